@@ -1,0 +1,166 @@
+"""The calibration file (DESIGN.md): each camera's clock offset and pose in the world frame.
+
+One loader and one writer, used by ``hiros calibrate``, the ``calib`` node and every stage::
+
+    reference: k01
+    world_frame: world
+    cameras:
+      k01:
+        frame_id: k01_depth_camera_link
+        time_offset: 0.0   # t_reference = t_camera + time_offset + drift * (t_camera - drift_epoch)
+        drift: 0.0
+        drift_epoch: 0.0
+        translation: [0, 0, 0]          # p_world = R p_camera + t
+        rotation: [0, 0, 0, 1]          # x, y, z, w
+        quality: {}
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import yaml
+
+from hiros_core.errors import CalibrationError
+from hiros_core.geometry import RigidTransform
+
+__all__ = ["CameraCalibration", "Calibration", "load_calibration", "save_calibration"]
+
+
+@dataclass
+class CameraCalibration:
+    """One camera's clock and pose relative to the reference."""
+
+    frame_id: str
+    time_offset: float = 0.0
+    drift: float = 0.0
+    drift_epoch: float = 0.0
+    translation: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    rotation: np.ndarray = field(default_factory=lambda: np.array([0.0, 0.0, 0.0, 1.0]))
+    quality: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def extrinsics(self) -> RigidTransform:
+        """Camera frame -> world frame."""
+        return RigidTransform.from_quaternion(self.rotation, self.translation)
+
+    def to_reference_time(self, t_camera: float | np.ndarray) -> float | np.ndarray:
+        """Camera-clock seconds to reference-clock seconds (DESIGN.md formula)."""
+        return t_camera + self.time_offset + self.drift * (t_camera - self.drift_epoch)
+
+    def to_reference_ns(self, t_camera_ns: int) -> int:
+        """Camera-clock nanoseconds to reference-clock nanoseconds, exact when drift is 0."""
+        offset = self.time_offset + self.drift * (t_camera_ns * 1e-9 - self.drift_epoch)
+        return t_camera_ns + round(offset * 1e9)
+
+
+@dataclass
+class Calibration:
+    """All cameras of a setup. ``cameras`` is keyed by camera name (topic namespace)."""
+
+    reference: str
+    world_frame: str = "world"
+    cameras: dict[str, CameraCalibration] = field(default_factory=dict)
+
+    def camera(self, name: str) -> CameraCalibration:
+        """One camera's calibration; raises CalibrationError when the camera is unknown."""
+        try:
+            return self.cameras[name]
+        except KeyError:
+            msg = f"camera {name!r} is not in the calibration (known: {sorted(self.cameras)})"
+            raise CalibrationError(msg) from None
+
+    def to_dict(self) -> dict[str, Any]:
+        """Plain data in the file's layout (lists, floats, strings)."""
+        return {
+            "reference": self.reference,
+            "world_frame": self.world_frame,
+            "cameras": {
+                name: {
+                    "frame_id": cam.frame_id,
+                    "time_offset": float(cam.time_offset),
+                    "drift": float(cam.drift),
+                    "drift_epoch": float(cam.drift_epoch),
+                    "translation": [float(v) for v in cam.translation],
+                    "rotation": [float(v) for v in cam.rotation],
+                    "quality": _plain(cam.quality),
+                }
+                for name, cam in self.cameras.items()
+            },
+        }
+
+    @classmethod
+    def from_dict(cls, data: Any, source: str = "calibration") -> Calibration:  # noqa: ANN401
+        """Parse and check the file's layout; errors name the source and the field."""
+        if not isinstance(data, dict) or not isinstance(data.get("cameras"), dict):
+            msg = f"{source}: expected a mapping with a 'cameras' mapping"
+            raise CalibrationError(msg)
+        cameras = {
+            str(name): _camera_from_dict(entry, f"{source}: camera {name}")
+            for name, entry in data["cameras"].items()
+        }
+        reference = str(data.get("reference", next(iter(cameras), "")))
+        if cameras and reference not in cameras:
+            msg = f"{source}: reference camera {reference!r} is not among the cameras"
+            raise CalibrationError(msg)
+        return cls(reference, str(data.get("world_frame", "world")), cameras)
+
+
+def _camera_from_dict(entry: Any, where: str) -> CameraCalibration:  # noqa: ANN401
+    if not isinstance(entry, dict):
+        msg = f"{where}: expected a mapping"
+        raise CalibrationError(msg)
+    try:
+        translation = np.asarray(entry.get("translation", [0.0, 0.0, 0.0]), dtype=float)
+        rotation = np.asarray(entry.get("rotation", [0.0, 0.0, 0.0, 1.0]), dtype=float)
+        scalars = {k: float(entry.get(k, 0.0)) for k in ("time_offset", "drift", "drift_epoch")}
+    except (TypeError, ValueError) as exc:
+        msg = f"{where}: {exc}"
+        raise CalibrationError(msg) from exc
+    if translation.shape != (3,) or rotation.shape != (4,):
+        msg = f"{where}: translation needs 3 numbers and rotation 4 (x, y, z, w)"
+        raise CalibrationError(msg)
+    norm = float(np.linalg.norm(rotation))
+    if not math.isfinite(norm) or abs(norm - 1.0) > 1e-3:
+        msg = f"{where}: rotation {rotation.tolist()} is not a unit quaternion"
+        raise CalibrationError(msg)
+    return CameraCalibration(
+        frame_id=str(entry.get("frame_id", "")),
+        translation=translation,
+        rotation=rotation / norm,
+        quality=dict(entry.get("quality") or {}),
+        **scalars,
+    )
+
+
+def _plain(value: Any) -> Any:  # noqa: ANN401
+    """numpy scalars and arrays to YAML-safe Python values."""
+    if isinstance(value, dict):
+        return {str(k): _plain(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple, np.ndarray)):
+        return [_plain(v) for v in value]
+    if isinstance(value, np.generic):
+        return value.item()
+    return value
+
+
+def load_calibration(path: str | Path) -> Calibration:
+    """Read a calibration file; raises CalibrationError naming the file on any problem."""
+    path = Path(path)
+    try:
+        data = yaml.safe_load(path.read_text())
+    except (OSError, yaml.YAMLError) as exc:
+        msg = f"cannot read calibration file {path}: {exc}"
+        raise CalibrationError(msg) from exc
+    return Calibration.from_dict(data, str(path))
+
+
+def save_calibration(calibration: Calibration, path: str | Path) -> None:
+    """Write a calibration file (parent folders are created)."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(yaml.safe_dump(calibration.to_dict(), sort_keys=False))

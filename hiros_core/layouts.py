@@ -1,0 +1,180 @@
+"""Skeleton layouts: which joints a body-tracking driver reports and how they connect.
+
+A layout is the one table every stage consults for joint names, parents, limbs (links) and the
+left/right mirror permutation. The Azure Kinect Body Tracking SDK (32 joints) and Kinect v2
+(25 joints) are built in; any other driver is described in a small YAML file::
+
+    name: my_driver
+    joints: [Pelvis, SpineNaval, ...]    # index = marker id
+    parents: [-1, 0, ...]                # parent joint index, -1 for the root
+
+For the Azure Kinect layout the marker id is the SDK joint index and a link's id is its child
+joint's id (DESIGN.md), so link ids run 1..31 and link 0 never exists.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from functools import cached_property
+from pathlib import Path
+
+import numpy as np
+import yaml
+
+from hiros_core.errors import LayoutError
+
+__all__ = [
+    "AZURE_KINECT",
+    "KINECT_V2",
+    "Layout",
+    "get_layout",
+    "load_layout",
+]
+
+
+@dataclass(frozen=True)
+class Layout:
+    """The joints of one driver's skeleton and the tree that links them.
+
+    Attributes:
+        name: short identifier (``azure_kinect``, ``kinect_v2``, ...).
+        joint_names: name of each joint; the index is the marker id.
+        parents: ``(J,)`` parent joint index of each joint, ``-1`` for the root.
+    """
+
+    name: str
+    joint_names: tuple[str, ...]
+    parents: tuple[int, ...]
+    _index: dict[str, int] = field(init=False, repr=False, compare=False)
+
+    def __post_init__(self) -> None:
+        if len(self.joint_names) != len(self.parents):
+            msg = (
+                f"layout {self.name!r} has {len(self.joint_names)} joints "
+                f"but {len(self.parents)} parents"
+            )
+            raise LayoutError(msg)
+        if len(set(self.joint_names)) != len(self.joint_names):
+            msg = f"layout {self.name!r} repeats a joint name"
+            raise LayoutError(msg)
+        for joint, parent in enumerate(self.parents):
+            if parent >= len(self.parents) or parent < -1 or parent == joint:
+                msg = f"layout {self.name!r}: joint {joint} has invalid parent {parent}"
+                raise LayoutError(msg)
+        object.__setattr__(self, "_index", {n: i for i, n in enumerate(self.joint_names)})
+
+    @property
+    def n_joints(self) -> int:
+        """Number of joints J, which is also ``max_markers`` in messages."""
+        return len(self.joint_names)
+
+    @property
+    def n_links(self) -> int:
+        """``max_links`` in messages: link ids are child joint ids, so this equals J."""
+        return len(self.joint_names)
+
+    def index(self, joint_name: str) -> int:
+        """Marker id of a joint by name; raises LayoutError for an unknown name."""
+        try:
+            return self._index[joint_name]
+        except KeyError:
+            msg = f"layout {self.name!r} has no joint named {joint_name!r}"
+            raise LayoutError(msg) from None
+
+    @cached_property
+    def link_children(self) -> np.ndarray:
+        """``(L,)`` child joint of each link, which is also the link id (roots excluded)."""
+        return np.array([j for j, p in enumerate(self.parents) if p >= 0], dtype=np.int32)
+
+    @cached_property
+    def link_parents(self) -> np.ndarray:
+        """``(L,)`` parent joint of each link, aligned with ``link_children``."""
+        return np.array([self.parents[c] for c in self.link_children], dtype=np.int32)
+
+    @cached_property
+    def link_names(self) -> tuple[str, ...]:
+        """Name of each link id (``""`` for ids with no link, such as the root)."""
+        names = [""] * self.n_links
+        for parent, child in zip(self.link_parents, self.link_children, strict=True):
+            names[child] = f"{self.joint_names[parent]}-{self.joint_names[child]}"
+        return tuple(names)
+
+    @cached_property
+    def mirror(self) -> np.ndarray:
+        """``(J,)`` permutation that swaps left and right joints (identity on the midline).
+
+        ``positions[layout.mirror]`` is what a driver reports when it confuses the sides.
+        """
+        perm = np.arange(self.n_joints)
+        for joint, name in enumerate(self.joint_names):
+            for side, other in (("Left", "Right"), ("Right", "Left")):
+                if side in name:
+                    perm[joint] = self._index.get(name.replace(side, other), joint)
+        return perm
+
+
+_AZURE_JOINTS = (
+    ("Pelvis", -1), ("SpineNaval", 0), ("SpineChest", 1), ("Neck", 2),
+    ("ClavicleLeft", 2), ("ShoulderLeft", 4), ("ElbowLeft", 5), ("WristLeft", 6),
+    ("HandLeft", 7), ("HandTipLeft", 8), ("ThumbLeft", 7),
+    ("ClavicleRight", 2), ("ShoulderRight", 11), ("ElbowRight", 12), ("WristRight", 13),
+    ("HandRight", 14), ("HandTipRight", 15), ("ThumbRight", 14),
+    ("HipLeft", 0), ("KneeLeft", 18), ("AnkleLeft", 19), ("FootLeft", 20),
+    ("HipRight", 0), ("KneeRight", 22), ("AnkleRight", 23), ("FootRight", 24),
+    ("Head", 3), ("Nose", 26), ("EyeLeft", 26), ("EarLeft", 26), ("EyeRight", 26),
+    ("EarRight", 26),
+)  # fmt: skip
+
+_KINECT_V2_JOINTS = (
+    ("SpineBase", -1), ("SpineMid", 0), ("Neck", 20), ("Head", 2),
+    ("ShoulderLeft", 20), ("ElbowLeft", 4), ("WristLeft", 5), ("HandLeft", 6),
+    ("ShoulderRight", 20), ("ElbowRight", 8), ("WristRight", 9), ("HandRight", 10),
+    ("HipLeft", 0), ("KneeLeft", 12), ("AnkleLeft", 13), ("FootLeft", 14),
+    ("HipRight", 0), ("KneeRight", 16), ("AnkleRight", 17), ("FootRight", 18),
+    ("SpineShoulder", 1), ("HandTipLeft", 7), ("ThumbLeft", 6), ("HandTipRight", 11),
+    ("ThumbRight", 10),
+)  # fmt: skip
+
+AZURE_KINECT = Layout(
+    "azure_kinect",
+    tuple(n for n, _ in _AZURE_JOINTS),
+    tuple(p for _, p in _AZURE_JOINTS),
+)
+"""Azure Kinect Body Tracking SDK (k4abt) joints, in SDK index order."""
+
+KINECT_V2 = Layout(
+    "kinect_v2",
+    tuple(n for n, _ in _KINECT_V2_JOINTS),
+    tuple(p for _, p in _KINECT_V2_JOINTS),
+)
+"""Kinect for Windows v2 joints, in SDK ``JointType`` order."""
+
+_BUILTIN = {layout.name: layout for layout in (AZURE_KINECT, KINECT_V2)}
+
+
+def load_layout(path: str | Path) -> Layout:
+    """Read a layout from a YAML file with ``name``, ``joints`` and ``parents``."""
+    path = Path(path)
+    try:
+        spec = yaml.safe_load(path.read_text())
+    except (OSError, yaml.YAMLError) as exc:
+        msg = f"cannot read layout file {path}: {exc}"
+        raise LayoutError(msg) from exc
+    if not isinstance(spec, dict) or not {"joints", "parents"} <= spec.keys():
+        msg = f"layout file {path} must be a mapping with 'joints' and 'parents'"
+        raise LayoutError(msg)
+    return Layout(
+        str(spec.get("name", path.stem)),
+        tuple(str(j) for j in spec["joints"]),
+        tuple(int(p) for p in spec["parents"]),
+    )
+
+
+def get_layout(name_or_path: str | Path) -> Layout:
+    """A built-in layout by name (``azure_kinect``, ``kinect_v2``) or one loaded from YAML."""
+    if str(name_or_path) in _BUILTIN:
+        return _BUILTIN[str(name_or_path)]
+    if Path(name_or_path).suffix in {".yaml", ".yml"}:
+        return load_layout(name_or_path)
+    msg = f"unknown skeleton layout {name_or_path!r}; use one of {sorted(_BUILTIN)} or a YAML file"
+    raise LayoutError(msg)

@@ -1,0 +1,318 @@
+"""The numpy model of skeletons: what every stage takes and returns.
+
+A skeleton keeps, for each marker (joint) id and each link id, one row of 20 float64::
+
+    [confidence, px, py, pz, qx, qy, qz, qw, vx, vy, vz, wx, wy, wz, ax, ay, az, alx, aly, alz]
+
+i.e. the confidence followed by the message's ``KinematicState`` (pose, twist, accel) in message
+order. Rows are dense by id (row ``j`` is marker id ``j``), with a ``present`` mask saying which
+ids the message carries; absent rows are NaN. The named properties (``positions``,
+``orientations``, ...) are views into those rows, so stages work on ``(J, 3)`` arrays while the
+codec moves whole rows in one copy. Units: metres, seconds, quaternions x, y, z, w.
+Stamps are integer nanoseconds so that messages round-trip exactly.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from hiros_core.layouts import AZURE_KINECT, Layout
+
+__all__ = [
+    "BOX_WIDTH",
+    "STATE_WIDTH",
+    "Skeleton",
+    "SkeletonGroup",
+    "camera_from_frame",
+    "ns_to_sec",
+    "sec_to_ns",
+]
+
+STATE_WIDTH = 20
+"""Floats per marker or link row: confidence + KinematicState (7 pose, 6 twist, 6 accel)."""
+BOX_WIDTH = 22
+"""Floats of a bounding box: KinematicState (19) + height, length, width."""
+
+_CONFIDENCE = 0
+_POSITION = slice(1, 4)
+_ORIENTATION = slice(4, 8)
+_VELOCITY = slice(8, 11)
+_ANGULAR_VELOCITY = slice(11, 14)
+_ACCELERATION = slice(14, 17)
+_ANGULAR_ACCELERATION = slice(17, 20)
+
+
+def ns_to_sec(stamp_ns: int) -> float:
+    """Nanoseconds to float seconds."""
+    return stamp_ns * 1e-9
+
+
+def sec_to_ns(stamp: float) -> int:
+    """Float seconds to integer nanoseconds (rounded to the nearest)."""
+    return round(stamp * 1e9)
+
+
+def camera_from_frame(frame_id: str) -> str:
+    """The camera name a frame belongs to: ``k01_depth_camera_link`` -> ``k01``.
+
+    DESIGN.md names cameras by their topic namespace; Azure Kinect driver frames are
+    ``<prefix>depth_camera_link`` with the prefix ``<cam>_`` by convention.
+    """
+    for suffix in ("_depth_camera_link", "depth_camera_link"):
+        if frame_id.endswith(suffix) and len(frame_id) > len(suffix):
+            return frame_id[: -len(suffix)].rstrip("_/")
+    return frame_id.strip("/")
+
+
+def _nan_rows(count: int, width: int = STATE_WIDTH) -> np.ndarray:
+    return np.full((count, width), np.nan)
+
+
+@dataclass(eq=False)
+class Skeleton:
+    """One person's skeleton as seen at one instant.
+
+    Attributes:
+        id: track or body id (``-1`` when unknown).
+        src_time_ns: stamp of the source camera frame, integer nanoseconds.
+        src_frame: frame id of the source camera (or the world frame after merging).
+        layout: which joint each marker id is.
+        markers: ``(J, 20)`` rows by marker id (see module docstring).
+        links: ``(L, 20)`` rows by link id (link id = child joint id).
+        marker_present: ``(J,)`` which marker ids the skeleton carries.
+        link_present: ``(L,)`` which link ids the skeleton carries.
+        confidence: whole-skeleton confidence, NaN when unknown.
+        bounding_box: ``(22,)`` KinematicState of the box centre + height, length, width.
+        max_markers: the message field; the layout's joint count by default.
+        max_links: the message field; the layout's link count by default.
+    """
+
+    id: int
+    src_time_ns: int
+    src_frame: str
+    layout: Layout
+    markers: np.ndarray
+    links: np.ndarray
+    marker_present: np.ndarray
+    link_present: np.ndarray
+    confidence: float = math.nan
+    bounding_box: np.ndarray = field(default_factory=lambda: np.full(BOX_WIDTH, np.nan))
+    max_markers: int = -1
+    max_links: int = -1
+
+    def __post_init__(self) -> None:
+        if self.max_markers < 0:
+            self.max_markers = self.layout.n_joints
+        if self.max_links < 0:
+            self.max_links = self.layout.n_links
+
+    @classmethod
+    def empty(
+        cls,
+        layout: Layout = AZURE_KINECT,
+        *,
+        skeleton_id: int = -1,
+        src_time_ns: int = 0,
+        src_frame: str = "",
+    ) -> Skeleton:
+        """A skeleton with no markers and no links (all rows NaN, nothing present)."""
+        return cls(
+            id=skeleton_id,
+            src_time_ns=src_time_ns,
+            src_frame=src_frame,
+            layout=layout,
+            markers=_nan_rows(layout.n_joints),
+            links=_nan_rows(layout.n_links),
+            marker_present=np.zeros(layout.n_joints, dtype=bool),
+            link_present=np.zeros(layout.n_links, dtype=bool),
+        )
+
+    @classmethod
+    def from_positions(  # noqa: PLR0913 - every argument is an optional message field
+        cls,
+        positions: np.ndarray,
+        layout: Layout = AZURE_KINECT,
+        *,
+        skeleton_id: int = -1,
+        src_time_ns: int = 0,
+        src_frame: str = "",
+        confidences: np.ndarray | None = None,
+        orientations: np.ndarray | None = None,
+    ) -> Skeleton:
+        """A skeleton from ``(J, 3)`` joint positions; joints with any NaN coordinate are absent.
+
+        Links are present where both end joints are; their orientation is the child joint's
+        orientation when given (the Azure SDK's convention), their position the midpoint.
+        """
+        skeleton = cls.empty(
+            layout, skeleton_id=skeleton_id, src_time_ns=src_time_ns, src_frame=src_frame
+        )
+        positions = np.asarray(positions, dtype=float)
+        present = np.isfinite(positions).all(axis=1)
+        skeleton.marker_present[:] = present
+        skeleton.positions[present] = positions[present]
+        if confidences is not None:
+            skeleton.confidences[present] = np.asarray(confidences, dtype=float)[present]
+        if orientations is not None:
+            skeleton.orientations[present] = np.asarray(orientations, dtype=float)[present]
+        skeleton.update_links()
+        return skeleton
+
+    def update_links(self) -> None:
+        """Recompute link rows from marker rows: midpoint, child orientation, min confidence."""
+        parents, children = self.layout.link_parents, self.layout.link_children
+        both = self.marker_present[parents] & self.marker_present[children]
+        self.link_present[:] = False
+        self.link_present[children[both]] = True
+        self.links[:] = np.nan
+        ids, par = children[both], parents[both]
+        self.links[ids, _POSITION] = 0.5 * (self.positions[par] + self.positions[ids])
+        self.links[ids, _ORIENTATION] = self.orientations[ids]
+        self.links[ids, _CONFIDENCE] = np.fmin(self.confidences[par], self.confidences[ids])
+
+    # Views into the marker rows: (J,) or (J, k), writable.
+    @property
+    def confidences(self) -> np.ndarray:
+        """``(J,)`` joint confidences (0..1, or the driver's level), NaN when unknown."""
+        return self.markers[:, _CONFIDENCE]
+
+    @property
+    def positions(self) -> np.ndarray:
+        """``(J, 3)`` joint positions in metres."""
+        return self.markers[:, _POSITION]
+
+    @property
+    def orientations(self) -> np.ndarray:
+        """``(J, 4)`` joint orientations, quaternions x, y, z, w."""
+        return self.markers[:, _ORIENTATION]
+
+    @property
+    def velocities(self) -> np.ndarray:
+        """``(J, 3)`` linear joint velocities in m/s."""
+        return self.markers[:, _VELOCITY]
+
+    @property
+    def angular_velocities(self) -> np.ndarray:
+        """``(J, 3)`` angular joint velocities in rad/s."""
+        return self.markers[:, _ANGULAR_VELOCITY]
+
+    @property
+    def accelerations(self) -> np.ndarray:
+        """``(J, 3)`` linear joint accelerations in m/s^2."""
+        return self.markers[:, _ACCELERATION]
+
+    @property
+    def angular_accelerations(self) -> np.ndarray:
+        """``(J, 3)`` angular joint accelerations in rad/s^2."""
+        return self.markers[:, _ANGULAR_ACCELERATION]
+
+    @property
+    def link_orientations(self) -> np.ndarray:
+        """``(L, 4)`` link orientations, quaternions x, y, z, w."""
+        return self.links[:, _ORIENTATION]
+
+    @property
+    def src_time(self) -> float:
+        """Source stamp in float seconds."""
+        return ns_to_sec(self.src_time_ns)
+
+    @property
+    def camera(self) -> str:
+        """Name of the source camera, from ``src_frame``."""
+        return camera_from_frame(self.src_frame)
+
+    def copy(self) -> Skeleton:
+        """A deep copy (arrays copied, layout shared)."""
+        return Skeleton(
+            id=self.id,
+            src_time_ns=self.src_time_ns,
+            src_frame=self.src_frame,
+            layout=self.layout,
+            markers=self.markers.copy(),
+            links=self.links.copy(),
+            marker_present=self.marker_present.copy(),
+            link_present=self.link_present.copy(),
+            confidence=self.confidence,
+            bounding_box=self.bounding_box.copy(),
+            max_markers=self.max_markers,
+            max_links=self.max_links,
+        )
+
+    def same_as(self, other: Skeleton) -> bool:
+        """True when both carry the same fields, NaN equal to NaN (for tests and checks)."""
+        return (
+            self.id == other.id
+            and self.src_time_ns == other.src_time_ns
+            and self.src_frame == other.src_frame
+            and self.layout.joint_names == other.layout.joint_names
+            and self.max_markers == other.max_markers
+            and self.max_links == other.max_links
+            and np.array_equal(self.marker_present, other.marker_present)
+            and np.array_equal(self.link_present, other.link_present)
+            and _same_floats(self.markers[self.marker_present], other.markers[other.marker_present])
+            and _same_floats(self.links[self.link_present], other.links[other.link_present])
+            and _same_floats(np.array([self.confidence]), np.array([other.confidence]))
+            and _same_floats(self.bounding_box, other.bounding_box)
+        )
+
+
+def _same_floats(a: np.ndarray, b: np.ndarray) -> bool:
+    return a.shape == b.shape and bool(np.all((a == b) | (np.isnan(a) & np.isnan(b))))
+
+
+@dataclass(eq=False)
+class SkeletonGroup:
+    """All skeletons of one camera frame (or one pipeline output instant).
+
+    Attributes:
+        stamp_ns: header stamp, integer nanoseconds.
+        frame_id: header frame (camera frame before the tracker, world frame after).
+        skeletons: the people, in message order.
+    """
+
+    stamp_ns: int
+    frame_id: str
+    skeletons: list[Skeleton] = field(default_factory=list)
+
+    @property
+    def stamp(self) -> float:
+        """Header stamp in float seconds."""
+        return ns_to_sec(self.stamp_ns)
+
+    @property
+    def camera(self) -> str:
+        """Name of the camera the group came from, from ``frame_id``."""
+        return camera_from_frame(self.frame_id)
+
+    @property
+    def ids(self) -> np.ndarray:
+        """``(P,)`` skeleton ids."""
+        return np.array([s.id for s in self.skeletons], dtype=np.int64)
+
+    def positions(self) -> np.ndarray:
+        """``(P, J, 3)`` stacked joint positions; all skeletons must share one layout size."""
+        if not self.skeletons:
+            return np.empty((0, 0, 3))
+        return np.stack([s.positions for s in self.skeletons])
+
+    def confidences(self) -> np.ndarray:
+        """``(P, J)`` stacked joint confidences."""
+        if not self.skeletons:
+            return np.empty((0, 0))
+        return np.stack([s.confidences for s in self.skeletons])
+
+    def copy(self) -> SkeletonGroup:
+        """A deep copy."""
+        return SkeletonGroup(self.stamp_ns, self.frame_id, [s.copy() for s in self.skeletons])
+
+    def same_as(self, other: SkeletonGroup) -> bool:
+        """Field-wise equality with NaN equal to NaN."""
+        return (
+            self.stamp_ns == other.stamp_ns
+            and self.frame_id == other.frame_id
+            and len(self.skeletons) == len(other.skeletons)
+            and all(a.same_as(b) for a, b in zip(self.skeletons, other.skeletons, strict=True))
+        )
