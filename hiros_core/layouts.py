@@ -40,11 +40,14 @@ class Layout:
         name: short identifier (``azure_kinect``, ``kinect_v2``, ...).
         joint_names: name of each joint; the index is the marker id.
         parents: ``(J,)`` parent joint index of each joint, ``-1`` for the root.
+        link_labels: names of the links by link id, when they are not ``Parent-Child``
+            (layouts decoded from other tools' messages keep those tools' names).
     """
 
     name: str
     joint_names: tuple[str, ...]
     parents: tuple[int, ...]
+    link_labels: tuple[str, ...] | None = None
     _index: dict[str, int] = field(init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
@@ -54,14 +57,17 @@ class Layout:
                 f"but {len(self.parents)} parents"
             )
             raise LayoutError(msg)
-        if len(set(self.joint_names)) != len(self.joint_names):
-            msg = f"layout {self.name!r} repeats a joint name"
-            raise LayoutError(msg)
         for joint, parent in enumerate(self.parents):
             if parent >= len(self.parents) or parent < -1 or parent == joint:
                 msg = f"layout {self.name!r}: joint {joint} has invalid parent {parent}"
                 raise LayoutError(msg)
-        object.__setattr__(self, "_index", {n: i for i, n in enumerate(self.joint_names)})
+        if self.link_labels is not None and len(self.link_labels) != len(self.joint_names):
+            msg = f"layout {self.name!r} needs one link label per joint id"
+            raise LayoutError(msg)
+        index: dict[str, int] = {}
+        for joint, name in enumerate(self.joint_names):
+            index.setdefault(name, joint)
+        object.__setattr__(self, "_index", index)
 
     @property
     def n_joints(self) -> int:
@@ -94,6 +100,8 @@ class Layout:
     @cached_property
     def link_names(self) -> tuple[str, ...]:
         """Name of each link id (``""`` for ids with no link, such as the root)."""
+        if self.link_labels is not None:
+            return self.link_labels
         names = [""] * self.n_links
         for parent, child in zip(self.link_parents, self.link_children, strict=True):
             names[child] = f"{self.joint_names[parent]}-{self.joint_names[child]}"
@@ -163,9 +171,13 @@ def load_layout(path: str | Path) -> Layout:
     if not isinstance(spec, dict) or not {"joints", "parents"} <= spec.keys():
         msg = f"layout file {path} must be a mapping with 'joints' and 'parents'"
         raise LayoutError(msg)
+    joints = [str(j) for j in spec["joints"]]
+    if len(set(joints)) != len(joints):
+        msg = f"layout file {path} names a joint twice"
+        raise LayoutError(msg)
     return Layout(
         str(spec.get("name", path.stem)),
-        tuple(str(j) for j in spec["joints"]),
+        tuple(joints),
         tuple(int(p) for p in spec["parents"]),
     )
 

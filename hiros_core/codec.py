@@ -1,0 +1,546 @@
+"""Fast CDR codec: SkeletonGroup and MarkerArray bytes <-> the numpy model, no rclpy objects.
+
+The bytes are those of ``rclpy.serialization.serialize_message`` for the same message (Fast-CDR,
+little endian), except alignment padding, which Fast-CDR leaves uninitialised and we write as
+zeros. Speed comes from plans (``hiros_core.cdr``): a message shape (frames, which marker ids,
+names) is laid out once; after that encoding is a template copy plus one numpy scatter per kind
+of value, and decoding one comparison plus one gather, whatever the number of joints.
+
+Conventions kept from DESIGN.md: markers and links are sparse and found by id; a link's id is its
+child marker's id. Messages breaking that (duplicate or negative ids, a link whose id is not its
+child) are refused with ``CodecError`` rather than silently altered.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from hiros_core.cdr import CdrReader, Plan, PlanBuilder, PlanCache
+from hiros_core.errors import CodecError, LayoutError
+from hiros_core.layouts import AZURE_KINECT, KINECT_V2, Layout
+from hiros_core.model import BOX_WIDTH, STATE_WIDTH, Skeleton, SkeletonGroup
+
+__all__ = [
+    "MarkerArrayData",
+    "MarkerAttachments",
+    "decode_group",
+    "decode_marker_array",
+    "encode_group",
+    "encode_marker_array",
+]
+
+_NS = 1_000_000_000
+_MAX_DENSE_ID = 4096  # dense rows by id: larger ids would allocate absurd arrays
+_TIME = np.dtype([("sec", "<i4"), ("nanosec", "<u4")])
+_HEAD = np.dtype([("id", "<i4"), ("sec", "<i4"), ("nanosec", "<u4")])
+_MAXES = np.dtype([("max_markers", "<u4"), ("max_links", "<u4")])
+_ITA = np.dtype([("id", "<i4"), ("type", "<i4"), ("action", "<i4")])
+_ROW_BYTES = STATE_WIDTH * 8
+_BOX_FLOATS = 1 + BOX_WIDTH  # skeleton confidence + bounding box
+
+
+def _split_ns(stamps_ns: np.ndarray, what: str) -> np.ndarray:
+    """Integer nanoseconds to (sec, nanosec) records; refuses stamps outside int32 seconds."""
+    stamps = np.asarray(stamps_ns, dtype=np.int64)
+    sec, nanosec = np.divmod(stamps, _NS)
+    if sec.size and (sec.min() < -(2**31) or sec.max() >= 2**31):
+        msg = f"{what}: a stamp is outside the int32 seconds range of builtin_interfaces/Time"
+        raise CodecError(msg)
+    out = np.empty(stamps.shape, dtype=_TIME)
+    out["sec"], out["nanosec"] = sec, nanosec
+    return out
+
+
+def _join_ns(times: np.ndarray) -> np.ndarray:
+    return times["sec"].astype(np.int64) * _NS + times["nanosec"].astype(np.int64)
+
+
+def _checked(values: list[int], dtype: str, what: str) -> np.ndarray:
+    info = np.iinfo(dtype)
+    if values and (min(values) < info.min or max(values) > info.max):
+        msg = f"{what}: value out of range for {np.dtype(dtype).name}"
+        raise CodecError(msg)
+    return np.asarray(values, dtype=dtype)
+
+
+# --------------------------------------------------------------------------- SkeletonGroup
+
+
+@dataclass(frozen=True)
+class _SkeletonShape:
+    """What a plan fixes about one skeleton: frame, layout and which ids it carries."""
+
+    src_frame: str
+    layout: Layout
+    marker_ids: np.ndarray
+    link_ids: np.ndarray
+
+
+@dataclass(frozen=True)
+class _GroupShape:
+    frame_id: str
+    skeletons: tuple[_SkeletonShape, ...]
+
+
+_GROUP_PLANS = PlanCache()
+
+
+def _group_key(group: SkeletonGroup) -> tuple:
+    return (
+        group.frame_id,
+        *(
+            (s.src_frame, s.layout, s.marker_present.tobytes(), s.link_present.tobytes())
+            for s in group.skeletons
+        ),
+    )
+
+
+def _build_group_plan(group: SkeletonGroup) -> Plan:
+    builder = PlanBuilder()
+    builder.slot("stamp", 8, 4)
+    builder.string(group.frame_id)
+    builder.u32(len(group.skeletons))
+    shapes = []
+    for skeleton in group.skeletons:
+        layout = skeleton.layout
+        marker_ids = np.flatnonzero(skeleton.marker_present)
+        link_ids = np.flatnonzero(skeleton.link_present)
+        builder.slot("head", 12, 4)
+        builder.string(skeleton.src_frame)
+        builder.slot("maxes", 8, 4)
+        builder.slot("box", _BOX_FLOATS * 8, 8)
+        builder.u32(marker_ids.size)
+        for marker_id in marker_ids:
+            builder.i32(int(marker_id))
+            builder.string(layout.joint_names[marker_id])
+            builder.slot("markers", _ROW_BYTES, 8)
+        builder.u32(link_ids.size)
+        for link_id in link_ids:
+            builder.i32(int(link_id))
+            builder.string(layout.link_names[link_id])
+            builder.i32(layout.parents[link_id])
+            builder.i32(int(link_id))
+            builder.slot("links", _ROW_BYTES, 8)
+        shapes.append(_SkeletonShape(skeleton.src_frame, layout, marker_ids, link_ids))
+    return builder.build(_GroupShape(group.frame_id, tuple(shapes)))
+
+
+def _rows(arrays: list[np.ndarray], width: int) -> np.ndarray:
+    return np.concatenate(arrays) if arrays else np.empty((0, width))
+
+
+def encode_group(group: SkeletonGroup) -> bytes:
+    """CDR bytes of ``hiros_skeleton_msgs/msg/SkeletonGroup`` for the model ``group``."""
+    key = _group_key(group)
+    plan = _GROUP_PLANS.get(key) or _GROUP_PLANS.put(key, _build_group_plan(group))
+    skeletons = group.skeletons
+    what = "SkeletonGroup"
+    head = np.empty(len(skeletons), dtype=_HEAD)
+    head["id"] = _checked([s.id for s in skeletons], "<i4", f"{what} skeleton id")
+    times = _split_ns(np.array([s.src_time_ns for s in skeletons], dtype=np.int64), what)
+    head["sec"], head["nanosec"] = times["sec"], times["nanosec"]
+    maxes = np.empty(len(skeletons), dtype=_MAXES)
+    maxes["max_markers"] = _checked([s.max_markers for s in skeletons], "<u4", f"{what} max_markers")
+    maxes["max_links"] = _checked([s.max_links for s in skeletons], "<u4", f"{what} max_links")
+    box = np.empty((len(skeletons), _BOX_FLOATS))
+    box[:, 0] = [s.confidence for s in skeletons]
+    if skeletons:
+        box[:, 1:] = np.stack([s.bounding_box for s in skeletons])
+    return plan.encode(
+        {
+            "stamp": _split_ns(np.array([group.stamp_ns]), what),
+            "head": head,
+            "maxes": maxes,
+            "box": box,
+            "markers": _rows([s.markers[s.marker_present] for s in skeletons], STATE_WIDTH),
+            "links": _rows([s.links[s.link_present] for s in skeletons], STATE_WIDTH),
+        }
+    )
+
+
+def decode_group(data: bytes | bytearray | memoryview) -> SkeletonGroup:
+    """The model of a ``SkeletonGroup`` from CDR bytes; raises CodecError on bad bytes."""
+    raw = np.frombuffer(data, dtype=np.uint8)
+    plan = _GROUP_PLANS.find(raw)
+    if plan is None:
+        group = _parse_group(data)
+        _GROUP_PLANS.put(_group_key(group), _build_group_plan(group))
+        return group
+    return _decode_group_with(plan, raw)
+
+
+def _decode_group_with(plan: Plan, raw: np.ndarray) -> SkeletonGroup:
+    shape: _GroupShape = plan.meta  # type: ignore[assignment]
+    stamp = _join_ns(plan.gather(raw, "stamp", _TIME).ravel())[0]
+    head = plan.gather(raw, "head", _HEAD).ravel()
+    maxes = plan.gather(raw, "maxes", _MAXES).ravel()
+    box = plan.gather(raw, "box", "<f8")
+    markers = plan.gather(raw, "markers", "<f8")
+    links = plan.gather(raw, "links", "<f8")
+    src_times = _join_ns(head)
+    skeletons = []
+    marker_start = link_start = 0
+    for index, sk in enumerate(shape.skeletons):
+        skeleton = Skeleton.empty(sk.layout, skeleton_id=int(head["id"][index]))
+        skeleton.src_time_ns = int(src_times[index])
+        skeleton.src_frame = sk.src_frame
+        skeleton.max_markers = int(maxes["max_markers"][index])
+        skeleton.max_links = int(maxes["max_links"][index])
+        skeleton.confidence = float(box[index, 0])
+        skeleton.bounding_box = box[index, 1:].copy()
+        marker_end, link_end = marker_start + sk.marker_ids.size, link_start + sk.link_ids.size
+        skeleton.markers[sk.marker_ids] = markers[marker_start:marker_end]
+        skeleton.links[sk.link_ids] = links[link_start:link_end]
+        skeleton.marker_present[sk.marker_ids] = True
+        skeleton.link_present[sk.link_ids] = True
+        marker_start, link_start = marker_end, link_end
+        skeletons.append(skeleton)
+    return SkeletonGroup(int(stamp), shape.frame_id, skeletons)
+
+
+def _parse_group(data: bytes | bytearray | memoryview) -> SkeletonGroup:
+    """Field-by-field decoding: any order of ids, any names; builds no plan by itself."""
+    reader = CdrReader(data, "hiros_skeleton_msgs/SkeletonGroup")
+    stamp_sec, stamp_nanosec = reader.i32(), reader.u32()
+    frame_id = reader.string()
+    skeletons = [_parse_skeleton(reader) for _ in range(reader.count(4 * 12 + 8 * _BOX_FLOATS))]
+    reader.done()
+    return SkeletonGroup(stamp_sec * _NS + stamp_nanosec, frame_id, skeletons)
+
+
+def _parse_skeleton(reader: CdrReader) -> Skeleton:
+    skeleton_id = reader.i32()
+    src_time_ns = reader.i32() * _NS + reader.u32()
+    src_frame = reader.string()
+    max_markers, max_links = reader.u32(), reader.u32()
+    box = reader.floats(_BOX_FLOATS)
+    markers: dict[int, tuple[str, np.ndarray]] = {}
+    for _ in range(reader.count(8 + 8 * STATE_WIDTH)):
+        marker_id, name = reader.i32(), reader.string()
+        if marker_id in markers:
+            reader.fail(f"skeleton {skeleton_id} repeats marker id {marker_id}")
+        markers[marker_id] = (name, reader.floats(STATE_WIDTH))
+    links: dict[int, tuple[str, int, np.ndarray]] = {}
+    for _ in range(reader.count(16 + 8 * STATE_WIDTH)):
+        link_id, name, parent, child = reader.i32(), reader.string(), reader.i32(), reader.i32()
+        if link_id != child:
+            reader.fail(f"link {link_id} has child marker {child}; a link's id must be its child's")
+        if link_id in links:
+            reader.fail(f"skeleton {skeleton_id} repeats link id {link_id}")
+        links[link_id] = (name, parent, reader.floats(STATE_WIDTH))
+    layout = _layout_for(reader, markers, links)
+    skeleton = Skeleton.empty(layout, skeleton_id=skeleton_id, src_frame=src_frame)
+    skeleton.src_time_ns = src_time_ns
+    skeleton.max_markers, skeleton.max_links = max_markers, max_links
+    skeleton.confidence, skeleton.bounding_box = float(box[0]), box[1:]
+    for marker_id, (_, row) in markers.items():
+        skeleton.markers[marker_id] = row
+        skeleton.marker_present[marker_id] = True
+    for link_id, (_, _, row) in links.items():
+        skeleton.links[link_id] = row
+        skeleton.link_present[link_id] = True
+    return skeleton
+
+
+_DECODED_LAYOUTS: dict[tuple, Layout] = {}
+
+
+def _layout_for(
+    reader: CdrReader,
+    markers: dict[int, tuple[str, np.ndarray]],
+    links: dict[int, tuple[str, int, np.ndarray]],
+) -> Layout:
+    """The built-in layout these names fit, else one made from the message (cached)."""
+    ids = list(markers) + list(links)
+    if ids and (min(ids) < 0 or max(ids) >= _MAX_DENSE_ID):
+        reader.fail(f"marker/link id outside 0..{_MAX_DENSE_ID - 1}")
+    for layout in (AZURE_KINECT, KINECT_V2):
+        if _fits(layout, markers, links):
+            return layout
+    key = (
+        tuple((i, m[0]) for i, m in sorted(markers.items())),
+        tuple((i, m[0], m[1]) for i, m in sorted(links.items())),
+    )
+    if key not in _DECODED_LAYOUTS:
+        size = max(ids, default=-1) + 1
+        names = [markers[i][0] if i in markers else f"joint{i}" for i in range(size)]
+        parents = [links[i][1] if i in links else -1 for i in range(size)]
+        labels = [links[i][0] if i in links else "" for i in range(size)]
+        try:
+            _DECODED_LAYOUTS[key] = Layout("decoded", tuple(names), tuple(parents), tuple(labels))
+        except LayoutError as exc:
+            reader.fail(str(exc))
+    return _DECODED_LAYOUTS[key]
+
+
+def _fits(
+    layout: Layout,
+    markers: dict[int, tuple[str, np.ndarray]],
+    links: dict[int, tuple[str, int, np.ndarray]],
+) -> bool:
+    n = layout.n_joints
+    return all(i < n and layout.joint_names[i] == m[0] for i, m in markers.items()) and all(
+        i < n and layout.link_names[i] == name and layout.parents[i] == parent
+        for i, (name, parent, _) in links.items()
+    )
+
+
+# --------------------------------------------------------------------------- MarkerArray
+
+
+@dataclass(frozen=True)
+class MarkerAttachments:
+    """The rarely used media fields of a Marker, kept so that decoding loses nothing."""
+
+    texture_resource: str = ""
+    texture_stamp_ns: int = 0
+    texture_frame_id: str = ""
+    texture_format: str = ""
+    texture_data: bytes = b""
+    uv_coordinates: tuple[tuple[float, float], ...] = ()
+    mesh_resource: str = ""
+    mesh_filename: str = ""
+    mesh_data: bytes = b""
+
+
+_NO_ATTACHMENTS = MarkerAttachments()
+
+
+@dataclass(eq=False)
+class MarkerArrayData:
+    """A ``visualization_msgs/MarkerArray`` of N markers as columns.
+
+    Attributes:
+        stamps_ns: ``(N,)`` header stamps in ns.
+        frame_ids, namespaces, texts: N strings each.
+        ids, types, actions: ``(N,)`` int32 (types/actions as in visualization_msgs/Marker).
+        poses: ``(N, 7)`` position x, y, z and orientation x, y, z, w.
+        scales: ``(N, 3)``; colors: ``(N, 4)`` float32 r, g, b, a.
+        lifetimes_ns: ``(N,)``; frame_locked, mesh_use_embedded_materials: ``(N,)`` bool.
+        points: N arrays ``(k, 3)``; point_colors: N arrays ``(k, 4)`` float32.
+        attachments: N ``MarkerAttachments`` (textures, uv, meshes).
+    """
+
+    stamps_ns: np.ndarray
+    frame_ids: list[str]
+    namespaces: list[str]
+    ids: np.ndarray
+    types: np.ndarray
+    actions: np.ndarray
+    poses: np.ndarray
+    scales: np.ndarray
+    colors: np.ndarray
+    lifetimes_ns: np.ndarray
+    frame_locked: np.ndarray
+    points: list[np.ndarray]
+    point_colors: list[np.ndarray]
+    texts: list[str]
+    attachments: list[MarkerAttachments] = field(default_factory=list)
+    mesh_use_embedded_materials: np.ndarray = field(default_factory=lambda: np.zeros(0, bool))
+
+    def __post_init__(self) -> None:
+        n = len(self.ids)
+        if not self.attachments:
+            self.attachments = [_NO_ATTACHMENTS] * n
+        if self.mesh_use_embedded_materials.size != n:
+            self.mesh_use_embedded_materials = np.zeros(n, dtype=bool)
+
+    def __len__(self) -> int:
+        return len(self.ids)
+
+    @classmethod
+    def new(cls, n: int, *, frame_id: str = "", stamp_ns: int = 0) -> MarkerArrayData:
+        """N SPHERE markers with action ADD, identity orientation, 5 cm, opaque white."""
+        poses = np.zeros((n, 7))
+        poses[:, 6] = 1.0
+        return cls(
+            stamps_ns=np.full(n, stamp_ns, dtype=np.int64),
+            frame_ids=[frame_id] * n,
+            namespaces=[""] * n,
+            ids=np.arange(n, dtype=np.int32),
+            types=np.full(n, 2, dtype=np.int32),
+            actions=np.zeros(n, dtype=np.int32),
+            poses=poses,
+            scales=np.full((n, 3), 0.05),
+            colors=np.ones((n, 4), dtype=np.float32),
+            lifetimes_ns=np.zeros(n, dtype=np.int64),
+            frame_locked=np.zeros(n, dtype=bool),
+            points=[np.empty((0, 3))] * n,
+            point_colors=[np.empty((0, 4), dtype=np.float32)] * n,
+            texts=[""] * n,
+        )
+
+
+_MARKER_PLANS = PlanCache()
+
+
+def _marker_key(data: MarkerArrayData) -> tuple:
+    return (
+        tuple(data.frame_ids),
+        tuple(data.namespaces),
+        tuple(data.texts),
+        tuple(len(p) for p in data.points),
+        tuple(len(c) for c in data.point_colors),
+        tuple(data.attachments),
+    )
+
+
+@dataclass(frozen=True)
+class _MarkerShape:
+    frame_ids: tuple[str, ...]
+    namespaces: tuple[str, ...]
+    texts: tuple[str, ...]
+    point_counts: np.ndarray
+    color_counts: np.ndarray
+    attachments: tuple[MarkerAttachments, ...]
+
+
+def _build_marker_plan(data: MarkerArrayData) -> Plan:
+    builder = PlanBuilder()
+    builder.u32(len(data))
+    for i in range(len(data)):
+        builder.slot("stamp", 8, 4)
+        builder.string(data.frame_ids[i])
+        builder.string(data.namespaces[i])
+        builder.slot("ita", 12, 4)
+        builder.slot("pose_scale", 80, 8)
+        builder.slot("color", 16, 4)
+        builder.slot("lifetime", 8, 4)
+        builder.slot("locked", 1, 1)
+        builder.u32(len(data.points[i]))
+        for _ in range(len(data.points[i])):
+            builder.slot("points", 24, 8)
+        builder.u32(len(data.point_colors[i]))
+        for _ in range(len(data.point_colors[i])):
+            builder.slot("point_colors", 16, 4)
+        extra = data.attachments[i]
+        builder.string(extra.texture_resource)
+        sec, nanosec = divmod(extra.texture_stamp_ns, _NS)
+        builder.i32(sec)
+        builder.u32(nanosec)
+        builder.string(extra.texture_frame_id)
+        builder.string(extra.texture_format)
+        builder.blob(extra.texture_data)
+        builder.u32(len(extra.uv_coordinates))
+        builder.align(4)
+        builder.buf += np.asarray(extra.uv_coordinates, dtype="<f4").tobytes()
+        builder.string(data.texts[i])
+        builder.string(extra.mesh_resource)
+        builder.string(extra.mesh_filename)
+        builder.blob(extra.mesh_data)
+        builder.slot("embedded", 1, 1)
+    return builder.build(
+        _MarkerShape(
+            tuple(data.frame_ids),
+            tuple(data.namespaces),
+            tuple(data.texts),
+            np.array([len(p) for p in data.points], dtype=np.intp),
+            np.array([len(c) for c in data.point_colors], dtype=np.intp),
+            tuple(data.attachments),
+        )
+    )
+
+
+def encode_marker_array(data: MarkerArrayData) -> bytes:
+    """CDR bytes of ``visualization_msgs/msg/MarkerArray`` for the columns ``data``."""
+    key = _marker_key(data)
+    plan = _MARKER_PLANS.get(key) or _MARKER_PLANS.put(key, _build_marker_plan(data))
+    what = "MarkerArray"
+    ita = np.empty(len(data), dtype=_ITA)
+    ita["id"] = _checked(list(map(int, data.ids)), "<i4", f"{what} marker id")
+    ita["type"], ita["action"] = data.types, data.actions
+    pose_scale = np.concatenate(
+        [np.asarray(data.poses, dtype="<f8"), np.asarray(data.scales, dtype="<f8")], axis=1
+    )
+    return plan.encode(
+        {
+            "stamp": _split_ns(data.stamps_ns, what),
+            "ita": ita,
+            "pose_scale": pose_scale,
+            "color": np.asarray(data.colors, dtype="<f4"),
+            "lifetime": _split_ns(data.lifetimes_ns, what),
+            "locked": np.asarray(data.frame_locked, dtype=np.uint8),
+            "points": _rows([np.asarray(p, dtype="<f8") for p in data.points], 3),
+            "point_colors": _rows([np.asarray(c, dtype="<f4") for c in data.point_colors], 4),
+            "embedded": np.asarray(data.mesh_use_embedded_materials, dtype=np.uint8),
+        }
+    )
+
+
+def decode_marker_array(data: bytes | bytearray | memoryview) -> MarkerArrayData:
+    """Columns of a ``visualization_msgs/MarkerArray`` from CDR bytes; CodecError on bad bytes."""
+    raw = np.frombuffer(data, dtype=np.uint8)
+    plan = _MARKER_PLANS.find(raw)
+    if plan is None:
+        markers = _parse_marker_array(data)
+        _MARKER_PLANS.put(_marker_key(markers), _build_marker_plan(markers))
+        return markers
+    shape: _MarkerShape = plan.meta  # type: ignore[assignment]
+    ita = plan.gather(raw, "ita", _ITA).ravel()
+    pose_scale = plan.gather(raw, "pose_scale", "<f8")
+    points = plan.gather(raw, "points", "<f8").reshape(-1, 3)
+    point_colors = plan.gather(raw, "point_colors", "<f4").reshape(-1, 4)
+    return MarkerArrayData(
+        stamps_ns=_join_ns(plan.gather(raw, "stamp", _TIME).ravel()),
+        frame_ids=list(shape.frame_ids),
+        namespaces=list(shape.namespaces),
+        ids=ita["id"].copy(),
+        types=ita["type"].copy(),
+        actions=ita["action"].copy(),
+        poses=pose_scale[:, :7].copy(),
+        scales=pose_scale[:, 7:].copy(),
+        colors=plan.gather(raw, "color", "<f4").copy(),
+        lifetimes_ns=_join_ns(plan.gather(raw, "lifetime", _TIME).ravel()),
+        frame_locked=plan.gather(raw, "locked", np.uint8).ravel().astype(bool),
+        points=np.split(points, np.cumsum(shape.point_counts)[:-1]) if len(ita) else [],
+        point_colors=np.split(point_colors, np.cumsum(shape.color_counts)[:-1]) if len(ita) else [],
+        texts=list(shape.texts),
+        attachments=list(shape.attachments),
+        mesh_use_embedded_materials=plan.gather(raw, "embedded", np.uint8).ravel().astype(bool),
+    )
+
+
+def _parse_marker_array(data: bytes | bytearray | memoryview) -> MarkerArrayData:
+    reader = CdrReader(data, "visualization_msgs/MarkerArray")
+    n = reader.count(150)
+    out = MarkerArrayData.new(n)
+    out.attachments = []
+    out.points, out.point_colors = [], []
+    for i in range(n):
+        out.stamps_ns[i] = reader.i32() * _NS + reader.u32()
+        out.frame_ids[i] = reader.string()
+        out.namespaces[i] = reader.string()
+        out.ids[i], out.types[i], out.actions[i] = reader.i32(), reader.i32(), reader.i32()
+        pose_scale = reader.floats(10)
+        out.poses[i], out.scales[i] = pose_scale[:7], pose_scale[7:]
+        out.colors[i] = reader.floats(4, "<f4")
+        out.lifetimes_ns[i] = reader.i32() * _NS + reader.u32()
+        out.frame_locked[i] = bool(reader.u8())
+        out.points.append(reader.floats(3 * reader.count(24)).reshape(-1, 3))
+        out.point_colors.append(reader.floats(4 * reader.count(16), "<f4").reshape(-1, 4))
+        texture_resource = reader.string()
+        texture_stamp = reader.i32() * _NS + reader.u32()
+        texture_frame, texture_format = reader.string(), reader.string()
+        texture_data = reader.blob()
+        uv = reader.floats(2 * reader.count(8), "<f4").reshape(-1, 2)
+        out.texts[i] = reader.string()
+        mesh_resource, mesh_filename = reader.string(), reader.string()
+        mesh_data = reader.blob()
+        out.mesh_use_embedded_materials[i] = bool(reader.u8())
+        out.attachments.append(
+            MarkerAttachments(
+                texture_resource,
+                texture_stamp,
+                texture_frame,
+                texture_format,
+                texture_data,
+                tuple(map(tuple, uv.tolist())),
+                mesh_resource,
+                mesh_filename,
+                mesh_data,
+            )
+        )
+    reader.done()
+    return out
