@@ -30,7 +30,7 @@ def sample_group(people: int = 4, seed: int = 0) -> SkeletonGroup:
     for person in range(people):
         quaternions = rng.normal(size=(32, 4))
         skeleton = Skeleton.from_positions(
-            rng.normal(size=(32, 3)) + [0, 0, 3],
+            rng.normal(size=(32, 3)) + np.array([0.0, 0.0, 3.0]),
             skeleton_id=person,
             src_time_ns=1_700_000_000_123_456_789,
             src_frame="k01_depth_camera_link",
@@ -45,7 +45,9 @@ def sample_group(people: int = 4, seed: int = 0) -> SkeletonGroup:
 
 def sample_markers(group: SkeletonGroup) -> MarkerArrayData:
     """The group as the Azure Kinect driver publishes it (id = body * 100 + joint)."""
-    rows = [(s.id, j, s.positions[j], s.orientations[j]) for s in group.skeletons for j in range(32)]
+    rows = [
+        (s.id, j, s.positions[j], s.orientations[j]) for s in group.skeletons for j in range(32)
+    ]
     data = MarkerArrayData.new(len(rows), frame_id=group.frame_id, stamp_ns=group.stamp_ns)
     data.ids[:] = [body * 100 + joint for body, joint, _, _ in rows]
     data.poses[:, :3] = [p for _, _, p, _ in rows]
@@ -55,7 +57,9 @@ def sample_markers(group: SkeletonGroup) -> MarkerArrayData:
 
 
 def _rclpy_group(group: SkeletonGroup):  # noqa: ANN202 - rclpy message type
-    from hiros_skeleton_msgs.msg import Link, Marker, Skeleton as SkeletonMsg, SkeletonGroup as Msg
+    from hiros_skeleton_msgs.msg import Link, Marker
+    from hiros_skeleton_msgs.msg import Skeleton as SkeletonMsg
+    from hiros_skeleton_msgs.msg import SkeletonGroup as Msg
 
     def state(msg, row: np.ndarray) -> None:  # noqa: ANN001
         pose, twist, accel = msg.pose, msg.velocity, msg.acceleration
@@ -139,8 +143,9 @@ def _rclpy_markers_to_numpy(msg) -> tuple[np.ndarray, np.ndarray]:  # noqa: ANN0
 def measure() -> list[tuple[str, float, float]]:
     """(operation, rclpy seconds, hiros seconds) for the four codec operations."""
     from rclpy.serialization import deserialize_message, serialize_message
-    from hiros_skeleton_msgs.msg import SkeletonGroup as GroupMsg
     from visualization_msgs.msg import MarkerArray
+
+    from hiros_skeleton_msgs.msg import SkeletonGroup as GroupMsg
 
     group = sample_group()
     markers = sample_markers(group)
@@ -153,7 +158,9 @@ def measure() -> list[tuple[str, float, float]]:
         ),
         (
             "SkeletonGroup 4x32 deserialise+numpy",
-            per_call_seconds(lambda: _rclpy_group_to_numpy(deserialize_message(group_bytes, GroupMsg))),
+            per_call_seconds(
+                lambda: _rclpy_group_to_numpy(deserialize_message(group_bytes, GroupMsg))
+            ),
             per_call_seconds(lambda: decode_group(group_bytes)),
         ),
         (
@@ -176,11 +183,14 @@ def run(console) -> list[str]:  # noqa: ANN001 - rich Console
     rows = measure()
     lines = [f"{'operation':42s} {'rclpy ms':>10s} {'hiros ms':>10s} {'ratio':>7s}"]
     for name, baseline, ours in rows:
-        lines.append(f"{name:42s} {baseline * 1e3:10.3f} {ours * 1e3:10.3f} {baseline / ours:6.1f}x")
+        lines.append(
+            f"{name:42s} {baseline * 1e3:10.3f} {ours * 1e3:10.3f} {baseline / ours:6.1f}x"
+        )
     ratios = [baseline / ours for _, baseline, ours in rows]
     group_ratio, marker_ratio = min(ratios[:2]), min(ratios[2:])
     lines.append(
-        f"codec speed-up vs rclpy: SkeletonGroup {group_ratio:.1f}x, MarkerArray {marker_ratio:.1f}x "
+        f"codec speed-up vs rclpy: SkeletonGroup {group_ratio:.1f}x, "
+        f"MarkerArray {marker_ratio:.1f}x "
         f"(min {min(ratios):.1f}x)"
     )
     for line in lines:

@@ -6,7 +6,9 @@ import time
 from collections.abc import Callable
 
 
-def per_call_seconds(function: Callable[[], object], *, repeats: int = 5, budget: float = 0.3) -> float:
+def per_call_seconds(
+    function: Callable[[], object], *, repeats: int = 5, budget: float = 0.3
+) -> float:
     """Seconds per call of ``function``: the best of ``repeats`` batches of about ``budget`` s.
 
     The minimum over batches is the figure least disturbed by other processes on a shared

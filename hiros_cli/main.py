@@ -68,7 +68,7 @@ def main(argv: list[str] | None = None) -> int:
         parser.print_help()
         return 2
     try:
-        return int(args._module.run(args) or 0)  # noqa: SLF001 - argparse default slot
+        return int(args._module.run(args) or 0)
     except HirosError as exc:
         print(f"hiros {args.command}: error: {exc}", file=sys.stderr)
         return 1

@@ -28,7 +28,7 @@ import yaml
 from hiros_core.errors import CalibrationError
 from hiros_core.geometry import RigidTransform
 
-__all__ = ["CameraCalibration", "Calibration", "load_calibration", "save_calibration"]
+__all__ = ["Calibration", "CameraCalibration", "load_calibration", "save_calibration"]
 
 
 @dataclass
@@ -94,7 +94,7 @@ class Calibration:
         }
 
     @classmethod
-    def from_dict(cls, data: Any, source: str = "calibration") -> Calibration:  # noqa: ANN401
+    def from_dict(cls, data: Any, source: str = "calibration") -> Calibration:
         """Parse and check the file's layout; errors name the source and the field."""
         if not isinstance(data, dict) or not isinstance(data.get("cameras"), dict):
             msg = f"{source}: expected a mapping with a 'cameras' mapping"
@@ -110,7 +110,7 @@ class Calibration:
         return cls(reference, str(data.get("world_frame", "world")), cameras)
 
 
-def _camera_from_dict(entry: Any, where: str) -> CameraCalibration:  # noqa: ANN401
+def _camera_from_dict(entry: Any, where: str) -> CameraCalibration:
     if not isinstance(entry, dict):
         msg = f"{where}: expected a mapping"
         raise CalibrationError(msg)
@@ -137,8 +137,8 @@ def _camera_from_dict(entry: Any, where: str) -> CameraCalibration:  # noqa: ANN
     )
 
 
-def _plain(value: Any) -> Any:  # noqa: ANN401
-    """numpy scalars and arrays to YAML-safe Python values."""
+def _plain(value: Any) -> Any:
+    """Numpy scalars and arrays to YAML-safe Python values."""
     if isinstance(value, dict):
         return {str(k): _plain(v) for k, v in value.items()}
     if isinstance(value, (list, tuple, np.ndarray)):

@@ -80,7 +80,9 @@ class CdrReader:
         """A sequence length, checked against the bytes left (each item >= ``item_size``)."""
         n = self.u32()
         if n * item_size > len(self.data) - self.pos:
-            self.fail(f"sequence of {n} items cannot fit in the {len(self.data) - self.pos} bytes left")
+            self.fail(
+                f"sequence of {n} items cannot fit in the {len(self.data) - self.pos} bytes left"
+            )
         return n
 
     def string(self) -> str:
@@ -126,6 +128,7 @@ class Plan:
         widths: slot kind -> bytes per slot.
         constant: ``(m,)`` offsets of bytes that must match for a message to have this shape.
         meta: what the decoder needs besides the slots (strings, ids, layouts).
+
     """
 
     template: np.ndarray

@@ -142,7 +142,9 @@ def encode_group(group: SkeletonGroup) -> bytes:
     times = _split_ns(np.array([s.src_time_ns for s in skeletons], dtype=np.int64), what)
     head["sec"], head["nanosec"] = times["sec"], times["nanosec"]
     maxes = np.empty(len(skeletons), dtype=_MAXES)
-    maxes["max_markers"] = _checked([s.max_markers for s in skeletons], "<u4", f"{what} max_markers")
+    maxes["max_markers"] = _checked(
+        [s.max_markers for s in skeletons], "<u4", f"{what} max_markers"
+    )
     maxes["max_links"] = _checked([s.max_links for s in skeletons], "<u4", f"{what} max_links")
     box = np.empty((len(skeletons), _BOX_FLOATS))
     box[:, 0] = [s.confidence for s in skeletons]
@@ -321,6 +323,7 @@ class MarkerArrayData:
         lifetimes_ns: ``(N,)``; frame_locked, mesh_use_embedded_materials: ``(N,)`` bool.
         points: N arrays ``(k, 3)``; point_colors: N arrays ``(k, 4)`` float32.
         attachments: N ``MarkerAttachments`` (textures, uv, meshes).
+
     """
 
     stamps_ns: np.ndarray

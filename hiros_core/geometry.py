@@ -32,6 +32,7 @@ class RigidTransform:
     Attributes:
         rotation: a scipy ``Rotation``.
         translation: ``(3,)`` metres.
+
     """
 
     rotation: Rotation
@@ -43,7 +44,9 @@ class RigidTransform:
         return cls(Rotation.identity(), np.zeros(3))
 
     @classmethod
-    def from_quaternion(cls, quaternion_xyzw: np.ndarray, translation: np.ndarray) -> RigidTransform:
+    def from_quaternion(
+        cls, quaternion_xyzw: np.ndarray, translation: np.ndarray
+    ) -> RigidTransform:
         """From a quaternion x, y, z, w and a translation."""
         return cls(Rotation.from_quat(quaternion_xyzw), np.asarray(translation, dtype=float))
 
@@ -73,7 +76,8 @@ class RigidTransform:
     def __matmul__(self, other: RigidTransform) -> RigidTransform:
         """Composition: ``(a @ b).apply(p) == a.apply(b.apply(p))``."""
         return RigidTransform(
-            self.rotation * other.rotation, self.rotation.apply(other.translation) + self.translation
+            self.rotation * other.rotation,
+            self.rotation.apply(other.translation) + self.translation,
         )
 
     def apply(self, points: np.ndarray) -> np.ndarray:

@@ -42,6 +42,7 @@ class Layout:
         parents: ``(J,)`` parent joint index of each joint, ``-1`` for the root.
         link_labels: names of the links by link id, when they are not ``Parent-Child``
             (layouts decoded from other tools' messages keep those tools' names).
+
     """
 
     name: str

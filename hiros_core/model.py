@@ -88,6 +88,7 @@ class Skeleton:
         bounding_box: ``(22,)`` KinematicState of the box centre + height, length, width.
         max_markers: the message field; the layout's joint count by default.
         max_links: the message field; the layout's link count by default.
+
     """
 
     id: int
@@ -131,7 +132,7 @@ class Skeleton:
         )
 
     @classmethod
-    def from_positions(  # noqa: PLR0913 - every argument is an optional message field
+    def from_positions(
         cls,
         positions: np.ndarray,
         layout: Layout = AZURE_KINECT,
@@ -271,6 +272,7 @@ class SkeletonGroup:
         stamp_ns: header stamp, integer nanoseconds.
         frame_id: header frame (camera frame before the tracker, world frame after).
         skeletons: the people, in message order.
+
     """
 
     stamp_ns: int

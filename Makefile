@@ -1,0 +1,42 @@
+# hiros: `make demo` and `make test` are the two commands; both set up the venv first.
+VENV ?= .venv
+PY := $(VENV)/bin/python
+STAMP := $(VENV)/.hiros-setup
+SETUP_INPUTS := requirements.txt constraints.txt setup.py setup.cfg package.xml \
+	tools/build_interfaces.sh tools/install_ament_layout.sh \
+	$(wildcard hiros_skeleton_msgs/msg/*.msg hiros_skeleton_msgs/srv/*.srv) \
+	hiros_skeleton_msgs/CMakeLists.txt third_party/tf2_msgs/CMakeLists.txt
+
+.PHONY: setup test test-fast lint demo bench clean
+
+setup: $(STAMP)
+
+$(STAMP): $(SETUP_INPUTS)
+	@test -x $(PY) || python3 -m venv $(VENV)
+	$(PY) -m pip install --quiet --disable-pip-version-check -r requirements.txt -c constraints.txt
+	tools/build_interfaces.sh $(VENV) hiros_skeleton_msgs
+	@$(PY) -c "import tf2_msgs.msg" 2>/dev/null || tools/build_interfaces.sh $(VENV) third_party/tf2_msgs
+	$(PY) -m pip install --quiet --disable-pip-version-check --no-deps --no-build-isolation -e .
+	tools/install_ament_layout.sh $(VENV)
+	@touch $(STAMP)
+	@echo "hiros is set up in $(VENV)"
+
+lint: setup
+	$(VENV)/bin/ruff check .
+
+# The whole suite runs in a private network namespace holding only loopback, so that DDS
+# traffic of the ROS tests never leaves the machine (fallback: localhost-only discovery).
+test: lint
+	tools/netns.sh $(VENV)/bin/pytest -q
+
+test-fast: lint
+	tools/netns.sh $(VENV)/bin/pytest -q -m "not slow"
+
+demo: setup
+	$(VENV)/bin/hiros demo
+
+bench: setup
+	$(VENV)/bin/hiros bench
+
+clean:
+	rm -rf $(VENV) build install log
