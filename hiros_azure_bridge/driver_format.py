@@ -1,0 +1,359 @@
+"""The Azure Kinect ROS driver's ``body_tracking_data`` MarkerArray <-> the skeleton model.
+
+The driver (Azure_Kinect_ROS_Driver) publishes, for every body-tracking frame, one
+``visualization_msgs/MarkerArray`` holding one SPHERE marker per joint of every body:
+
+* marker id = body id × 100 + joint index (k4abt order), so a frame has bodies × 32 markers;
+* every marker carries the frame's stamp and the frame ``<prefix>depth_camera_link``;
+* the pose is the joint position in metres and the joint orientation (x, y, z, w);
+* some driver forks write the joint confidence level (k4abt: 0 none, 1 low, 2 medium,
+  3 high) as an integer in ``marker.text``.
+
+Conventions of this module beyond the driver's:
+
+* confidences in the model are levels divided by ``confidence_levels`` (3 for k4abt), so HIGH
+  is 1.0 and NONE 0.0; a marker without a level gives NaN;
+* an unknown orientation is written as the all-zero quaternion, which viewers treat as
+  "no orientation" (identity), and read back as NaN;
+* a layout other than the Azure Kinect's is named in ``marker.ns`` (``kinect_v2``), so a
+  recording converted from another device reads back with the right joints; a namespace that
+  names a built-in layout overrides the bridge's configured layout.
+
+``DriverBridge`` is the stage the bridge nodes and the recording reader share; the same class,
+configured by a YAML file, reads other drivers that publish one marker per joint (another id
+stride, joint-major ids, another joint order, millimetres).
+"""
+
+from __future__ import annotations
+
+import math
+from collections import Counter
+from dataclasses import dataclass, field
+from functools import cache
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import yaml
+
+from hiros_core.codec import MarkerArrayData
+from hiros_core.errors import CodecError, ConfigError, LayoutError
+from hiros_core.layouts import AZURE_KINECT, Layout, get_layout
+from hiros_core.model import Skeleton, SkeletonGroup
+
+__all__ = [
+    "ADD",
+    "DELETE",
+    "DELETEALL",
+    "SPHERE",
+    "DriverBridge",
+    "DriverBridgeParams",
+    "group_to_driver_markers",
+    "load_bridge_params",
+]
+
+SPHERE = 2
+"""``visualization_msgs/Marker.SPHERE``."""
+ADD = 0
+"""``Marker.ADD`` (also ``MODIFY``)."""
+DELETE = 2
+"""``Marker.DELETE``: remove one marker."""
+DELETEALL = 3
+"""``Marker.DELETEALL``: remove every marker of the namespace (the driver's "no bodies")."""
+
+DRIVER_LIFETIME_NS = 250_000_000
+"""The driver gives markers 0.25 s of life so that RViz does not flicker at 5 Hz."""
+JOINT_SCALE = 0.05
+"""Sphere diameter the driver uses, metres."""
+
+# One colour per body id (id modulo the palette), like the driver, so people keep a colour.
+_PALETTE = np.array(
+    [
+        [0.90, 0.20, 0.20, 1.0],
+        [0.20, 0.60, 0.90, 1.0],
+        [0.30, 0.80, 0.30, 1.0],
+        [0.95, 0.75, 0.10, 1.0],
+        [0.70, 0.35, 0.85, 1.0],
+        [0.10, 0.80, 0.80, 1.0],
+        [0.95, 0.50, 0.15, 1.0],
+        [0.60, 0.60, 0.60, 1.0],
+    ],
+    dtype=np.float32,
+)
+
+_ID_SCHEMES = ("body_major", "joint_major")
+
+
+@dataclass
+class DriverBridgeParams:
+    """How a driver numbers its markers; field names are the bridge nodes' ROS parameters.
+
+    Attributes:
+        layout: built-in layout name (``azure_kinect``, ``kinect_v2``) or a layout YAML file.
+        id_stride: ids are ``body * id_stride + joint`` (``body_major``) or
+            ``joint * id_stride + body`` (``joint_major``).
+        id_scheme: ``body_major`` (the Azure driver) or ``joint_major``.
+        joint_names: the driver's joint order by layout joint name, when it differs from the
+            layout's order; empty means driver joint index = layout marker id.
+        position_scale: metres per driver unit (0.001 for a driver publishing millimetres).
+        confidence_levels: the driver's highest confidence level; model confidence is
+            ``level / confidence_levels``.
+        frame_id: frame written to the groups; empty keeps the markers' frame.
+        reset_after_backwards: a stamp that jumps back by more than this many seconds is a
+            restarted source (a replay looping), not a late message: the bridge starts over.
+
+    """
+
+    layout: str = "azure_kinect"
+    id_stride: int = 100
+    id_scheme: str = "body_major"
+    joint_names: list[str] = field(default_factory=list)
+    position_scale: float = 1.0
+    confidence_levels: int = 3
+    frame_id: str = ""
+    reset_after_backwards: float = 1.0
+
+
+def load_bridge_params(path: str | Path) -> tuple[DriverBridgeParams, dict[str, Any]]:
+    """Read a generic bridge description: the bridge parameters and the rest (topics).
+
+    The file is a mapping whose keys are ``DriverBridgeParams`` fields plus free keys such as
+    ``topic`` and ``output_topic`` for the node. A relative ``layout`` file path is taken
+    relative to the YAML file. Raises ConfigError naming the file and the bad key.
+    """
+    path = Path(path)
+    try:
+        spec = yaml.safe_load(path.read_text())
+    except (OSError, yaml.YAMLError) as exc:
+        msg = f"cannot read bridge description {path}: {exc}"
+        raise ConfigError(msg) from exc
+    if not isinstance(spec, dict):
+        msg = f"bridge description {path} must be a mapping of parameters"
+        raise ConfigError(msg)
+    known = DriverBridgeParams.__dataclass_fields__
+    values = {k: v for k, v in spec.items() if k in known}
+    layout = values.get("layout")
+    if isinstance(layout, str) and layout.endswith((".yaml", ".yml")):
+        layout_path = Path(layout)
+        if not layout_path.is_absolute():
+            values["layout"] = str(path.parent / layout_path)
+    try:
+        params = DriverBridgeParams(**values)
+        DriverBridge(params)  # validates layout, scheme and joint names now, not per message
+    except (TypeError, LayoutError, ConfigError) as exc:
+        msg = f"bridge description {path}: {exc}"
+        raise ConfigError(msg) from exc
+    return params, {k: v for k, v in spec.items() if k not in known}
+
+
+@cache
+def _level(text: str) -> float:
+    """Confidence level written in a marker's text, NaN when there is none."""
+    try:
+        return float(int(text.strip()))
+    except ValueError:
+        return math.nan
+
+
+class DriverBridge:
+    """One driver topic's MarkerArrays -> SkeletonGroups in the camera's frame and clock.
+
+    Keep one bridge per camera: it remembers the last stamp to refuse messages that go back
+    in time. Bad input is never raised: it is counted in ``drops`` by reason:
+
+    * ``empty_array``: a MarkerArray with no markers (nothing to stamp a group with);
+    * ``delete_marker`` / ``deleteall_marker``: DELETE / DELETEALL markers (a message of
+      DELETEALL markers alone still gives an empty group: "nobody in view");
+    * ``unknown_action``: actions other than ADD, DELETE, DELETEALL;
+    * ``unknown_joint``: an id whose joint is outside the layout (or negative);
+    * ``nan_position``: a joint position that is NaN or infinite;
+    * ``duplicate_marker``: a second marker for the same body and joint (the first is kept);
+    * ``mixed_stamps``: markers of one message with different stamps (the first is used);
+    * ``stamp_backwards`` / ``repeated_stamp``: a message older than, or as old as, the last
+      one (dropped whole); a jump back larger than ``reset_after_backwards`` counts
+      ``source_restarted`` and is accepted.
+    """
+
+    def __init__(self, params: DriverBridgeParams | None = None) -> None:
+        self.params = params or DriverBridgeParams()
+        self.layout: Layout = get_layout(self.params.layout)
+        if self.params.id_scheme not in _ID_SCHEMES:
+            msg = f"id_scheme must be one of {_ID_SCHEMES}, not {self.params.id_scheme!r}"
+            raise ConfigError(msg)
+        if self.params.id_stride < 1:
+            msg = f"id_stride must be a positive integer, not {self.params.id_stride}"
+            raise ConfigError(msg)
+        self.drops: Counter[str] = Counter()
+        self.last_stamp_ns: int | None = None
+        self._lookups: dict[str, tuple[Layout, np.ndarray]] = {}
+        self._lookup("")  # an unknown name in joint_names fails here, not per message
+
+    def reset(self) -> None:
+        """Forget the last stamp (a new recording or a restarted source)."""
+        self.last_stamp_ns = None
+
+    def _lookup(self, namespace: str) -> tuple[Layout, np.ndarray]:
+        """The layout of a namespace and the driver-joint -> marker-id table for it."""
+        found = self._lookups.get(namespace)
+        if found is None:
+            try:
+                layout = get_layout(namespace) if namespace else self.layout
+            except LayoutError:
+                layout = self.layout
+            if self.params.joint_names and layout is self.layout:
+                table = np.array([layout.index(n) for n in self.params.joint_names])
+            else:
+                table = np.arange(layout.n_joints)
+            found = self._lookups[namespace] = (layout, table)
+        return found
+
+    def update(self, data: MarkerArrayData) -> SkeletonGroup | None:
+        """Convert one MarkerArray; None when the whole message is dropped (see ``drops``)."""
+        actions = np.asarray(data.actions)
+        if len(actions) == 0:
+            self.drops["empty_array"] += 1
+            return None
+        add = actions == ADD
+        deleteall = actions == DELETEALL
+        self.drops["delete_marker"] += int((actions == DELETE).sum())
+        self.drops["deleteall_marker"] += int(deleteall.sum())
+        self.drops["unknown_action"] += int((~add & ~deleteall & (actions != DELETE)).sum())
+        rows = np.flatnonzero(add if add.any() else deleteall)
+        if len(rows) == 0:
+            return None
+        stamp = int(data.stamps_ns[rows[0]])
+        frame = self.params.frame_id or data.frame_ids[rows[0]]
+        if not add.any():
+            # Clearing markers are often unstamped: they say "nobody in view" only when they
+            # carry a new stamp, and never restart the clock.
+            if self.last_stamp_ns is not None and stamp <= self.last_stamp_ns:
+                return None
+            self.last_stamp_ns = stamp
+            return SkeletonGroup(stamp, frame, [])
+        if not self._accept_stamp(stamp):
+            return None
+        if (data.stamps_ns[rows] != stamp).any():
+            self.drops["mixed_stamps"] += 1
+        return SkeletonGroup(stamp, frame, self._skeletons(data, rows, stamp, frame))
+
+    def _accept_stamp(self, stamp: int) -> bool:
+        last = self.last_stamp_ns
+        if last is not None and stamp <= last:
+            if last - stamp > self.params.reset_after_backwards * 1e9:
+                self.drops["source_restarted"] += 1
+            else:
+                self.drops["repeated_stamp" if stamp == last else "stamp_backwards"] += 1
+                return False
+        self.last_stamp_ns = stamp
+        return True
+
+    def _skeletons(
+        self, data: MarkerArrayData, rows: np.ndarray, stamp: int, frame: str
+    ) -> list[Skeleton]:
+        """Skeletons of the ADD markers ``rows``, one per body id in increasing order."""
+        layout, table = self._lookup(data.namespaces[rows[0]])
+        ids = np.asarray(data.ids, dtype=np.int64)[rows]
+        stride = self.params.id_stride
+        major, minor = ids // stride, ids % stride
+        body, driver_joint = (
+            (major, minor) if self.params.id_scheme == "body_major" else (minor, major)
+        )
+        known = (ids >= 0) & (driver_joint < len(table))
+        joint = np.where(known, table[np.minimum(driver_joint, len(table) - 1)], -1)
+        known &= joint >= 0
+        self.drops["unknown_joint"] += int((~known).sum())
+        poses = np.asarray(data.poses, dtype=float)[rows]
+        positions = poses[:, :3] * self.params.position_scale
+        finite = np.isfinite(positions).all(axis=1)
+        self.drops["nan_position"] += int((known & ~finite).sum())
+        keep = np.flatnonzero(known & finite)
+        key = body[keep] * layout.n_joints + joint[keep]
+        _, first = np.unique(key, return_index=True)
+        self.drops["duplicate_marker"] += len(keep) - len(first)
+        keep = keep[first]
+        if len(keep) == 0:
+            return []
+        quaternions = poses[keep, 3:7]
+        unknown = ~(np.linalg.norm(quaternions, axis=1) > 0)  # zero or NaN: no orientation
+        quaternions[unknown] = np.nan
+        levels = np.array([_level(data.texts[rows[i]]) for i in keep])
+        confidences = levels / self.params.confidence_levels
+        bodies, person = np.unique(body[keep], return_inverse=True)
+        shape = (len(bodies), layout.n_joints)
+        grid_positions = np.full((*shape, 3), np.nan)
+        grid_orientations = np.full((*shape, 4), np.nan)
+        grid_confidences = np.full(shape, np.nan)
+        grid_positions[person, joint[keep]] = positions[keep]
+        grid_orientations[person, joint[keep]] = quaternions
+        grid_confidences[person, joint[keep]] = confidences
+        return [
+            Skeleton.from_positions(
+                grid_positions[p],
+                layout,
+                skeleton_id=int(body_id),
+                src_time_ns=stamp,
+                src_frame=frame,
+                confidences=grid_confidences[p],
+                orientations=grid_orientations[p],
+            )
+            for p, body_id in enumerate(bodies)
+        ]
+
+
+def group_to_driver_markers(
+    group: SkeletonGroup,
+    *,
+    id_stride: int = 100,
+    confidence_levels: int = 3,
+    lifetime_ns: int = DRIVER_LIFETIME_NS,
+) -> MarkerArrayData:
+    """The MarkerArray the Azure Kinect driver would publish for ``group``.
+
+    One SPHERE marker per present joint of every skeleton: id ``skeleton.id * id_stride +
+    joint``, the group's stamp and frame, the joint pose (all-zero quaternion when the
+    orientation is unknown), a colour per body, and the confidence level
+    ``round(confidence * confidence_levels)`` as text when the confidence is known. A group
+    without skeletons gives an empty array, as the driver publishes when nobody is in view.
+
+    Raises:
+        CodecError: a skeleton id is negative or a layout has more joints than ``id_stride``,
+            which the driver's id scheme cannot express.
+
+    """
+    joints_of = [np.flatnonzero(s.marker_present) for s in group.skeletons]
+    total = sum(len(j) for j in joints_of)
+    data = MarkerArrayData.new(total)
+    if total == 0:
+        return data
+    for skeleton in group.skeletons:
+        if skeleton.id < 0 or skeleton.layout.n_joints > id_stride:
+            msg = (
+                f"skeleton id {skeleton.id} with {skeleton.layout.n_joints} joints cannot be "
+                f"written as driver marker ids (needs id >= 0 and at most {id_stride} joints)"
+            )
+            raise CodecError(msg)
+    body_of = np.repeat([s.id for s in group.skeletons], [len(j) for j in joints_of])
+    joints = np.concatenate(joints_of)
+    markers = np.concatenate(
+        [s.markers[j] for s, j in zip(group.skeletons, joints_of, strict=True)]
+    )
+    orientations = markers[:, 4:8].copy()
+    orientations[~np.isfinite(orientations).all(axis=1)] = 0.0
+    levels = np.rint(markers[:, 0] * confidence_levels)
+    data.stamps_ns[:] = group.stamp_ns
+    data.frame_ids = [group.frame_id] * total
+    data.namespaces = [
+        "" if s.layout is AZURE_KINECT else s.layout.name
+        for s, j in zip(group.skeletons, joints_of, strict=True)
+        for _ in range(len(j))
+    ]
+    data.ids[:] = body_of * id_stride + joints
+    data.types[:] = SPHERE
+    data.actions[:] = ADD
+    data.poses[:, :3] = markers[:, 1:4]
+    data.poses[:, 3:7] = orientations
+    data.scales[:] = JOINT_SCALE
+    data.colors[:] = _PALETTE[body_of % len(_PALETTE)]
+    data.lifetimes_ns[:] = lifetime_ns
+    data.texts = ["" if math.isnan(v) else str(int(v)) for v in levels.tolist()]
+    return data

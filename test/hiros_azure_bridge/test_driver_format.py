@@ -1,0 +1,210 @@
+"""Azure Kinect driver MarkerArray <-> model: round trips and every bad input."""
+
+import numpy as np
+import pytest
+
+from hiros_azure_bridge import (
+    DriverBridge,
+    DriverBridgeParams,
+    group_to_driver_markers,
+    load_bridge_params,
+)
+from hiros_azure_bridge.driver_format import ADD, DELETE, DELETEALL, SPHERE
+from hiros_core.codec import MarkerArrayData, decode_marker_array, encode_marker_array
+from hiros_core.errors import CodecError, ConfigError
+from hiros_core.layouts import AZURE_KINECT, KINECT_V2
+from hiros_core.model import Skeleton, SkeletonGroup
+
+FRAME = "k01_depth_camera_link"
+STAMP = 1_635_261_007_408_000_123
+
+
+def _group(n_people=2, stamp=STAMP, layout=AZURE_KINECT, seed=0):
+    rng = np.random.default_rng(seed)
+    skeletons = []
+    for person in range(n_people):
+        positions = rng.normal([0.0, 0.0, 2.5], 0.4, size=(layout.n_joints, 3))
+        orientations = rng.normal(size=(layout.n_joints, 4))
+        orientations /= np.linalg.norm(orientations, axis=1, keepdims=True)
+        levels = rng.integers(0, 4, layout.n_joints)
+        skeletons.append(
+            Skeleton.from_positions(
+                positions,
+                layout,
+                skeleton_id=person + 1,
+                src_time_ns=stamp,
+                src_frame=FRAME,
+                confidences=levels / 3,
+                orientations=orientations,
+            )
+        )
+    return SkeletonGroup(stamp, FRAME, skeletons)
+
+
+def _markers(ids, positions=None, actions=None, stamps=None, texts=None):
+    data = MarkerArrayData.new(len(ids), frame_id=FRAME, stamp_ns=STAMP)
+    data.ids[:] = ids
+    if positions is not None:
+        data.poses[:, :3] = positions
+    if actions is not None:
+        data.actions[:] = actions
+    if stamps is not None:
+        data.stamps_ns[:] = stamps
+    if texts is not None:
+        data.texts = list(texts)
+    return data
+
+
+def test_driver_convention():
+    group = _group()
+    data = group_to_driver_markers(group)
+    assert len(data) == 2 * 32
+    assert data.ids[:3].tolist() == [100, 101, 102]
+    assert data.ids[32] == 200
+    assert (data.types == SPHERE).all()
+    assert (data.actions == ADD).all()
+    assert set(data.frame_ids) == {FRAME}
+    assert (data.stamps_ns == STAMP).all()
+    assert set(data.namespaces) == {""}
+    levels = np.rint(group.skeletons[0].confidences * 3).astype(int)
+    assert data.texts[:32] == [str(v) for v in levels]
+    np.testing.assert_array_equal(data.poses[:32, :3], group.skeletons[0].positions)
+
+
+def test_round_trip_through_cdr_is_exact():
+    group = _group(3)
+    group.skeletons[1].marker_present[[4, 9]] = False
+    group.skeletons[1].markers[[4, 9]] = np.nan
+    group.skeletons[1].update_links()
+    group.skeletons[2].orientations[5] = np.nan  # unknown orientation
+    group.skeletons[2].confidences[6] = np.nan  # no confidence level
+    group.skeletons[2].update_links()
+    raw = encode_marker_array(group_to_driver_markers(group))
+    bridge = DriverBridge()
+    out = bridge.update(decode_marker_array(raw))
+    assert out is not None
+    assert out.same_as(group)
+    assert not bridge.drops or sum(bridge.drops.values()) == 0
+
+
+def test_kinect_v2_layout_travels_in_namespace():
+    group = _group(1, layout=KINECT_V2)
+    data = group_to_driver_markers(group)
+    assert set(data.namespaces) == {"kinect_v2"}
+    out = DriverBridge().update(data)
+    assert out.skeletons[0].layout is KINECT_V2
+    assert out.same_as(group)
+
+
+def test_empty_array_and_deleteall():
+    bridge = DriverBridge()
+    assert bridge.update(MarkerArrayData.new(0)) is None
+    assert bridge.drops["empty_array"] == 1
+    clear = _markers([0], actions=[DELETEALL])
+    out = bridge.update(clear)
+    assert out is not None
+    assert out.skeletons == []
+    assert out.stamp_ns == STAMP
+    # an unstamped DELETEALL after data neither gives a group nor restarts the clock
+    bridge.update(_markers([100], positions=[[0, 0, 1]], stamps=[STAMP + 10]))
+    assert bridge.update(_markers([0], actions=[DELETEALL], stamps=[0])) is None
+    assert bridge.last_stamp_ns == STAMP + 10
+    assert bridge.drops["deleteall_marker"] == 2
+
+
+def test_bad_markers_are_counted_not_raised():
+    ids = [100, 101, 101, 150, -5, 102, 103, 104, 105]
+    positions = np.tile([0.1, 0.2, 2.0], (len(ids), 1))
+    positions[2] = [9, 9, 9]  # duplicate of joint 1: the first copy stays
+    positions[5] = [np.nan, 0.0, 1.0]
+    positions[6] = [np.inf, 0.0, 1.0]
+    actions = [ADD] * 7 + [DELETE, 7]
+    texts = ["3", "x", "1", "", "", "", "", "", ""]
+    bridge = DriverBridge()
+    out = bridge.update(_markers(ids, positions, actions, texts=texts))
+    assert bridge.drops == {
+        "duplicate_marker": 1,
+        "unknown_joint": 2,
+        "nan_position": 2,
+        "delete_marker": 1,
+        "unknown_action": 1,
+    } | {k: v for k, v in bridge.drops.items() if v == 0}
+    (skeleton,) = out.skeletons
+    assert skeleton.id == 1
+    assert np.flatnonzero(skeleton.marker_present).tolist() == [0, 1]
+    np.testing.assert_array_equal(skeleton.positions[1], [0.1, 0.2, 2.0])
+    assert skeleton.confidences[0] == 1.0
+    assert np.isnan(skeleton.confidences[1])  # "x" is no level
+
+
+def test_stamps_backwards_repeated_mixed_and_restart():
+    bridge = DriverBridge()
+    assert bridge.update(_markers([100], stamps=[STAMP])) is not None
+    assert bridge.update(_markers([100], stamps=[STAMP])) is None
+    assert bridge.update(_markers([100], stamps=[STAMP - 1000])) is None
+    assert bridge.drops["repeated_stamp"] == 1
+    assert bridge.drops["stamp_backwards"] == 1
+    out = bridge.update(_markers([100, 101], stamps=[STAMP + 5, STAMP + 6]))
+    assert out.stamp_ns == STAMP + 5
+    assert bridge.drops["mixed_stamps"] == 1
+    restarted = bridge.update(_markers([100], stamps=[STAMP - 10**10]))  # replay looped
+    assert restarted is not None
+    assert bridge.drops["source_restarted"] == 1
+
+
+def test_generic_scheme_millimetres_and_joint_order(tmp_path):
+    order = list(reversed(KINECT_V2.joint_names))
+    spec = tmp_path / "driver.yaml"
+    spec.write_text(
+        "topic: /people\nlayout: kinect_v2\nid_scheme: joint_major\nid_stride: 1000\n"
+        f"position_scale: 0.001\njoint_names: {order}\nframe_id: cam_link\n"
+    )
+    params, rest = load_bridge_params(spec)
+    assert rest == {"topic": "/people"}
+    bridge = DriverBridge(params)
+    # driver joint 0 is the layout's last joint (ThumbRight); body 7
+    data = _markers([0 * 1000 + 7, 24 * 1000 + 7], positions=[[1000, 0, 2000], [0, 500, 0]])
+    out = bridge.update(data)
+    (skeleton,) = out.skeletons
+    assert skeleton.id == 7
+    assert out.frame_id == "cam_link"
+    np.testing.assert_allclose(skeleton.positions[KINECT_V2.index("ThumbRight")], [1, 0, 2])
+    np.testing.assert_allclose(skeleton.positions[KINECT_V2.index("SpineBase")], [0, 0.5, 0])
+
+
+def test_layout_file_relative_to_description(tmp_path):
+    (tmp_path / "tiny.yaml").write_text("name: tiny\njoints: [a, b]\nparents: [-1, 0]\n")
+    spec = tmp_path / "bridge.yaml"
+    spec.write_text("layout: tiny.yaml\n")
+    params, _ = load_bridge_params(spec)
+    out = DriverBridge(params).update(_markers([300, 301, 302], positions=np.ones((3, 3))))
+    assert out.skeletons[0].layout.name == "tiny"
+    assert DriverBridge(params).drops["unknown_joint"] == 0
+
+
+@pytest.mark.parametrize(
+    "text",
+    ["id_scheme: sideways\n", "id_stride: 0\n", "layout: nope\n", "joint_names: [Elbow]\n", "[1]"],
+)
+def test_bad_descriptions(tmp_path, text):
+    spec = tmp_path / "bad.yaml"
+    spec.write_text(text)
+    with pytest.raises(ConfigError, match=r"bad\.yaml"):
+        load_bridge_params(spec)
+
+
+def test_unwritable_ids():
+    group = _group(1)
+    group.skeletons[0].id = -1
+    with pytest.raises(CodecError, match="id -1"):
+        group_to_driver_markers(group)
+    assert len(group_to_driver_markers(SkeletonGroup(STAMP, FRAME, []))) == 0
+
+
+def test_bridge_params_defaults_match_driver():
+    params = DriverBridgeParams()
+    assert (params.layout, params.id_stride, params.id_scheme) == (
+        "azure_kinect",
+        100,
+        "body_major",
+    )
