@@ -1,0 +1,204 @@
+"""From a BVH skeleton to the 32 Azure Kinect joints, in the simulator's world frame.
+
+World frame: metres, Z up, the floor is ``z = 0`` and x, y lie on it. A BVH file (Y up, the
+character facing +Z and its left on +X in the rest pose) is turned by +90° about X::
+
+    world = (x_bvh, -z_bvh, y_bvh)
+
+so the rest-pose character faces -y with its left on +x (right-handed either way).
+
+Most Azure joints are weighted sums of BVH joints (one ``(32, J_bvh)`` weight matrix per file,
+built once from the rest pose), so mapping a whole clip is one matrix product. Joint names are
+matched by role with aliases so that the CMU files, the Xsens MVN export and the common
+"LeftUpLeg/LeftArm" naming all work.
+
+| Azure joint | from the BVH |
+|---|---|
+| HipLeft/Right, KneeLeft/Right, ShoulderLeft/Right, ElbowLeft/Right, WristLeft/Right | the joint of that role (CMU ``LeftHip``, Xsens ``LeftHip``, ``LeftUpLeg``...) |
+| AnkleLeft/Right | ``LeftAnkle`` / ``LeftFoot`` |
+| FootLeft/Right | ``LeftToe`` / ``LeftToeBase`` (ball of the foot) |
+| Pelvis | midpoint of the two hips (the Kinect pelvis sits between the hip joints) |
+| SpineNaval, SpineChest, Neck, Head | points at 0.22, 0.40, 0.664 and 0.763 of the spine polyline (pelvis → root → spine joints → head → head top), by rest-pose arc length |
+| ClavicleLeft/Right | 0.8 × Neck + 0.2 × Shoulder |
+| HandLeft/Right, HandTipLeft/Right | wrist + 0.095 m and 0.19 m along the wrist → finger-end direction, scaled by arm length / 0.51 m |
+| ThumbLeft/Right | wrist + wrist rotation × (0.09 m along the hand + 0.09 m forward in the rest pose) |
+| Nose, EyeLeft/Right, EarLeft/Right | Head + head rotation × fixed offsets (left, up, forward): nose (0, 0.113, 0.112), eyes (±0.026, 0.12, 0.066), ears (±0.083, 0.057, −0.026) m |
+
+The fractions and offsets were measured on the real Azure Kinect stream of
+``unipd_bpe_sample`` (median over 355 frames, in a pelvis/neck/hip body frame for the torso and
+a neck/head/ear frame for the face): Kinect pelvis → SpineNaval 0.176 m, → SpineChest 0.318 m,
+→ Neck 0.532 m, → Head 0.611 m, for a subject whose Xsens pelvis → head top is 0.801 m.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from hiros_core.errors import RecordingError
+from hiros_core.layouts import AZURE_KINECT
+from hiros_sim.bvh import BvhMotion
+
+__all__ = ["BVH_TO_WORLD", "map_to_azure", "mapping_weights"]
+
+BVH_TO_WORLD = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]])
+"""Rotation taking BVH axes (Y up) to the world frame (Z up): ``world = BVH_TO_WORLD @ bvh``."""
+
+_SPINE_FRACTIONS = {"SpineNaval": 0.22, "SpineChest": 0.40, "Neck": 0.664, "Head": 0.763}
+_CLAVICLE_TO_SHOULDER = 0.2
+_HAND, _HAND_TIP, _ARM_REFERENCE = 0.095, 0.19, 0.51
+_THUMB_ALONG, _THUMB_FORWARD = 0.09, 0.09
+# Offsets from the Azure Head joint in the head's rest frame (x left, y up, z forward), metres.
+_FACE = {
+    "Nose": (0.0, 0.113, 0.112),
+    "EyeLeft": (0.026, 0.12, 0.066),
+    "EyeRight": (-0.026, 0.12, 0.066),
+    "EarLeft": (0.083, 0.057, -0.026),
+    "EarRight": (-0.083, 0.057, -0.026),
+}
+
+_ALIASES = {
+    "Hip": ("{s}Hip", "{s}UpLeg", "{s}Thigh", "{c}Hip"),
+    "Knee": ("{s}Knee", "{s}Leg", "{s}Shin", "{c}Knee"),
+    "Ankle": ("{s}Ankle", "{s}Foot", "{c}Ankle"),
+    "Foot": ("{s}Toe", "{s}ToeBase", "{s}Toes", "{c}Toe"),
+    # "LeftArm" first: in files that have it, "LeftShoulder" names the collar bone.
+    "Shoulder": ("{s}Arm", "{s}UpperArm", "{s}Shoulder", "{c}Shoulder"),
+    "Elbow": ("{s}Elbow", "{s}ForeArm", "{s}LowerArm", "{c}Elbow"),
+    "Wrist": ("{s}Wrist", "{s}Hand", "{c}Wrist"),
+}
+
+
+def _find(names: tuple[str, ...], candidates: tuple[str, ...], what: str, source: str) -> int:
+    lower = {n.lower(): i for i, n in enumerate(names)}
+    for candidate in candidates:
+        if candidate.lower() in lower:
+            return lower[candidate.lower()]
+    msg = f"BVH clip {source}: no joint for {what} (tried {', '.join(candidates)})"
+    raise RecordingError(msg)
+
+
+def _rest_positions(motion: BvhMotion) -> np.ndarray:
+    """``(J, 3)`` joint positions in the rest pose (all rotations zero)."""
+    rest = np.zeros_like(motion.offsets)
+    for j, parent in enumerate(motion.parents):
+        rest[j] = motion.offsets[j] + (rest[parent] if parent >= 0 else 0.0)
+    return rest
+
+
+def _ancestors(parents: np.ndarray, joint: int) -> list[int]:
+    chain = []
+    while joint >= 0:
+        chain.append(joint)
+        joint = int(parents[joint])
+    return chain[::-1]
+
+
+class _Roles:
+    """Indices of the BVH joints that play each role, found once per skeleton."""
+
+    def __init__(self, motion: BvhMotion) -> None:
+        names, src = motion.joint_names, motion.name
+        self.side: dict[str, dict[str, int]] = {}
+        for side, short in (("Left", "L"), ("Right", "R")):
+            self.side[side] = {
+                role: _find(
+                    names, tuple(a.format(s=side, c=short) for a in aliases), f"{side}{role}", src
+                )
+                for role, aliases in _ALIASES.items()
+            }
+        self.head = _find(names, ("Head",), "Head", src)
+        ends = [i for i, p in enumerate(motion.parents) if p == self.head]
+        self.head_end = ends[0] if ends else None
+        rest = _rest_positions(motion)
+        self.finger_end: dict[str, int] = {}
+        self.thumb_end: dict[str, int | None] = {}
+        for side in ("Left", "Right"):
+            wrist = self.side[side]["Wrist"]
+            below = [j for j in range(len(names)) if wrist in _ancestors(motion.parents, j)[:-1]]
+            thumbs = [j for j in below if "thumb" in names[j].lower()]
+            fingers = [j for j in below if j not in thumbs] or [wrist]
+            reach = np.linalg.norm(rest[fingers] - rest[wrist], axis=1)
+            self.finger_end[side] = fingers[int(np.argmax(reach))]
+            self.thumb_end[side] = thumbs[-1] if thumbs else None
+
+
+def mapping_weights(motion: BvhMotion) -> np.ndarray:
+    """``(32, J_bvh)`` weights: the linear part of the mapping (``azure = W @ bvh``).
+
+    Hand, hand tip, thumb and face joints get zero rows here; ``map_to_azure`` adds them
+    from joint rotations.
+    """
+    roles = _Roles(motion)
+    rest = _rest_positions(motion)
+    weights = np.zeros((AZURE_KINECT.n_joints, len(motion.joint_names)))
+    idx = AZURE_KINECT.index
+    for side in ("Left", "Right"):
+        for role, joint in roles.side[side].items():
+            weights[idx(f"{role}{side}"), joint] = 1.0
+    pelvis = np.zeros(len(motion.joint_names))
+    pelvis[[roles.side["Left"]["Hip"], roles.side["Right"]["Hip"]]] = 0.5
+    weights[idx("Pelvis")] = pelvis
+
+    # Spine polyline: pelvis, then the root ... head chain, then the head top (or a head-length
+    # extension when the file has no end site).
+    chain_rows = [pelvis]
+    for joint in _ancestors(motion.parents, roles.head):
+        row = np.zeros(len(motion.joint_names))
+        row[joint] = 1.0
+        chain_rows.append(row)
+    if roles.head_end is not None:
+        top = np.zeros(len(motion.joint_names))
+        top[roles.head_end] = 1.0
+    else:
+        parent = int(motion.parents[roles.head])
+        top = 2.0 * chain_rows[-1]
+        top[parent] -= 1.0
+    chain_rows.append(top)
+    chain = np.stack(chain_rows)
+    points = chain @ rest
+    arc = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(points, axis=0), axis=1))])
+    for name, fraction in _SPINE_FRACTIONS.items():
+        target = fraction * arc[-1]
+        k = int(np.clip(np.searchsorted(arc, target, side="right") - 1, 0, len(arc) - 2))
+        span = arc[k + 1] - arc[k]
+        u = 0.0 if span <= 0 else (target - arc[k]) / span
+        weights[idx(name)] = (1.0 - u) * chain[k] + u * chain[k + 1]
+    for side in ("Left", "Right"):
+        weights[idx(f"Clavicle{side}")] = (1.0 - _CLAVICLE_TO_SHOULDER) * weights[
+            idx("Neck")
+        ] + _CLAVICLE_TO_SHOULDER * weights[idx(f"Shoulder{side}")]
+    return weights
+
+
+def map_to_azure(motion: BvhMotion) -> np.ndarray:
+    """``(T, 32, 3)`` Azure Kinect joints of every frame, world frame (Z up), metres."""
+    roles = _Roles(motion)
+    rest = _rest_positions(motion)
+    weights = mapping_weights(motion)
+    bvh = motion.positions  # (T, Jb, 3), BVH axes
+    out = np.einsum("aj,tjc->tac", weights, bvh)
+    idx = AZURE_KINECT.index
+    for side in ("Left", "Right"):
+        s = roles.side[side]
+        wrist_rest = rest[s["Wrist"]]
+        arm = np.linalg.norm(rest[s["Elbow"]] - rest[s["Shoulder"]]) + np.linalg.norm(
+            wrist_rest - rest[s["Elbow"]]
+        )
+        scale = arm / _ARM_REFERENCE
+        wrist = bvh[:, s["Wrist"]]
+        end = roles.finger_end[side]
+        along_rest = rest[end] - wrist_rest
+        if np.linalg.norm(along_rest) < 1e-6:  # no hand in the file: continue the forearm
+            along_rest = wrist_rest - rest[s["Elbow"]]
+        along_rest = along_rest / np.linalg.norm(along_rest)
+        wrist_rot = motion.rotations[:, s["Wrist"]]
+        along = np.einsum("tab,b->ta", wrist_rot, along_rest)
+        out[:, idx(f"Hand{side}")] = wrist + _HAND * scale * along
+        out[:, idx(f"HandTip{side}")] = wrist + _HAND_TIP * scale * along
+        thumb_rest = _THUMB_ALONG * along_rest + _THUMB_FORWARD * np.array([0.0, 0.0, 1.0])
+        out[:, idx(f"Thumb{side}")] = wrist + scale * np.einsum("tab,b->ta", wrist_rot, thumb_rest)
+    head_rot = motion.rotations[:, roles.head]
+    face = np.array(list(_FACE.values()))  # (5, 3) rest frame: x left, y up, z forward
+    face_ids = [idx(n) for n in _FACE]
+    out[:, face_ids] = out[:, idx("Head")][:, None] + np.einsum("tab,fb->tfa", head_rot, face)
+    return out @ BVH_TO_WORLD.T

@@ -1,0 +1,146 @@
+"""What a body-tracking SDK gets wrong: occlusion, joint noise, flips, swaps.
+
+All functions work on whole streams at once: ``(P, N, 32, 3)`` positions of P people over the
+N frames of one camera, in that camera's frame (metres, z = depth).
+
+Joint noise model (figures fitted by ``hiros_sim.fit``; see that module and ``SimParams``)::
+
+    sigma = (noise_base + noise_per_metre * depth) * (1 + oblique_gain * obliqueness)
+            * (occluded_gain if occluded) * (out_of_view_gain if outside the field of view)
+
+per axis, with the depth (z) axis scaled by ``depth_axis_gain``, correlated over time as an
+AR(1) process with correlation time ``noise_correlation_time``. ``obliqueness`` is
+``|sin|`` of the angle between the body's facing direction and the direction to the camera
+(0 seen from the front or back, 1 from the side).
+
+Self-occlusion: a joint is hidden when the ray from the camera to it passes through a body part
+in front of it; bodies are approximated by spheres along the pelvis → neck axis (radius 0.15 m)
+and one head sphere (0.085 m), which also hides the face from behind. Other people's spheres
+occlude too.
+
+Confidence levels follow the Azure Kinect Body Tracking SDK (``k4abt_joint_confidence_level_t``):
+0 NONE (outside the field of view), 1 LOW (occluded, predicted), 2 MEDIUM (seen). They become
+the model's confidence through ``CONFIDENCE_OF_LEVEL`` (0, 0.5, 1.0; level 3 HIGH, which the SDK
+reserves, would be 1.0).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.signal import lfilter
+
+from hiros_core.layouts import AZURE_KINECT
+
+__all__ = [
+    "CONFIDENCE_OF_LEVEL",
+    "LEVEL_LOW",
+    "LEVEL_MEDIUM",
+    "LEVEL_NONE",
+    "ar1_noise",
+    "flip_front_back",
+    "in_view",
+    "occluded",
+]
+
+LEVEL_NONE, LEVEL_LOW, LEVEL_MEDIUM = 0, 1, 2
+CONFIDENCE_OF_LEVEL = np.array([0.0, 0.5, 1.0, 1.0])
+"""Model confidence of each SDK level: NONE, LOW, MEDIUM, HIGH."""
+
+_IDX = AZURE_KINECT.index
+_TORSO_RADIUS, _HEAD_RADIUS = 0.15, 0.085
+_TORSO_SPHERES = np.linspace(0.0, 1.0, 5)
+_MIDLINE = np.array(
+    [_IDX(n) for n in ("Pelvis", "SpineNaval", "SpineChest", "Neck", "Head")], dtype=np.int64
+)
+_LEFT_RIGHT_LEGS = np.arange(AZURE_KINECT.n_joints)
+for _side, _other in (("Left", "Right"), ("Right", "Left")):
+    for _part in ("Hip", "Knee", "Ankle", "Foot"):
+        _LEFT_RIGHT_LEGS[_IDX(f"{_part}{_side}")] = _IDX(f"{_part}{_other}")
+LEGS_SWAP = _LEFT_RIGHT_LEGS
+"""Permutation swapping only the legs (the SDK's most common left/right confusion)."""
+
+
+def in_view(
+    positions: np.ndarray, fov_deg: tuple[float, float], depth_range: tuple[float, float]
+) -> np.ndarray:
+    """``(...,)`` True where points ``(..., 3)`` (camera frame) are inside the view frustum."""
+    x, y, z = positions[..., 0], positions[..., 1], positions[..., 2]
+    half_w, half_h = np.tan(np.deg2rad(fov_deg[0]) / 2), np.tan(np.deg2rad(fov_deg[1]) / 2)
+    with np.errstate(invalid="ignore"):
+        return (
+            (z > depth_range[0])
+            & (z < depth_range[1])
+            & (np.abs(x) < half_w * z)
+            & (np.abs(y) < half_h * z)
+        )
+
+
+def _spheres(positions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Sphere centres ``(P, N, S, 3)`` and radii ``(S,)`` approximating each body."""
+    pelvis = positions[:, :, _IDX("Pelvis")]
+    neck = positions[:, :, _IDX("Neck")]
+    torso = pelvis[:, :, None] + _TORSO_SPHERES[None, None, :, None] * (neck - pelvis)[:, :, None]
+    head = positions[:, :, _IDX("Head")] + 0.06 * (neck - pelvis) / np.linalg.norm(
+        neck - pelvis, axis=-1, keepdims=True
+    )
+    centres = np.concatenate([torso, head[:, :, None]], axis=2)
+    radii = np.concatenate([np.full(_TORSO_SPHERES.size, _TORSO_RADIUS), [_HEAD_RADIUS]])
+    return centres, radii
+
+
+def occluded(positions: np.ndarray) -> np.ndarray:
+    """``(P, N, 32)`` True where a joint is hidden from the camera at the origin.
+
+    Args:
+        positions: ``(P, N, 32, 3)`` camera frame, NaN for absent people.
+
+    """
+    centres, radii = _spheres(positions)  # (P, N, S, 3)
+    n_people, n_frames = positions.shape[:2]
+    hidden = np.zeros(positions.shape[:3], dtype=bool)
+    for occluder in range(n_people):  # a few people: loop over occluders, vectorise the rest
+        c = centres[occluder][None]  # (1, N, S, 3)
+        ray = positions  # (P, N, J, 3), from the origin
+        length2 = np.einsum("pnjc,pnjc->pnj", ray, ray)[..., None]  # (P, N, J, 1)
+        along = np.einsum(
+            "pnjc,pnsc->pnjs", ray, np.broadcast_to(c, (n_people, n_frames, *c.shape[2:]))
+        )
+        with np.errstate(invalid="ignore", divide="ignore"):
+            s = along / length2  # (P, N, J, S) fraction along the ray of the closest point
+            closest = s[..., None] * ray[:, :, :, None, :]
+            dist = np.linalg.norm(closest - c[:, :, None], axis=-1)
+            length = np.sqrt(length2)
+            in_front = s * length < length - radii
+            blocked = (dist < radii) & in_front & (s > 0)
+        blocked = blocked.any(axis=-1)
+        blocked[occluder][:, _MIDLINE] = False  # the spine is inside its own torso spheres
+        hidden |= blocked
+    return hidden
+
+
+def ar1_noise(rng: np.random.Generator, shape: tuple[int, ...], rho: float) -> np.ndarray:
+    """Unit-variance AR(1) noise correlated along axis 1 (frames) with coefficient ``rho``."""
+    white = rng.standard_normal(shape)
+    if rho <= 0.0:
+        return white
+    scale = np.sqrt(1.0 - rho * rho)
+    white[:, 0] /= scale  # start in the stationary distribution, not at zero
+    return lfilter([scale], [1.0, -rho], white, axis=1)
+
+
+def flip_front_back(positions: np.ndarray, forward: np.ndarray) -> np.ndarray:
+    """The skeleton an SDK fits when it takes a person's back for their front.
+
+    Reflect the joints through the body's frontal plane (the plane through the pelvis whose
+    normal is the facing direction) and exchange left and right labels: the result faces the
+    camera with its anatomical sides where a front-facing body would have them.
+
+    Args:
+        positions: ``(M, 32, 3)``.
+        forward: ``(M, 3)`` unit facing directions in the same frame.
+
+    """
+    pelvis = positions[:, _IDX("Pelvis")][:, None]
+    depth = np.einsum("mjc,mc->mj", positions - pelvis, forward)
+    reflected = positions - 2.0 * depth[..., None] * forward[:, None]
+    return reflected[:, AZURE_KINECT.mirror]

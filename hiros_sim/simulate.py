@@ -1,0 +1,495 @@
+"""The semi-synthetic multi-camera simulator: real mocap seen by simulated Azure Kinects.
+
+``simulate(SimParams(...))`` places people (``hiros_sim.people``) and cameras
+(``hiros_sim.cameras``) in a room, samples the truth at the mocap rate, and for every camera
+produces what its body-tracking driver would publish: one ``SkeletonGroup`` per camera frame, in
+the camera's depth frame (x right, y down, z forward) and on the camera's own clock, with the
+Azure Kinect layout, SDK body ids and SDK confidences, and the mistakes of ``hiros_sim.noise``.
+
+World frame: metres, Z up, floor at z = 0, room centre at the origin. Clock: the reference clock
+is k01's; ``Truth.times`` are reference-clock seconds.
+
+Frame timing: camera frames are ``1 / rate`` apart on the camera's own clock, plus a Gaussian
+``jitter``; a frame's stamp is the instant it shows (so the truth at
+``to_reference_time(stamp)`` is the clean skeleton). Frames are dropped with ``drop_rate``
+(no message at all) and people are missed with ``miss_rate`` (a message without them).
+
+``SimParams(noise=False)`` switches every imperfection off (no joint noise, jitter, drops,
+misses, flips, swaps, ghosts, id changes) but keeps clock offsets, drift, field of view and the
+confidence levels, so a camera's stream is exactly the truth moved into it.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+from functools import lru_cache
+from pathlib import Path
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from hiros_core.calibration import Calibration, CameraCalibration
+from hiros_core.errors import ConfigError
+from hiros_core.layouts import AZURE_KINECT
+from hiros_core.model import Skeleton, SkeletonGroup
+from hiros_sim.bvh import read_bvh
+from hiros_sim.cameras import camera_to_reference, make_setup, reference_to_camera
+from hiros_sim.noise import (
+    CONFIDENCE_OF_LEVEL,
+    LEGS_SWAP,
+    LEVEL_LOW,
+    LEVEL_MEDIUM,
+    LEVEL_NONE,
+    ar1_noise,
+    flip_front_back,
+    in_view,
+    occluded,
+)
+from hiros_sim.people import Clip, PersonPath, body_forward, prepare_clip
+
+__all__ = ["SimParams", "SimResult", "Truth", "default_bvh_files", "simulate"]
+
+_DATA = Path(__file__).resolve().parent.parent / "hiros_data"
+_IDX = AZURE_KINECT.index
+_MAX_PEOPLE = 6
+
+
+def default_bvh_files() -> tuple[str, ...]:
+    """The bundled clips (hiros_data): three CMU walks/hops and the Xsens bending take."""
+    return tuple(
+        str(p)
+        for p in (
+            _DATA / "mocap_cmu" / "131_01.bvh.gz",
+            _DATA / "mocap_cmu" / "131_02.bvh.gz",
+            _DATA / "mocap_cmu" / "131_03.bvh.gz",
+            _DATA / "unipd_bpe_sample" / "sbj01_bend1.bvh.gz",
+        )
+    )
+
+
+@dataclass
+class SimParams:
+    """Every knob of the simulator, with defaults fitted to real data where data exists.
+
+    Noise figures come from ``hiros simulate --fit-noise`` (``hiros_sim.fit``) on the
+    UNIPD-BPE Azure Kinect vs Xsens take; clock figures are typical of Azure Kinect host stamps.
+    """
+
+    n_cameras: int = 3
+    setup: str = "room"
+    """``room``, ``facing``, ``ring`` or a calibration YAML file with camera poses."""
+    n_people: int = 2
+    duration: float = 60.0
+    """Seconds of reference time."""
+    seed: int = 0
+    rate: float = 30.0
+    """Camera frame rate, Hz (the Azure Kinect offers 30, 15 and 5)."""
+    bvh_files: tuple[str, ...] = ()
+    """Mocap clips; empty = the bundled ``hiros_data`` clips."""
+    noise: bool = True
+    """Master switch: False turns every imperfection off (see module docstring)."""
+
+    # room and cameras
+    camera_radius: float = 3.5
+    camera_height: tuple[float, float] = (1.0, 2.0)
+    camera_tilt: tuple[float, float] = (2.0, 8.0)
+    """Degrees of extra downward pitch beyond aiming at 1 m above the room centre."""
+    fov: tuple[float, float] = (75.0, 65.0)
+    """Horizontal, vertical field of view in degrees (Azure Kinect NFOV depth mode)."""
+    depth_range: tuple[float, float] = (0.5, 5.5)
+    walk_area: float = 0.7
+    """Path centres lie within this radius of the room centre, metres."""
+    enter_leave: bool = True
+    """People after the first enter late or leave early."""
+
+    # clocks
+    clock_start: float = 1_700_000_000.0
+    max_time_offset: float = 3.0
+    drift_ppm: float = 30.0
+    start_spread: float = 0.5
+    """Cameras start recording within this many seconds of each other."""
+    jitter: float = 0.0005
+    drop_rate: float = 0.003
+
+    # joint noise (see hiros_sim.noise)
+    noise_base: float = 0.012
+    noise_per_metre: float = 0.004
+    depth_axis_gain: float = 1.5
+    oblique_gain: float = 1.0
+    occluded_gain: float = 3.0
+    out_of_view_gain: float = 4.0
+    noise_correlation_time: float = 0.15
+    """Seconds for the joint error's autocorrelation to fall to 1/e."""
+
+    # SDK mistakes
+    miss_rate: float = 0.005
+    flip_probability: float = 0.5
+    """Chance that a stretch of a person facing away is reported front/back flipped."""
+    facing_away_cos: float = -0.5
+    swap_rate: float = 2.0
+    """Left/right swap episodes per person per camera per minute."""
+    ghost_rate: float = 1.0
+    """Ghost bodies per camera per minute."""
+    id_change_rate: float = 0.5
+    """SDK body id changes per person per camera per minute."""
+    reid_gap: float = 0.5
+    """A person unseen for longer than this (s) comes back with a new SDK id."""
+    truth_rate: float = 0.0
+    """Truth sampling rate, Hz; 0 = the highest clip rate."""
+
+    def check(self) -> None:
+        """Raise ConfigError for values the simulator cannot honour."""
+        problems = []
+        if not 1 <= self.n_people <= _MAX_PEOPLE:
+            problems.append(f"n_people must be 1..{_MAX_PEOPLE}, not {self.n_people}")
+        if self.n_cameras < 1:
+            problems.append(f"n_cameras must be at least 1, not {self.n_cameras}")
+        if self.duration <= 2.0 * self.start_spread + 1.0:
+            problems.append(f"duration must exceed {2 * self.start_spread + 1.0:g} s")
+        if self.rate <= 0:
+            problems.append(f"rate must be positive, not {self.rate}")
+        if problems:
+            raise ConfigError("; ".join(problems))
+
+
+@dataclass
+class Truth:
+    """What really happened, in the world frame on the reference clock.
+
+    Attributes:
+        times: ``(T,)`` reference-clock seconds at the mocap rate.
+        positions: ``(P, T, 32, 3)`` Azure Kinect joints, metres, NaN where a person is absent.
+        person_ids: ``(P,)`` true person ids.
+        clip_names: ``(P,)`` which mocap clip each person plays.
+
+    """
+
+    times: np.ndarray
+    positions: np.ndarray
+    person_ids: np.ndarray
+    clip_names: tuple[str, ...] = ()
+
+    @property
+    def rate(self) -> float:
+        """Samples per second."""
+        return float((len(self.times) - 1) / (self.times[-1] - self.times[0]))
+
+    def at(self, times: np.ndarray) -> np.ndarray:
+        """``(P, N, 32, 3)`` positions at reference times by linear interpolation.
+
+        NaN outside the truth's time span and where a person is absent at either neighbour.
+        """
+        times = np.asarray(times, dtype=float)
+        upper = np.clip(np.searchsorted(self.times, times), 1, len(self.times) - 1)
+        lower = upper - 1
+        span = self.times[upper] - self.times[lower]
+        w = ((times - self.times[lower]) / span)[None, :, None, None]
+        out = (1.0 - w) * self.positions[:, lower] + w * self.positions[:, upper]
+        outside = (times < self.times[0] - 1e-9) | (times > self.times[-1] + 1e-9)
+        out[:, outside] = np.nan
+        return out
+
+
+@dataclass
+class SimResult:
+    """A simulated recording.
+
+    Attributes:
+        params: what it was made from.
+        camera_groups: per camera name, its groups in time order (camera frame and clock).
+        truth: the world-frame truth.
+        calibration: true camera poses (camera -> world) and clocks.
+        labels: per camera, for each group, the true person id of each skeleton (-1 = ghost).
+
+    """
+
+    params: SimParams
+    camera_groups: dict[str, list[SkeletonGroup]]
+    truth: Truth
+    calibration: Calibration
+    labels: dict[str, list[np.ndarray]] = field(default_factory=dict)
+
+
+@lru_cache(maxsize=16)
+def _load_clip(path: str) -> Clip:
+    return prepare_clip(read_bvh(path))
+
+
+def _people(params: SimParams, rng: np.random.Generator) -> list[PersonPath]:
+    files = params.bvh_files or default_bvh_files()
+    clips = [_load_clip(str(f)) for f in files]
+    people = []
+    duration = params.duration
+    for p in range(params.n_people):
+        clip = clips[p % len(clips)]
+        if (p // len(clips)) % 2 == 1:
+            clip = clip.mirrored()
+        heading = np.pi * p / params.n_people + rng.uniform(-0.3, 0.3)
+        radius = params.walk_area * np.sqrt(rng.uniform(0.0, 1.0))
+        angle = rng.uniform(0.0, 2.0 * np.pi)
+        centre = radius * np.array([np.cos(angle), np.sin(angle)])
+        enter, leave = 0.0, duration
+        if params.enter_leave and p > 0 and duration >= 20.0:
+            if p % 2 == 1:
+                enter = rng.uniform(0.05, 0.25) * duration
+            else:
+                leave = duration - rng.uniform(0.05, 0.25) * duration
+        phase = rng.uniform(0.0, clip.duration)
+        people.append(PersonPath(clip, centre, float(heading), float(phase), enter, leave))
+    return people
+
+
+def _truth(params: SimParams, people: list[PersonPath]) -> Truth:
+    rate = params.truth_rate or max(p.clip.rate for p in people)
+    count = int(np.floor(params.duration * rate)) + 1
+    sim_times = np.arange(count) / rate
+    positions = np.stack([person.positions(sim_times) for person in people])
+    return Truth(
+        times=params.clock_start + sim_times,
+        positions=positions,
+        person_ids=np.arange(len(people), dtype=np.int64),
+        clip_names=tuple(person.clip.name for person in people),
+    )
+
+
+def _runs(mask: np.ndarray) -> np.ndarray:
+    """``(P, N)`` run label of each True element (0 where False), unique across rows."""
+    starts = mask & ~np.concatenate([np.zeros((mask.shape[0], 1), bool), mask[:, :-1]], axis=1)
+    labels = np.cumsum(starts.ravel()).reshape(mask.shape)
+    return np.where(mask, labels, 0)
+
+
+@dataclass
+class _Stream:
+    """One camera's observations before they become groups."""
+
+    stamps_ns: np.ndarray  # (N,)
+    kept: np.ndarray  # (N,) frame published
+    positions: np.ndarray  # (P, N, 32, 3) camera frame, with noise
+    levels: np.ndarray  # (P, N, 32) SDK confidence levels
+    detected: np.ndarray  # (P, N)
+    ids: np.ndarray  # (P, N) SDK body ids
+    ghosts: list[tuple[int, int, int, np.ndarray, np.ndarray]]  # start, stop, id, pos, levels
+
+
+def _observe(  # noqa: PLR0915 - one pass over the camera's imperfections, in order
+    cam: CameraCalibration,
+    truth: Truth,
+    clips: list[Clip],
+    params: SimParams,
+    rng: np.random.Generator,
+) -> _Stream:
+    noisy = params.noise
+    rate = params.rate
+    start_ref = params.clock_start + rng.uniform(0.0, params.start_spread)
+    start_ns = round(float(reference_to_camera(cam, np.array(start_ref))) * 1e9)
+    n_frames = int((params.duration - params.start_spread - 2.0 / rate) * rate)
+    offsets = np.arange(n_frames) / rate
+    if noisy and params.jitter > 0:
+        offsets = offsets + rng.normal(0.0, params.jitter, n_frames)
+    stamps_ns = start_ns + np.round(offsets * 1e9).astype(np.int64)
+    kept = rng.random(n_frames) >= params.drop_rate if noisy else np.ones(n_frames, bool)
+    t_ref = camera_to_reference(cam, stamps_ns * 1e-9)
+
+    world = truth.at(t_ref)  # (P, N, 32, 3)
+    rotation = Rotation.from_quat(cam.rotation).as_matrix()
+    positions = (world - cam.translation) @ rotation  # R^T (p - t)
+    present = np.isfinite(world).all(axis=(2, 3))
+    joint_in = in_view(positions, params.fov, params.depth_range)
+    hidden = occluded(positions)
+    levels = np.where(joint_in, np.where(hidden, LEVEL_LOW, LEVEL_MEDIUM), LEVEL_NONE)
+    detected = present & (joint_in.mean(axis=-1) >= 0.5)
+    n_people = positions.shape[0]
+    if noisy:
+        detected &= rng.random(detected.shape) >= params.miss_rate
+
+    forward = body_forward(world) @ rotation  # (P, N, 3) camera frame
+    pelvis = positions[:, :, _IDX("Pelvis")]
+    with np.errstate(invalid="ignore", divide="ignore"):
+        to_camera = -pelvis / np.linalg.norm(pelvis, axis=-1, keepdims=True)
+        facing_cos = np.einsum("pnc,pnc->pn", forward, to_camera)
+
+    if noisy:
+        obliqueness = np.sqrt(np.clip(1.0 - facing_cos**2, 0.0, 1.0))
+        depth = np.abs(positions[..., 2])
+        sigma = (params.noise_base + params.noise_per_metre * depth) * (
+            1.0 + params.oblique_gain * obliqueness
+        )[..., None]
+        sigma = sigma * np.where(hidden, params.occluded_gain, 1.0)
+        sigma = sigma * np.where(joint_in, 1.0, params.out_of_view_gain)
+        rho = float(np.exp(-1.0 / (rate * params.noise_correlation_time)))
+        error = ar1_noise(rng, positions.shape, rho) * sigma[..., None]
+        error[..., 2] *= params.depth_axis_gain
+        positions = positions + error
+
+        away = detected & (facing_cos < params.facing_away_cos)
+        episodes = _runs(away)
+        flip_episode = rng.random(episodes.max() + 1) < params.flip_probability
+        flipped = away & flip_episode[episodes]
+        if flipped.any():
+            positions[flipped] = flip_front_back(positions[flipped], forward[flipped])
+            levels[flipped] = levels[flipped][:, AZURE_KINECT.mirror]
+        for p in range(n_people):
+            for _ in range(rng.poisson(params.swap_rate * params.duration / 60.0)):
+                first = rng.integers(0, n_frames)
+                stop = min(n_frames, first + int(rng.uniform(0.2, 1.0) * rate))
+                perm = LEGS_SWAP if rng.random() < 0.7 else AZURE_KINECT.mirror
+                span = slice(first, stop)
+                positions[p, span] = positions[p, span][:, perm]
+                levels[p, span] = levels[p, span][:, perm]
+
+    # SDK ids: a new id when a person is seen again after reid_gap, or at random changes
+    frame = np.arange(n_frames)
+    new_track = np.zeros_like(detected)
+    gap = int(round(params.reid_gap * rate))
+    for p in range(n_people):
+        seen = np.flatnonzero(detected[p])
+        if seen.size:
+            starts = seen[np.concatenate([[True], np.diff(seen) > gap])]
+            new_track[p, starts] = True
+        if noisy:
+            changes = rng.integers(
+                0, n_frames, rng.poisson(params.id_change_rate * params.duration / 60.0)
+            )
+            new_track[p, changes] |= detected[p, changes]
+    ghosts_spec = []
+    if noisy:
+        for _ in range(rng.poisson(params.ghost_rate * params.duration / 60.0)):
+            first = int(rng.integers(0, n_frames))
+            stop = min(n_frames, first + max(1, int(rng.uniform(0.2, 1.5) * rate)))
+            ghosts_spec.append((first, stop))
+    # ids in order of appearance across people and ghosts, 1, 2, 3, ... like the SDK
+    events = [(int(f), 0, p) for p, f in zip(*np.nonzero(new_track), strict=True)]
+    events += [(first, 1, g) for g, (first, _) in enumerate(ghosts_spec)]
+    events.sort(key=lambda e: (e[0], e[1], e[2]))
+    ids = np.zeros((n_people, n_frames), dtype=np.int64)
+    ghost_ids = {}
+    next_id = 1
+    for first, kind, who in events:
+        if kind == 0:
+            ids[who, first] = next_id
+        else:
+            ghost_ids[who] = next_id
+        next_id += 1
+    # carry each id forward until the next new track
+    for p in range(n_people):
+        marks = np.where(ids[p] > 0, frame, -1)
+        last = np.maximum.accumulate(marks)
+        ids[p] = np.where(last >= 0, ids[p][np.maximum(last, 0)], 0)
+
+    ghosts = []
+    for g, (first, stop) in enumerate(ghosts_spec):
+        pose, ghost_levels = _ghost_pose(cam, clips, params, rng)
+        count = stop - first
+        jitter = rng.normal(0.0, 0.03, (count, *pose.shape))
+        ghosts.append((first, stop, ghost_ids[g], pose[None] + jitter, ghost_levels))
+    return _Stream(stamps_ns, kept, positions, levels, detected, ids, ghosts)
+
+
+def _ghost_pose(
+    cam: CameraCalibration, clips: list[Clip], params: SimParams, rng: np.random.Generator
+) -> tuple[np.ndarray, np.ndarray]:
+    """A spurious body in the camera frame: a random mocap pose, somewhere in view, distorted."""
+    clip = clips[int(rng.integers(len(clips)))]
+    pose = clip.positions[int(rng.integers(clip.positions.shape[0]))]
+    pose = pose - np.array([*pose[_IDX("Pelvis"), :2], 0.0])
+    yaw = rng.uniform(0.0, 2.0 * np.pi)
+    c, s = np.cos(yaw), np.sin(yaw)
+    pose = pose @ np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]]).T
+    rotation = Rotation.from_quat(cam.rotation).as_matrix()
+    ahead = rotation[:, 2].copy()
+    ahead[2] = 0.0
+    ahead /= np.linalg.norm(ahead)
+    right = np.array([-ahead[1], ahead[0], 0.0])
+    spot = cam.translation + rng.uniform(1.5, 4.5) * ahead + rng.uniform(-1.0, 1.0) * right
+    world = pose + np.array([spot[0], spot[1], 0.0])
+    world = world + rng.normal(0.0, 0.05, world.shape)
+    positions = (world - cam.translation) @ rotation
+    levels = np.where(rng.random(AZURE_KINECT.n_joints) < 0.7, LEVEL_LOW, LEVEL_MEDIUM)
+    return positions, levels
+
+
+def _groups(
+    name: str, frame_id: str, stream: _Stream, person_ids: np.ndarray
+) -> tuple[list[SkeletonGroup], list[np.ndarray]]:
+    groups, labels = [], []
+    confidences = CONFIDENCE_OF_LEVEL[stream.levels]
+    for n in np.flatnonzero(stream.kept):
+        stamp = int(stream.stamps_ns[n])
+        skeletons, truth_ids = [], []
+        for p in np.flatnonzero(stream.detected[:, n]):
+            skeletons.append(
+                Skeleton.from_positions(
+                    stream.positions[p, n],
+                    AZURE_KINECT,
+                    skeleton_id=int(stream.ids[p, n]),
+                    src_time_ns=stamp,
+                    src_frame=frame_id,
+                    confidences=confidences[p, n],
+                )
+            )
+            truth_ids.append(int(person_ids[p]))
+        for first, stop, ghost_id, poses, levels in stream.ghosts:
+            if first <= n < stop:
+                skeletons.append(
+                    Skeleton.from_positions(
+                        poses[n - first],
+                        AZURE_KINECT,
+                        skeleton_id=ghost_id,
+                        src_time_ns=stamp,
+                        src_frame=frame_id,
+                        confidences=CONFIDENCE_OF_LEVEL[levels],
+                    )
+                )
+                truth_ids.append(-1)
+        order = np.argsort([s.id for s in skeletons], kind="stable")
+        groups.append(SkeletonGroup(stamp, frame_id, [skeletons[i] for i in order]))
+        labels.append(np.array(truth_ids, dtype=np.int64)[order])
+    del name
+    return groups, labels
+
+
+def simulate(params: SimParams | None = None, progress: object = None) -> SimResult:
+    """Run the simulator.
+
+    Args:
+        params: the knobs; defaults to ``SimParams()``.
+        progress: optional callable ``progress(step: str, done: int, total: int)`` for a bar.
+
+    Raises:
+        ConfigError: impossible parameters (see ``SimParams.check``).
+        RecordingError: a BVH file cannot be read or mapped.
+
+    """
+    params = params or SimParams()
+    params.check()
+
+    def report(step: str, done: int, total: int) -> None:
+        if callable(progress):
+            progress(step, done, total)
+
+    seeds = np.random.SeedSequence(params.seed).spawn(2)
+    report("people", 0, params.n_cameras + 2)
+    people = _people(params, np.random.default_rng(seeds[0]))
+    truth = _truth(params, people)
+    report("cameras", 1, params.n_cameras + 2)
+    calibration = make_setup(
+        params.setup,
+        params.n_cameras,
+        np.random.default_rng(seeds[1]),
+        radius=params.camera_radius,
+        height_range=params.camera_height,
+        tilt_range=params.camera_tilt,
+        max_time_offset=params.max_time_offset,
+        drift_ppm=params.drift_ppm,
+        clock_start=params.clock_start,
+    )
+    clips = [person.clip for person in people]
+    camera_groups, labels = {}, {}
+    camera_seeds = np.random.SeedSequence([params.seed, 1]).spawn(len(calibration.cameras))
+    for k, (name, cam) in enumerate(calibration.cameras.items()):
+        stream = _observe(cam, truth, clips, params, np.random.default_rng(camera_seeds[k]))
+        camera_groups[name], labels[name] = _groups(name, cam.frame_id, stream, truth.person_ids)
+        report(name, 2 + k, len(calibration.cameras) + 2)
+    report("done", len(calibration.cameras) + 2, len(calibration.cameras) + 2)
+    return SimResult(replace(params), camera_groups, truth, calibration, labels)
