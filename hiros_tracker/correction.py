@@ -1,0 +1,100 @@
+"""Applying the calibration: a camera's skeletons moved into the world frame and reference clock.
+
+The tracker does this itself (rather than each bridge) so that any bridge's raw output can feed
+it, and so that a calibration refined live by the ``calib`` node takes effect on the next frame.
+DESIGN.md: ``p_world = R p_camera + t`` and
+``t_reference = t_camera + time_offset + drift * (t_camera - drift_epoch)``.
+"""
+
+from __future__ import annotations
+
+from collections import Counter
+
+from hiros_core.calibration import Calibration, CameraCalibration
+from hiros_core.geometry import RigidTransform
+from hiros_core.model import SkeletonGroup
+
+__all__ = ["CameraCorrection"]
+
+UNCALIBRATED = "uncalibrated camera"
+"""Drop reason of a group whose camera has no calibration."""
+
+
+class CameraCorrection:
+    """Moves each camera's ``SkeletonGroup`` into the world frame and onto the reference clock.
+
+    Cameras are looked up by name (the topic namespace, ``group.camera``) and, failing that, by
+    the calibration's ``frame_id``. A camera with no calibration is remembered in
+    ``uncalibrated`` (so a node can report it once) and its groups are dropped, counted in
+    ``drops``.
+
+    Attributes:
+        world_frame: frame id of the output groups.
+        drops: reason -> count, shared with the owning stage.
+        uncalibrated: cameras seen without calibration since the last ``set_calibration``.
+
+    """
+
+    def __init__(
+        self, calibration: Calibration | None = None, drops: Counter[str] | None = None
+    ) -> None:
+        self.drops: Counter[str] = drops if drops is not None else Counter()
+        self.world_frame = "world"
+        self.uncalibrated: set[str] = set()
+        self._cameras: dict[str, CameraCalibration] = {}
+        self._by_frame: dict[str, str] = {}
+        self._extrinsics: dict[str, RigidTransform] = {}
+        if calibration is not None:
+            self.set_calibration(calibration)
+
+    @property
+    def cameras(self) -> dict[str, CameraCalibration]:
+        """The calibrated cameras by name (read-only view by convention)."""
+        return self._cameras
+
+    def set_calibration(self, calibration: Calibration) -> None:
+        """Replace the whole calibration (file reloaded, or a new one from ``calib``)."""
+        self.world_frame = calibration.world_frame
+        self._cameras = {}
+        self._by_frame = {}
+        self._extrinsics = {}
+        for name, camera in calibration.cameras.items():
+            self.set_camera(name, camera)
+
+    def set_camera(self, name: str, camera: CameraCalibration) -> None:
+        """Replace one camera's calibration (a live parameter update from ``calib``)."""
+        self._cameras[name] = camera
+        self._extrinsics[name] = camera.extrinsics
+        if camera.frame_id:
+            self._by_frame[camera.frame_id] = name
+        self.uncalibrated.discard(name)
+
+    def camera_name(self, group: SkeletonGroup) -> str | None:
+        """The calibration's name for the camera a group came from, None when uncalibrated."""
+        name = group.camera
+        if name in self._cameras:
+            return name
+        return self._by_frame.get(group.frame_id)
+
+    def apply(self, group: SkeletonGroup) -> SkeletonGroup | None:
+        """The group in the world frame with reference-clock stamps, or None (counted) if unknown.
+
+        Each skeleton keeps its ``src_frame`` (the camera's frame, which the merger needs to
+        tell cameras apart); ``src_time`` becomes the corrected stamp. A skeleton without a
+        ``src_time`` (0) takes the header stamp.
+        """
+        name = self.camera_name(group)
+        if name is None:
+            self.uncalibrated.add(group.camera)
+            self.drops[UNCALIBRATED] += 1
+            return None
+        camera = self._cameras[name]
+        extrinsics = self._extrinsics[name]
+        skeletons = []
+        for skeleton in group.skeletons:
+            moved = extrinsics.apply_to_skeleton(skeleton)
+            stamp = skeleton.src_time_ns or group.stamp_ns
+            moved.src_time_ns = camera.to_reference_ns(stamp)
+            moved.src_frame = skeleton.src_frame or group.frame_id
+            skeletons.append(moved)
+        return SkeletonGroup(camera.to_reference_ns(group.stamp_ns), self.world_frame, skeletons)
