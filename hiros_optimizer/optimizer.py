@@ -1,0 +1,436 @@
+"""The optimizer stage: each person keeps their own limb lengths, every frame.
+
+Per track id the stage first learns the limb (link) lengths over the person's first frames:
+per link the median of the measured lengths over the last ``number_of_frames_for_calibration``
+frames. A link is constrained when it was measured in at least ``min_link_presence`` of those
+frames and its robust coefficient of variation (``1.4826 MAD / median``) is below
+``max_calibration_coefficient_of_variation`` (Hi-ROS's acceptance rule, with robust statistics
+so a few bad frames do not spoil it); other links stay free (follow the measurement). The person
+calibration is accepted once at least ``min_calibrated_fraction`` of the layout's links are
+constrained — a steady view of the body — so that chronically noisy short links (hand tips,
+thumbs) cannot block a person forever. Until then the window slides and the person passes
+through unchanged.
+
+Once calibrated, each frame's joints are replaced by the positions closest to the measurement,
+weighted by confidence, that keep the calibrated lengths exactly
+(:func:`hiros_optimizer.kinematics.fit_fixed_lengths`, all people of a layout at once). A joint
+far from the motion prediction (last output + velocity × dt) is down-weighted by
+``(outlier_distance / d)^2``, and a small prior towards the prediction (``prior_weight``) keeps
+unmeasured or rejected joints where the motion puts them.
+
+Person calibrations can be restarted (:meth:`Optimizer.calibrate`), moved to another id
+(:meth:`Optimizer.change_id`) and exported/loaded as plain dicts (YAML on disk, see
+``hiros_optimizer.calibration_file``) so a known person keeps their lengths across sessions.
+"""
+
+from __future__ import annotations
+
+from collections import Counter
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from hiros_core.errors import ConfigError
+from hiros_core.layouts import Layout, get_layout
+from hiros_core.model import Skeleton, SkeletonGroup, ns_to_sec
+from hiros_optimizer.kinematics import KinematicTree, fit_fixed_lengths, link_lengths
+
+__all__ = ["Optimizer", "OptimizerParams", "PersonCalibration"]
+
+_MAD_TO_SD = 1.4826  # MAD of a normal distribution times this is its standard deviation
+_MIN_VELOCITY_DT = 1e-3  # s; closer frames (duplicates) would turn noise into huge velocities
+
+
+@dataclass
+class OptimizerParams:
+    """Parameters of the optimizer node (ROS parameter names and defaults).
+
+    Attributes:
+        input_topic: merged skeletons in.
+        output_topic: optimised skeletons out.
+        number_of_frames_for_calibration: frames per person to learn the limb lengths from.
+        max_calibration_coefficient_of_variation: a person calibration is accepted when every
+            constrained link's robust CV is below this.
+        min_link_presence: fraction of the calibration frames a link must be measured in to be
+            constrained; rarer links stay free.
+        min_calibrated_fraction: fraction of the layout's links that must be constrained for
+            a person calibration to be accepted.
+        outlier_distance: metres from the prediction beyond which a joint is down-weighted.
+        prior_weight: weight of the motion prediction relative to a joint confidence of 1.
+        sweeps: block-coordinate sweeps of the fit (its starting point).
+        refinements: Gauss-Newton steps of the fit.
+        track_timeout: seconds unseen after which a track's prediction is forgotten (its
+            calibration is kept).
+        export_calibration: node only: write the person calibrations on each new one.
+        load_calibration: node only: read person calibrations at start.
+        calibration_file: node only: YAML file of person calibrations.
+
+    """
+
+    input_topic: str = "/hiros/merger"
+    output_topic: str = "/hiros/optimizer"
+    number_of_frames_for_calibration: int = 60
+    max_calibration_coefficient_of_variation: float = 0.2
+    min_link_presence: float = 0.5
+    min_calibrated_fraction: float = 0.8
+    outlier_distance: float = 0.15
+    prior_weight: float = 0.05
+    sweeps: int = 1
+    refinements: int = 2
+    track_timeout: float = 1.0
+    export_calibration: bool = False
+    load_calibration: bool = False
+    calibration_file: str = ""
+
+    def __post_init__(self) -> None:
+        if self.number_of_frames_for_calibration < 3:
+            msg = "number_of_frames_for_calibration must be at least 3 frames"
+            raise ConfigError(msg)
+        if self.max_calibration_coefficient_of_variation <= 0:
+            msg = "max_calibration_coefficient_of_variation must be greater than 0"
+            raise ConfigError(msg)
+        if not (0 < self.min_link_presence <= 1 and 0 < self.min_calibrated_fraction <= 1):
+            msg = "min_link_presence and min_calibrated_fraction must be in (0, 1]"
+            raise ConfigError(msg)
+        if self.outlier_distance <= 0 or self.prior_weight < 0:
+            msg = "outlier_distance must be > 0 and prior_weight >= 0"
+            raise ConfigError(msg)
+
+
+@dataclass
+class PersonCalibration:
+    """One person's limb lengths.
+
+    Attributes:
+        layout: the layout the link ids refer to.
+        lengths: ``(J,)`` metres by link id (= child joint id); NaN for free links and roots.
+        variation: ``(J,)`` robust coefficient of variation seen during calibration (NaN if
+            unknown, e.g. loaded without it).
+        n_frames: frames the lengths were learnt from.
+
+    """
+
+    layout: Layout
+    lengths: np.ndarray
+    variation: np.ndarray
+    n_frames: int = 0
+
+    def to_dict(self) -> dict[str, Any]:
+        """Plain types for YAML: links by name, ``{length, cv}`` in metres and as a fraction."""
+        links = {}
+        for link_id in np.flatnonzero(np.isfinite(self.lengths)):
+            entry = {"length": round(float(self.lengths[link_id]), 6)}
+            if np.isfinite(self.variation[link_id]):
+                entry["cv"] = round(float(self.variation[link_id]), 6)
+            links[self.layout.link_names[link_id]] = entry
+        return {"layout": self.layout.name, "n_frames": int(self.n_frames), "links": links}
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any]) -> PersonCalibration:
+        """Inverse of :meth:`to_dict`; raises ConfigError naming what is wrong."""
+        if not isinstance(data, dict) or not isinstance(data.get("links"), dict):
+            msg = "a person calibration must be a mapping with 'layout' and 'links'"
+            raise ConfigError(msg)
+        layout = get_layout(str(data.get("layout", "azure_kinect")))
+        names = {name: i for i, name in enumerate(layout.link_names) if name}
+        lengths = np.full(layout.n_joints, np.nan)
+        variation = np.full(layout.n_joints, np.nan)
+        for name, entry in data["links"].items():
+            if name not in names:
+                msg = f"link {name!r} is not a link of layout {layout.name!r}"
+                raise ConfigError(msg)
+            value = entry.get("length") if isinstance(entry, dict) else entry
+            try:
+                length = float(value)
+            except (TypeError, ValueError):
+                msg = f"link {name!r} needs a numeric length in metres, got {value!r}"
+                raise ConfigError(msg) from None
+            if not length > 0:
+                msg = f"link {name!r} has a non-positive length {length}"
+                raise ConfigError(msg)
+            lengths[names[name]] = length
+            if isinstance(entry, dict) and entry.get("cv") is not None:
+                variation[names[name]] = float(entry["cv"])
+        return cls(layout, lengths, variation, int(data.get("n_frames", 0)))
+
+
+@dataclass
+class _Track:
+    """What the stage remembers about one track id."""
+
+    layout: Layout
+    window: np.ndarray  # (N, J) measured link lengths of the last N frames, NaN where missing
+    filled: int = 0  # frames pushed into the window (saturates at N... and beyond)
+    calibration: PersonCalibration | None = None
+    positions: np.ndarray | None = None  # (J, 3) last output
+    velocities: np.ndarray | None = None  # (J, 3) from the last two outputs
+    vectors: np.ndarray | None = None  # (J, 3) last link vectors, to start unseen links from
+    time_ns: int | None = None
+
+    def forget_motion(self) -> None:
+        self.positions = self.velocities = self.vectors = None
+        self.time_ns = None
+
+
+class Optimizer:
+    """Limb-length-preserving fit of each tracked person (module docstring).
+
+    Attributes:
+        params: the parameters.
+        drops: reason -> count of skeletons not optimised (passed through or dropped).
+        calibrations: track id -> accepted :class:`PersonCalibration`.
+
+    """
+
+    def __init__(self, params: OptimizerParams | None = None) -> None:
+        self.params = params or OptimizerParams()
+        self.drops: Counter[str] = Counter()
+        self.calibrations: dict[int, PersonCalibration] = {}
+        self._tracks: dict[int, _Track] = {}
+        self._renames: dict[int, int] = {}
+        self._trees: dict[str, KinematicTree] = {}
+        self.new_calibrations: list[int] = []
+        """Track ids calibrated by the last :meth:`update` (the node exports on these)."""
+
+    # ----------------------------------------------------------------- person calibrations
+
+    def calibrate(self, track_ids: list[int] | np.ndarray) -> bool:
+        """Forget these tracks' lengths and learn them again from their next frames.
+
+        Returns True when every id is known (seen or calibrated); unknown ids are ignored.
+        """
+        known = True
+        for requested in track_ids:
+            track_id = self._renames.get(int(requested), int(requested))
+            if track_id not in self._tracks and track_id not in self.calibrations:
+                known = False
+                continue
+            self.calibrations.pop(track_id, None)
+            track = self._tracks.get(track_id)
+            if track is not None:
+                track.calibration = None
+                track.window[:] = np.nan
+                track.filled = 0
+        return known
+
+    def change_id(self, from_id: int, to_id: int) -> bool:
+        """From now on, track ``from_id`` is person ``to_id``: output id and calibration.
+
+        If ``to_id`` already has a calibration (e.g. loaded for a known person) that one is
+        kept; otherwise ``from_id``'s calibration and state move to ``to_id``. Returns False
+        (and changes nothing) when ``from_id`` is unknown or ``to_id`` is a live track.
+        """
+        from_id, to_id = int(from_id), int(to_id)
+        source = self._renames.get(from_id, from_id)
+        if source not in self._tracks and source not in self.calibrations:
+            return False
+        if to_id != source and to_id in self._tracks:
+            return False
+        # Incoming skeletons with from_id (and anything already renamed to it) go to to_id.
+        for incoming, target in list(self._renames.items()):
+            if target == source:
+                self._renames[incoming] = to_id
+        self._renames[from_id] = to_id
+        if to_id == source:
+            return True
+        track = self._tracks.pop(source, None)
+        calibration = self.calibrations.pop(source, None)
+        if to_id in self.calibrations:
+            calibration = self.calibrations[to_id]
+        if calibration is not None:
+            self.calibrations[to_id] = calibration
+        if track is not None:
+            track.calibration = calibration
+            self._tracks[to_id] = track
+        return True
+
+    def export_calibrations(self) -> dict[str, Any]:
+        """All accepted person calibrations as plain types: ``{"people": {id: {...}}}``."""
+        return {
+            "people": {
+                int(track_id): calibration.to_dict()
+                for track_id, calibration in sorted(self.calibrations.items())
+            }
+        }
+
+    def load_calibrations(self, data: dict[str, Any]) -> list[int]:
+        """Adopt person calibrations from :meth:`export_calibrations`' form; returns the ids."""
+        people = data.get("people") if isinstance(data, dict) else None
+        if not isinstance(people, dict):
+            msg = "a person calibration file must hold a mapping 'people: {track_id: ...}'"
+            raise ConfigError(msg)
+        loaded = {}
+        for key, entry in people.items():
+            try:
+                track_id = int(key)
+            except (TypeError, ValueError):
+                msg = f"person calibration key {key!r} is not an integer track id"
+                raise ConfigError(msg) from None
+            loaded[track_id] = PersonCalibration.from_dict(entry)
+        for track_id, calibration in loaded.items():
+            self.calibrations[track_id] = calibration
+            if track_id in self._tracks:
+                self._tracks[track_id].calibration = calibration
+        return sorted(loaded)
+
+    # ------------------------------------------------------------------------ per frame
+
+    def update(self, group: SkeletonGroup) -> SkeletonGroup:
+        """Fit every calibrated person of ``group``; others pass through (module docstring)."""
+        self.new_calibrations = []
+        out = SkeletonGroup(group.stamp_ns, group.frame_id, [])
+        seen: set[int] = set()
+        batches: dict[str, list[tuple[int, Skeleton, _Track]]] = {}
+        for skeleton in group.skeletons:
+            if skeleton.markers.shape[0] != skeleton.layout.n_joints:
+                self.drops["marker rows do not match the layout"] += 1
+                continue
+            present = skeleton.marker_present
+            if not np.isfinite(skeleton.positions[present]).all():
+                self.drops["non-finite position of a present joint"] += 1
+                continue
+            result = skeleton.copy()
+            result.id = self._renames.get(skeleton.id, skeleton.id)
+            if result.id < 0:
+                self.drops["no track id (passed through)"] += 1
+                out.skeletons.append(result)
+                continue
+            if result.id in seen:
+                self.drops["track id repeated within a group"] += 1
+                continue
+            seen.add(result.id)
+            out.skeletons.append(result)
+            track = self._track(result)
+            if track.calibration is None:
+                self._learn(result.id, track, result)
+                self._remember(track, result, None)
+                continue
+            batches.setdefault(result.layout.name, []).append((result.id, result, track))
+        for items in batches.values():
+            self._fit(items)
+        return out
+
+    def _track(self, skeleton: Skeleton) -> _Track:
+        track = self._tracks.get(skeleton.id)
+        if track is None or track.layout.name != skeleton.layout.name:
+            n = self.params.number_of_frames_for_calibration
+            track = _Track(skeleton.layout, np.full((n, skeleton.layout.n_joints), np.nan))
+            track.calibration = self._calibration_for(skeleton.id, skeleton.layout)
+            self._tracks[skeleton.id] = track
+        elif track.time_ns is not None and (
+            ns_to_sec(skeleton.src_time_ns - track.time_ns) > self.params.track_timeout
+            or skeleton.src_time_ns < track.time_ns
+        ):
+            track.forget_motion()
+        return track
+
+    def _calibration_for(self, track_id: int, layout: Layout) -> PersonCalibration | None:
+        calibration = self.calibrations.get(track_id)
+        if calibration is not None and calibration.layout.name != layout.name:
+            self.drops["person calibration is for another layout (recalibrating)"] += 1
+            del self.calibrations[track_id]
+            return None
+        return calibration
+
+    def _tree(self, layout: Layout) -> KinematicTree:
+        tree = self._trees.get(layout.name)
+        if tree is None:
+            tree = self._trees[layout.name] = KinematicTree.from_layout(layout)
+        return tree
+
+    def _learn(self, track_id: int, track: _Track, skeleton: Skeleton) -> None:
+        """Push this frame's link lengths; accept a calibration when the window is steady."""
+        weights = _weights(skeleton)
+        positions = np.where((weights > 0)[:, None], skeleton.positions, np.nan)
+        row = track.filled % track.window.shape[0]
+        track.window[row] = link_lengths(positions, np.asarray(skeleton.layout.parents))
+        track.filled += 1
+        if track.filled < track.window.shape[0]:
+            return
+        window = track.window
+        seen = np.isfinite(window).mean(axis=0) >= self.params.min_link_presence
+        median = np.full(window.shape[1], np.nan)
+        variation = np.full(window.shape[1], np.nan)
+        if seen.any():
+            median[seen] = np.nanmedian(window[:, seen], axis=0)
+            mad = np.nanmedian(np.abs(window[:, seen] - median[seen]), axis=0)
+            with np.errstate(invalid="ignore", divide="ignore"):
+                variation[seen] = _MAD_TO_SD * mad / median[seen]
+        with np.errstate(invalid="ignore"):
+            steady = (
+                seen
+                & (median > 0)
+                & (variation < self.params.max_calibration_coefficient_of_variation)
+            )
+        if steady.sum() < self.params.min_calibrated_fraction * skeleton.layout.link_children.size:
+            return
+        # Noise perpendicular to a link lengthens it on average: |d + n|^2 = L^2 + 3 s^2 with
+        # s the per-axis noise of d, of which the radial part shows as the spread s of the
+        # lengths; the two perpendicular axes add 2 s^2, which is removed here.
+        spread = variation * median
+        lengths = np.where(
+            steady, np.sqrt(np.maximum(median**2 - 2 * spread**2, 0.25 * median**2)), np.nan
+        )
+        track.calibration = PersonCalibration(skeleton.layout, lengths, variation, window.shape[0])
+        self.calibrations[track_id] = track.calibration
+        self.new_calibrations.append(track_id)
+
+    def _fit(self, items: list[tuple[int, Skeleton, _Track]]) -> None:
+        """One least-squares fit for all calibrated people of one layout."""
+        layout = items[0][1].layout
+        tree = self._tree(layout)
+        n_people, n_joints = len(items), layout.n_joints
+        measured = np.stack([skeleton.positions for _, skeleton, _ in items])
+        weights = np.stack([_weights(skeleton) for _, skeleton, _ in items])
+        lengths = np.stack([track.calibration.lengths for _, _, track in items])
+        prior = np.full((n_people, n_joints, 3), np.nan)
+        fallback = np.full((n_people, n_joints, 3), np.nan)
+        for row, (_, skeleton, track) in enumerate(items):
+            if track.positions is not None:
+                dt = max(ns_to_sec(skeleton.src_time_ns - track.time_ns), 0.0)
+                velocity = 0.0 if track.velocities is None else track.velocities
+                prior[row] = track.positions + velocity * dt
+                fallback[row] = track.vectors
+        # Outliers: far from where the motion predicts them (Cauchy-like weight beyond the gate).
+        with np.errstate(invalid="ignore", divide="ignore"):
+            distance = np.linalg.norm(measured - prior, axis=-1)
+            factor = np.minimum(1.0, (self.params.outlier_distance / distance) ** 2)
+        weights = weights * np.where(np.isfinite(factor), factor, 1.0)
+        positions, vectors = fit_fixed_lengths(
+            tree,
+            measured,
+            weights,
+            lengths,
+            prior=prior,
+            prior_weight=self.params.prior_weight,
+            fallback_vectors=fallback,
+            sweeps=self.params.sweeps,
+            refinements=self.params.refinements,
+        )
+        for row, (_, skeleton, track) in enumerate(items):
+            present = skeleton.marker_present
+            skeleton.positions[present] = positions[row, present]
+            skeleton.update_links()
+            self._remember(track, skeleton, vectors[row])
+
+    def _remember(self, track: _Track, skeleton: Skeleton, vectors: np.ndarray | None) -> None:
+        positions = np.where(skeleton.marker_present[:, None], skeleton.positions, np.nan)
+        dt = 0.0 if track.time_ns is None else ns_to_sec(skeleton.src_time_ns - track.time_ns)
+        if track.positions is not None and dt >= _MIN_VELOCITY_DT:
+            velocities = (positions - track.positions) / dt
+            track.velocities = np.where(np.isfinite(velocities), velocities, 0.0)
+        elif track.positions is None:
+            track.velocities = None
+        # A joint missing this frame keeps its last position so the prediction survives gaps.
+        if track.positions is not None:
+            positions = np.where(np.isfinite(positions), positions, track.positions)
+        track.positions = positions
+        track.vectors = vectors
+        track.time_ns = skeleton.src_time_ns
+
+
+def _weights(skeleton: Skeleton) -> np.ndarray:
+    """``(J,)`` fit weights: the confidence (1 when unknown), 0 for absent joints."""
+    confidence = np.where(np.isfinite(skeleton.confidences), skeleton.confidences, 1.0)
+    return np.where(skeleton.marker_present, np.clip(confidence, 0.0, None), 0.0)

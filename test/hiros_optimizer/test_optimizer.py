@@ -1,0 +1,219 @@
+import numpy as np
+import pytest
+
+from hiros_core.errors import ConfigError
+from hiros_core.layouts import AZURE_KINECT
+from hiros_core.model import Skeleton, SkeletonGroup
+from hiros_optimizer import (
+    Optimizer,
+    OptimizerParams,
+    PersonCalibration,
+    read_person_calibrations,
+    write_person_calibrations,
+)
+from hiros_optimizer.kinematics import link_lengths
+
+PARENTS = np.asarray(AZURE_KINECT.parents)
+FRAMES = 30
+
+
+@pytest.fixture
+def noisy_people(moving_person):
+    """Two people, 90 frames: (truths, noisy measurements, lengths)."""
+    rng = np.random.default_rng(7)
+    truths, measured, lengths = [], [], []
+    for seed in (1, 2):
+        positions, length = moving_person(90, seed=seed)
+        truths.append(positions)
+        measured.append(positions + rng.normal(scale=0.01, size=positions.shape))
+        lengths.append(length)
+    return truths, measured, lengths
+
+
+@pytest.fixture
+def run(group_at):
+    """``run(optimizer, people, frames, ids=None, start=0)``: feed frames, return the outputs."""
+
+    def feed(optimizer, people, frames, ids=None, start=0):
+        return [
+            optimizer.update(group_at(frame, list(people), ids=ids))
+            for frame in range(start, start + frames)
+        ]
+
+    return feed
+
+
+def small_optimizer(**kwargs):
+    return Optimizer(OptimizerParams(number_of_frames_for_calibration=FRAMES, **kwargs))
+
+
+def test_learns_lengths_then_holds_them_exactly(noisy_people, run):
+    truths, measured, lengths = noisy_people
+    optimizer = small_optimizer()
+    outputs = run(optimizer, measured, 90)
+    assert sorted(optimizer.calibrations) == [0, 1]
+    for person in (0, 1):
+        calibration = optimizer.calibrations[person]
+        constrained = np.isfinite(calibration.lengths)
+        assert constrained.sum() >= 0.8 * 31
+        # learnt lengths are close to the true ones (1 cm noise per joint)
+        assert np.nanmedian(np.abs(calibration.lengths - lengths[person])) < 0.004
+        after = np.stack([o.skeletons[person].positions for o in outputs[FRAMES:]])
+        held = link_lengths(after, PARENTS)[:, constrained]
+        np.testing.assert_allclose(held, np.tile(calibration.lengths[constrained], (len(after), 1)))
+        error_out = np.linalg.norm(after - truths[person][FRAMES:], axis=-1).mean()
+        error_in = np.linalg.norm(
+            measured[person][FRAMES:] - truths[person][FRAMES:], axis=-1
+        ).mean()
+        assert error_out < error_in
+
+
+def test_passes_people_through_until_calibrated(noisy_people, run):
+    _, measured, _ = noisy_people
+    optimizer = small_optimizer()
+    first = run(optimizer, measured, FRAMES - 1)
+    assert not optimizer.calibrations
+    for frame, group in enumerate(first):
+        np.testing.assert_array_equal(group.skeletons[0].positions, measured[0][frame])
+
+
+def test_noisy_start_is_not_accepted(moving_person, run):
+    positions, _ = moving_person(FRAMES, seed=3)
+    rng = np.random.default_rng(0)
+    wild = positions + rng.normal(scale=0.2, size=positions.shape)
+    optimizer = small_optimizer(max_calibration_coefficient_of_variation=0.05)
+    run(optimizer, [wild], FRAMES)
+    assert not optimizer.calibrations
+
+
+def test_outlier_joint_is_down_weighted(noisy_people, group_at, run):
+    truths, measured, _ = noisy_people
+    optimizer = small_optimizer()
+    run(optimizer, measured, 60)
+    frame = 60
+    corrupted = [m.copy() for m in measured]
+    wrist = AZURE_KINECT.index("WristRight")
+    corrupted[0][frame, wrist] += (0.6, 0.0, 0.0)
+    out = optimizer.update(group_at(frame, corrupted))
+    error = np.linalg.norm(out.skeletons[0].positions[wrist] - truths[0][frame, wrist])
+    assert error < 0.2
+
+
+def test_gap_and_reappearance_do_not_explode(noisy_people, group_at, run):
+    truths, measured, _ = noisy_people
+    optimizer = small_optimizer(track_timeout=0.5)
+    run(optimizer, measured, 45)
+    # person 0 disappears for 1 s, then comes back far away with joints missing
+    later = [m.copy() for m in measured]
+    later[0][75:] += (2.0, 0.0, 0.0)
+    later[0][75:, 5:9] = np.nan
+    outputs = [optimizer.update(group_at(f, [later[1]], ids=[1])) for f in range(45, 75)]
+    outputs += run(optimizer, later, 15, start=75)
+    back = np.stack([o.skeletons[0].positions for o in outputs[30:]])
+    present = np.isfinite(later[0][75:])
+    assert np.isnan(back[~present]).all()
+    shifted = truths[0][75:] + np.array([2.0, 0.0, 0.0])
+    assert np.linalg.norm(back - shifted, axis=-1)[present.all(axis=-1)].max() < 0.1
+
+
+def test_yaml_round_trip(tmp_path, noisy_people, group_at, run):
+    _, measured, _ = noisy_people
+    optimizer = small_optimizer()
+    run(optimizer, measured, FRAMES)
+    path = tmp_path / "people.yaml"
+    write_person_calibrations(path, optimizer.export_calibrations())
+    other = small_optimizer()
+    assert other.load_calibrations(read_person_calibrations(path)) == [0, 1]
+    for person in (0, 1):
+        np.testing.assert_allclose(
+            other.calibrations[person].lengths, optimizer.calibrations[person].lengths, atol=1e-6
+        )
+    # a known person is optimised from the first frame of the next session
+    first = other.update(group_at(0, measured))
+    constrained = np.isfinite(other.calibrations[0].lengths)
+    held = link_lengths(first.skeletons[0].positions, PARENTS)[constrained]
+    np.testing.assert_allclose(held, other.calibrations[0].lengths[constrained])
+
+
+@pytest.mark.parametrize(
+    "data",
+    [
+        {"people": {"x": {"layout": "azure_kinect", "links": {}}}},
+        {"people": {0: {"layout": "azure_kinect", "links": {"Nope-Link": 0.3}}}},
+        {"people": {0: {"layout": "azure_kinect", "links": {"Pelvis-SpineNaval": -1}}}},
+        {"tracks": []},
+    ],
+)
+def test_bad_calibration_data_raises_config_error(data):
+    with pytest.raises(ConfigError):
+        Optimizer().load_calibrations(data)
+
+
+def test_unreadable_file_raises_config_error(tmp_path):
+    (tmp_path / "bad.yaml").write_text("people: [unclosed")
+    with pytest.raises(ConfigError):
+        read_person_calibrations(tmp_path / "bad.yaml")
+    with pytest.raises(ConfigError):
+        read_person_calibrations(tmp_path / "missing.yaml")
+
+
+def test_change_id_moves_the_calibration(noisy_people, group_at, run):
+    _, measured, _ = noisy_people
+    optimizer = small_optimizer()
+    run(optimizer, measured, FRAMES, ids=[5, 6])
+    lengths = optimizer.calibrations[5].lengths.copy()
+    assert not optimizer.change_id(42, 0)  # unknown track
+    assert not optimizer.change_id(5, 6)  # 6 is another live track
+    assert optimizer.change_id(5, 0)
+    assert 5 not in optimizer.calibrations
+    np.testing.assert_array_equal(optimizer.calibrations[0].lengths, lengths)
+    out = optimizer.update(group_at(FRAMES, measured, ids=[5, 6]))
+    assert list(out.ids) == [0, 6]
+    constrained = np.isfinite(lengths)
+    held = link_lengths(out.skeletons[0].positions, PARENTS)[constrained]
+    np.testing.assert_allclose(held, lengths[constrained])
+
+
+def test_change_id_keeps_a_known_persons_calibration(noisy_people, group_at, run):
+    _, measured, _ = noisy_people
+    known = PersonCalibration(AZURE_KINECT, np.full(32, 0.25), np.full(32, np.nan))
+    known.lengths[0] = np.nan
+    optimizer = small_optimizer()
+    optimizer.load_calibrations({"people": {0: known.to_dict()}})
+    run(optimizer, [measured[1]], 3, ids=[9])
+    assert optimizer.change_id(9, 0)
+    out = optimizer.update(group_at(3, [measured[1]], ids=[9]))
+    assert list(out.ids) == [0]
+    np.testing.assert_allclose(link_lengths(out.skeletons[0].positions, PARENTS)[1:], 0.25)
+
+
+def test_calibrate_restarts_learning(noisy_people, run):
+    _, measured, _ = noisy_people
+    optimizer = small_optimizer()
+    run(optimizer, measured, FRAMES)
+    assert optimizer.calibrate([0])
+    assert 0 not in optimizer.calibrations
+    assert 1 in optimizer.calibrations
+    assert not optimizer.calibrate([77])
+    run(optimizer, measured, FRAMES, start=FRAMES)
+    assert 0 in optimizer.calibrations
+
+
+def test_bad_skeletons_are_counted_not_fatal(noisy_people):
+    _, measured, _ = noisy_people
+    optimizer = small_optimizer()
+    broken = Skeleton.from_positions(measured[0][0], skeleton_id=3)
+    broken.positions[2] = np.inf
+    anonymous = Skeleton.from_positions(measured[1][0], skeleton_id=-1)
+    twin = Skeleton.from_positions(measured[1][0], skeleton_id=4)
+    group = SkeletonGroup(0, "world", [broken, anonymous, twin, twin.copy()])
+    out = optimizer.update(group)
+    assert list(out.ids) == [-1, 4]
+    assert sum(optimizer.drops.values()) == 3
+
+
+def test_params_are_checked():
+    with pytest.raises(ConfigError):
+        OptimizerParams(number_of_frames_for_calibration=1)
+    with pytest.raises(ConfigError):
+        OptimizerParams(min_calibrated_fraction=0.0)
