@@ -1,0 +1,225 @@
+"""Write recordings as MCAP, the ``ros2 bag`` default storage, readable by Foxglove.
+
+Messages go in as raw CDR bytes, so anything the codec or rclpy serialises can be recorded
+without building message objects. Each type's schema is its complete ``ros2msg`` definition
+(``msgdefs``), which is what ``ros2 bag`` and Foxglove need to decode a topic they have no
+installed package for.
+
+A path ending in ``.mcap`` gives a single file; any other path gives a rosbag2 folder holding
+``<name>_0.mcap`` and the ``metadata.yaml`` that ``ros2 bag info``/``play`` read.
+"""
+
+from __future__ import annotations
+
+from collections import Counter
+from pathlib import Path
+from types import TracebackType
+from typing import IO
+
+import yaml
+
+from hiros_core.errors import RecordingError
+from hiros_core.recording.msgdefs import message_definition, normalize_msgtype
+
+__all__ = [
+    "MARKER_ARRAY",
+    "SKELETON_GROUP",
+    "RecordingWriter",
+]
+
+SKELETON_GROUP = "hiros_skeleton_msgs/msg/SkeletonGroup"
+MARKER_ARRAY = "visualization_msgs/msg/MarkerArray"
+
+# QoS that ``ros2 bag play`` offers for latched topics, in the rosbag2 metadata layout.
+_LATCHED_QOS = (
+    "- history: 3\n  depth: 0\n  reliability: 1\n  durability: 1\n"
+    "  deadline:\n    sec: 2147483647\n    nsec: 4294967295\n"
+    "  lifespan:\n    sec: 2147483647\n    nsec: 4294967295\n"
+    "  liveliness: 1\n  liveliness_lease_duration:\n    sec: 2147483647\n"
+    "    nsec: 4294967295\n  avoid_ros_namespace_conventions: false\n"
+)
+_LATCHED_TOPICS = frozenset({"/tf_static"})
+
+
+class RecordingWriter:
+    """Append messages to a new MCAP recording.
+
+    Args:
+        path: ``*.mcap`` for one file, anything else for a rosbag2 folder (created).
+        compression: ``zstd`` (default), ``lz4`` or ``none`` for the MCAP chunks.
+        chunk_size: bytes per chunk before compression; a reader holds about one chunk per
+            topic in memory.
+
+    Raises:
+        RecordingError: the path exists already or cannot be written.
+
+    Use as a context manager so that the file is finished (summary and index written)::
+
+        with RecordingWriter("out.mcap") as recording:
+            recording.write("/k01/skeletons", SKELETON_GROUP, cdr_bytes, stamp_ns)
+
+    """
+
+    def __init__(
+        self, path: str | Path, *, compression: str = "zstd", chunk_size: int = 1 << 20
+    ) -> None:
+        from mcap.writer import CompressionType, Writer
+
+        self.path = Path(path)
+        if self.path.exists():
+            msg = f"{self.path} exists already; choose a new recording path"
+            raise RecordingError(msg)
+        self.folder: Path | None = None
+        file_path = self.path
+        if self.path.suffix != ".mcap":
+            self.folder = self.path
+            file_path = self.path / f"{self.path.name}_0.mcap"
+        try:
+            kind = CompressionType[compression.upper()]
+        except KeyError:
+            msg = f"unknown MCAP compression {compression!r}: use zstd, lz4 or none"
+            raise RecordingError(msg) from None
+        try:
+            file_path.parent.mkdir(parents=True, exist_ok=True)
+            self._stream: IO[bytes] = file_path.open("xb")
+        except OSError as exc:
+            msg = f"cannot create recording {file_path}: {exc}"
+            raise RecordingError(msg) from exc
+        self.file_path = file_path
+        self._writer = Writer(self._stream, chunk_size=chunk_size, compression=kind)
+        self._writer.start(profile="ros2", library="hiros")
+        self._schemas: dict[str, int] = {}
+        self._channels: dict[tuple[str, str], int] = {}
+        self._sequence: Counter[int] = Counter()
+        self.counts: Counter[tuple[str, str]] = Counter()
+        self.start_ns: int | None = None
+        self.end_ns: int | None = None
+        self.closed = False
+
+    def _channel(self, topic: str, msgtype: str) -> int:
+        key = (topic, msgtype)
+        channel = self._channels.get(key)
+        if channel is None:
+            schema = self._schemas.get(msgtype)
+            if schema is None:
+                schema = self._writer.register_schema(
+                    name=msgtype,
+                    encoding="ros2msg",
+                    data=message_definition(msgtype).encode(),
+                )
+                self._schemas[msgtype] = schema
+            metadata = {"offered_qos_profiles": _LATCHED_QOS} if topic in _LATCHED_TOPICS else {}
+            channel = self._writer.register_channel(
+                topic=topic, message_encoding="cdr", schema_id=schema, metadata=metadata
+            )
+            self._channels[key] = channel
+        return channel
+
+    def write(
+        self,
+        topic: str,
+        msgtype: str,
+        data: bytes,
+        log_time_ns: int,
+        publish_time_ns: int | None = None,
+    ) -> None:
+        """Append one message of CDR bytes; ``log_time_ns`` orders the recording."""
+        if self.closed:
+            msg = f"recording {self.path} is closed; open a new writer"
+            raise RecordingError(msg)
+        msgtype = normalize_msgtype(msgtype)
+        channel = self._channel(topic, msgtype)
+        log_time_ns = int(log_time_ns)
+        self._sequence[channel] += 1
+        self._writer.add_message(
+            channel_id=channel,
+            log_time=log_time_ns,
+            data=data,
+            publish_time=log_time_ns if publish_time_ns is None else int(publish_time_ns),
+            sequence=self._sequence[channel],
+        )
+        self.counts[(topic, msgtype)] += 1
+        self.start_ns = log_time_ns if self.start_ns is None else min(self.start_ns, log_time_ns)
+        self.end_ns = log_time_ns if self.end_ns is None else max(self.end_ns, log_time_ns)
+
+    def write_group(self, topic: str, group: object, log_time_ns: int | None = None) -> None:
+        """Append a SkeletonGroup (encoded with the codec); log time defaults to its stamp."""
+        from hiros_core.codec import encode_group
+
+        stamp = group.stamp_ns  # type: ignore[attr-defined]
+        self.write(
+            topic,
+            SKELETON_GROUP,
+            encode_group(group),
+            stamp if log_time_ns is None else log_time_ns,
+        )
+
+    def write_marker_array(self, topic: str, data: object, log_time_ns: int | None = None) -> None:
+        """Append a MarkerArrayData; log time defaults to its first marker's stamp (else 0)."""
+        from hiros_core.codec import encode_marker_array
+
+        stamps = data.stamps_ns  # type: ignore[attr-defined]
+        if log_time_ns is None:
+            log_time_ns = int(stamps[0]) if len(stamps) else (self.end_ns or 0)
+        self.write(topic, MARKER_ARRAY, encode_marker_array(data), log_time_ns)
+
+    def close(self) -> None:
+        """Finish the file (summary, indexes) and, for a folder, write ``metadata.yaml``."""
+        if self.closed:
+            return
+        self.closed = True
+        self._writer.finish()
+        self._stream.close()
+        if self.folder is not None:
+            (self.folder / "metadata.yaml").write_text(self._metadata())
+
+    def _metadata(self) -> str:
+        """rosbag2 ``metadata.yaml`` (version 9) describing the folder's one MCAP file."""
+        start = self.start_ns or 0
+        duration = (self.end_ns or 0) - start
+        total = sum(self.counts.values())
+        info = {
+            "version": 9,
+            "storage_identifier": "mcap",
+            "duration": {"nanoseconds": duration},
+            "starting_time": {"nanoseconds_since_epoch": start},
+            "message_count": total,
+            "topics_with_message_count": [
+                {
+                    "topic_metadata": {
+                        "name": topic,
+                        "type": msgtype,
+                        "serialization_format": "cdr",
+                        "offered_qos_profiles": _LATCHED_QOS if topic in _LATCHED_TOPICS else "",
+                        "type_description_hash": "",
+                    },
+                    "message_count": count,
+                }
+                for (topic, msgtype), count in self.counts.items()
+            ],
+            "compression_format": "",
+            "compression_mode": "",
+            "relative_file_paths": [self.file_path.name],
+            "files": [
+                {
+                    "path": self.file_path.name,
+                    "starting_time": {"nanoseconds_since_epoch": start},
+                    "duration": {"nanoseconds": duration},
+                    "message_count": total,
+                }
+            ],
+            "custom_data": {},
+            "ros_distro": "jazzy",
+        }
+        return yaml.safe_dump({"rosbag2_bagfile_information": info}, sort_keys=False)
+
+    def __enter__(self) -> RecordingWriter:
+        return self
+
+    def __exit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        traceback: TracebackType | None,
+    ) -> None:
+        self.close()

@@ -1,0 +1,216 @@
+"""RecordingWriter -> RecordingReader / rosbags / mcap round trips, truncation, bad paths."""
+
+from collections import Counter
+
+import numpy as np
+import pytest
+from mcap.reader import make_reader
+from mcap_ros2.decoder import DecoderFactory
+from rosbags.highlevel import AnyReader
+from rosbags.rosbag2 import StoragePlugin
+from rosbags.rosbag2 import Writer as Rosbag2Writer
+
+from hiros_core.codec import decode_group, decode_marker_array, encode_group
+from hiros_core.errors import RecordingError
+from hiros_core.recording import (
+    MARKER_ARRAY,
+    SKELETON_GROUP,
+    RecordingReader,
+    RecordingWriter,
+    iter_groups,
+)
+
+
+@pytest.fixture(name="driver_frames")
+def _driver_frames(samples):
+    return samples.driver_frames()
+
+
+def _write(path, driver_frames, **kwargs):
+    with RecordingWriter(path, **kwargs) as writer:
+        for topic, group, markers in driver_frames:
+            writer.write_marker_array(topic, markers)
+            writer.write_group(topic.replace("body_tracking_data", "skeletons"), group)
+    return writer
+
+
+def test_single_mcap_round_trip(tmp_path, driver_frames, samples):
+    path = tmp_path / "take.mcap"
+    _write(path, driver_frames)
+    with RecordingReader(path) as reader:
+        assert reader.topics == {
+            "/k01/body_tracking_data": MARKER_ARRAY,
+            "/k02/body_tracking_data": MARKER_ARRAY,
+            "/k01/skeletons": SKELETON_GROUP,
+            "/k02/skeletons": SKELETON_GROUP,
+        }
+        messages = list(reader.messages())
+    assert len(messages) == 200
+    times = [m.log_time_ns for m in messages]
+    assert times == sorted(times)
+    assert times[0] == samples.T0
+    first = next(m for m in messages if m.topic == "/k01/skeletons")
+    assert decode_group(first.data).same_as(driver_frames[0][1])
+    markers = decode_marker_array(messages[0].data)
+    assert len(markers) == 64
+
+
+def test_groups_from_both_kinds_of_topic_agree(tmp_path, driver_frames):
+    path = tmp_path / "take.mcap"
+    _write(path, driver_frames)
+    drops = Counter()
+    by_topic = {}
+    for source, group in iter_groups(path, drops=drops):
+        by_topic.setdefault(source, []).append(group)
+    assert sorted(by_topic) == ["k01", "k02"]
+    assert len(by_topic["k01"]) == 100  # 50 from the driver topic, 50 from the group topic
+    driver, decoded = by_topic["k01"][0::2], by_topic["k01"][1::2]
+    for a, b in zip(driver, decoded, strict=True):
+        assert a.same_as(b)
+    assert sum(drops.values()) == 0
+
+
+def test_other_tools_open_the_file(tmp_path, driver_frames):
+    path = tmp_path / "take.mcap"
+    _write(path, driver_frames[:4])
+    with AnyReader([path]) as reader:
+        assert reader.message_count == 8
+        for connection, _, raw in reader.messages():
+            message = reader.deserialize(raw, connection.msgtype)
+            if connection.msgtype == SKELETON_GROUP:
+                assert len(message.skeletons) == 2
+                assert message.skeletons[0].markers[0].confidence == 1.0
+            else:
+                assert message.markers[0].id == 100
+    with path.open("rb") as stream:
+        reader = make_reader(stream, decoder_factories=[DecoderFactory()])
+        decoded = list(reader.iter_decoded_messages())
+    assert len(decoded) == 8
+    group = next(d for _, c, _, d in decoded if c.topic == "/k01/skeletons")
+    expected = driver_frames[0][1].skeletons[0].positions[0]
+    position = group.skeletons[0].markers[0].center.pose.position
+    np.testing.assert_allclose([position.x, position.y, position.z], expected)
+
+
+def test_folder_with_metadata(tmp_path, driver_frames, samples):
+    folder = tmp_path / "bag"
+    _write(folder, driver_frames[:10])
+    assert (folder / "metadata.yaml").is_file()
+    with AnyReader([folder]) as reader:
+        assert reader.message_count == 20
+        assert reader.start_time == samples.T0
+    with RecordingReader(folder) as reader:
+        assert len(list(reader.messages({"/k01/skeletons"}))) == 5
+        assert not reader.problems
+
+
+def test_folder_without_metadata_merges_files_in_time_order(tmp_path, samples):
+    folder = tmp_path / "crashed"
+    folder.mkdir()
+    for part, indices in enumerate(([0, 2, 4], [1, 3, 5])):
+        with RecordingWriter(folder / f"part_{part}.mcap") as writer:
+            for index in indices:
+                writer.write_group("/k01/skeletons", samples.make_group(index))
+    with RecordingReader(folder) as reader:
+        stamps = [decode_group(m.data).stamp_ns for m in reader.messages()]
+        assert "no metadata.yaml" in reader.problems[0]
+    assert stamps == [samples.T0 + i * samples.PERIOD for i in range(6)]
+
+
+def test_messages_out_of_order_in_the_file_come_out_in_time_order(tmp_path, samples):
+    path = tmp_path / "late.mcap"
+    with RecordingWriter(path, chunk_size=2000) as writer:
+        for index in (3, 1, 0, 2, 5, 4):
+            writer.write_group("/k01/skeletons", samples.make_group(index), samples.T0 + index)
+            writer.write_group("/k02/skeletons", samples.make_group(index), samples.T0 + index)
+    with RecordingReader(path) as reader:
+        times = [m.log_time_ns for m in reader.messages()]
+    assert times == sorted(times)
+    assert len(times) == 12
+
+
+def test_truncated_mcap_reads_what_it_can(tmp_path, driver_frames):
+    path = tmp_path / "cut.mcap"
+    _write(path, driver_frames, chunk_size=20_000)
+    data = path.read_bytes()
+    path.write_bytes(data[: int(len(data) * 0.6)])
+    with RecordingReader(path) as reader:
+        assert set(reader.topics) >= {"/k01/body_tracking_data", "/k01/skeletons"}
+        messages = list(reader.messages())
+        assert 0 < len(messages) < 200
+        assert reader.drops["truncated"] == 1
+        assert "ends early" in reader.problems[0]
+    for message in messages:  # whatever was read is whole
+        if message.msgtype == SKELETON_GROUP:
+            decode_group(message.data)
+    drops = Counter()
+    groups = list(iter_groups(path, drops=drops))
+    assert len(groups) == len(messages)
+    assert drops["truncated"] == 1
+
+
+def test_sqlite3_file(tmp_path, samples):
+    folder = tmp_path / "sq"
+    writer = Rosbag2Writer(folder, version=9, storage_plugin=StoragePlugin.SQLITE3)
+    with writer:
+        from rosbags.typesys import Stores, get_typestore
+
+        store = get_typestore(Stores.ROS2_JAZZY)
+        text = (tmp_path / "dummy").as_posix()  # any string payload
+        connection = writer.add_connection("/note", "std_msgs/msg/String", typestore=store)
+        raw = store.serialize_cdr(
+            store.types["std_msgs/msg/String"](data=text), "std_msgs/msg/String"
+        )
+        writer.write(connection, samples.T0, raw)
+    (db3,) = folder.glob("*.db3")
+    for path in (folder, db3):
+        with RecordingReader(path) as reader:
+            (message,) = reader.messages()
+            assert message.topic == "/note"
+            assert message.msgtype == "std_msgs/msg/String"
+            assert message.data == bytes(raw)
+
+
+def test_bad_paths(tmp_path):
+    with pytest.raises(RecordingError, match="does not exist"):
+        RecordingReader(tmp_path / "none.mcap")
+    junk = tmp_path / "junk.mcap"
+    junk.write_bytes(b"this is not a recording at all")
+    with pytest.raises(RecordingError, match="not an MCAP file"):
+        RecordingReader(junk)
+    other = tmp_path / "take.txt"
+    other.write_text("x")
+    with pytest.raises(RecordingError, match="not a recording"):
+        RecordingReader(other)
+    empty = tmp_path / "empty"
+    empty.mkdir()
+    with pytest.raises(RecordingError, match="holds no recording"):
+        RecordingReader(empty)
+    broken = tmp_path / "broken.db3"
+    broken.write_bytes(b"SQLite format 3\x00" + b"\x00" * 50)
+    with pytest.raises(RecordingError, match=r"broken\.db3"):
+        RecordingReader(broken)
+
+
+def test_writer_refuses_existing_path_and_bad_compression(tmp_path):
+    path = tmp_path / "x.mcap"
+    path.write_bytes(b"")
+    with pytest.raises(RecordingError, match="exists already"):
+        RecordingWriter(path)
+    with pytest.raises(RecordingError, match="compression"):
+        RecordingWriter(tmp_path / "y.mcap", compression="brotli")
+
+
+def test_undecodable_messages_are_counted(tmp_path, samples):
+    path = tmp_path / "bad.mcap"
+    good = encode_group(samples.make_group(0))
+    with RecordingWriter(path) as writer:
+        writer.write("/k01/skeletons", SKELETON_GROUP, good[: len(good) // 2], samples.T0)
+        writer.write("/k01/skeletons", SKELETON_GROUP, good, samples.T0 + 1)
+        writer.write(
+            "/k01/body_tracking_data", MARKER_ARRAY, b"\x00\x01\x00\x00\x05", samples.T0 + 2
+        )
+    drops = Counter()
+    groups = list(iter_groups(path, drops=drops))
+    assert len(groups) == 1
+    assert drops["undecodable"] == 2
