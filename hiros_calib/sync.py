@@ -1,0 +1,714 @@
+"""Clock offsets between cameras from the people's own motion.
+
+Method (Eichler et al., Sensors 2022, section 3.2, extended):
+
+1. Every body track gets a camera-independent :mod:`~hiros_calib.signature`, resampled on a
+   common grid of camera-clock multiples of ``grid_step``; its time derivative is used, which
+   whitens the slow posture changes and sharpens the correlation peak.
+2. For a camera pair, every pair of body tracks (one per camera) gives a normalised
+   cross-correlation curve over all lags at once (FFT; channels pooled: the sum of
+   per-channel covariances over the square root of the summed variances).
+3. Consensus: curves whose peak is high and sharp (robust z-score of the peak over the
+   curve, the role of Eichler's coefficient of variation) vote for their peak lag, the best
+   ``best_fraction`` choose the winning lag and every good curve near it joins.
+4. Sub-frame refinement: a parabola through the pooled curve's peak, then the lag that
+   maximises the pooled correlation of the cubic-spline interpolated signatures, searched as
+   a continuous variable, so 30 Hz streams give millisecond offsets.
+5. Drift: the same continuous refinement in sliding windows gives the lag over time.
+6. N cameras: :func:`solve_clocks` fits one offset (and drift) per camera to all pairwise
+   window measurements by robust least squares, reference camera fixed, so the offsets are
+   globally consistent (loops close).
+
+Sign convention: a pair's lag ``tau = t_a - t_b`` for the same event, so the signature of
+camera b shifted by ``tau`` matches camera a; with the DESIGN.md clock model
+``t_ref = t_cam + time_offset + drift (t_cam - drift_epoch)`` this means
+``time_offset_b - time_offset_a = tau`` when there is no drift.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from scipy.fft import irfft, next_fast_len, rfft
+from scipy.interpolate import make_interp_spline
+from scipy.optimize import minimize_scalar
+
+from hiros_calib.signature import DEFAULT_JOINTS, PoseSignature, pose_signature, select_joints
+from hiros_calib.tracks import BodyTrack
+
+__all__ = [
+    "CameraClock",
+    "PairOffset",
+    "SyncParams",
+    "estimate_pair_offset",
+    "solve_clocks",
+    "synchronise",
+]
+
+
+@dataclass
+class SyncParams:
+    """Parameters of the time-offset estimation (same names as the ``calib`` node's)."""
+
+    joints: list[str] = field(default_factory=lambda: list(DEFAULT_JOINTS))
+    """Joints whose distances form the signature; names missing from a layout are skipped."""
+    mirror_invariant: bool = True
+    """Make the signature immune to SDKs swapping left and right (see signature.py)."""
+    grid_step: float = 0.01
+    """Coarse correlation grid (s); the refinement goes below it."""
+    refine_step: float = 0.01
+    """Grid (s) on which the continuous refinement compares interpolated signatures."""
+    max_offset: float = 0.0
+    """Largest |offset| searched (s); 0 searches every lag the data allow."""
+    min_overlap: float = 5.0
+    """Seconds two tracks must overlap at a lag for that lag to count."""
+    min_motion: float = 0.02
+    """A track whose smoothed signature moves less than this (m) is a still body: skipped."""
+    min_peak: float = 0.3
+    """Lowest peak correlation of a usable body pair."""
+    min_sharpness: float = 4.0
+    """Lowest robust z-score of a usable peak over its correlation curve."""
+    best_fraction: float = 0.1
+    """Fraction of the sharpest body pairs that choose the consensus lag (Eichler: 10 %)."""
+    consensus_tolerance: float = 0.05
+    """Body pairs whose peak lies within this (s) of the consensus join it."""
+    window: float = 20.0
+    """Window length (s) of the offset-over-time measurements that give the drift."""
+    estimate_drift: bool = True
+    """Fit a clock drift per camera (needs ``min_drift_span`` of common motion)."""
+    min_drift_span: float = 30.0
+    """Shortest span (s) of window measurements for a drift estimate."""
+    max_drift: float = 1e-3
+    """Largest drift (s/s) the window search allows for."""
+
+
+@dataclass
+class PairOffset:
+    """The clock lag of camera b relative to camera a, or why there is none.
+
+    Attributes:
+        camera_a, camera_b: the two cameras.
+        status: ``"ok"`` or ``"refused"``.
+        reason: why it was refused (empty when ok).
+        offset: ``tau = t_a - t_b`` (s) for the same event, over the whole overlap.
+        windows: ``(W, 4)`` per window: centre time on b's clock, tau, weight, correlation.
+        quality: peak correlation, sharpness, ambiguity, body pairs used/considered, ...
+        lags: ``(L,)`` lags (s) of the pooled correlation curve (for plots).
+        correlation: ``(L,)`` pooled correlation at those lags.
+        body_pairs: ``(track_a, track_b)`` indices of the body pairs in the consensus.
+
+    """
+
+    camera_a: str
+    camera_b: str
+    status: str = "refused"
+    reason: str = ""
+    offset: float = math.nan
+    windows: np.ndarray = field(default_factory=lambda: np.empty((0, 4)))
+    quality: dict[str, Any] = field(default_factory=dict)
+    lags: np.ndarray = field(default_factory=lambda: np.empty(0))
+    correlation: np.ndarray = field(default_factory=lambda: np.empty(0))
+    body_pairs: list[tuple[int, int]] = field(default_factory=list)
+
+    @property
+    def ok(self) -> bool:
+        """True when the offset was determined."""
+        return self.status == "ok"
+
+
+@dataclass
+class CameraClock:
+    """One camera's clock relative to the reference (DESIGN.md model), or why it is unknown."""
+
+    camera: str
+    status: str = "refused"
+    reason: str = ""
+    time_offset: float = math.nan
+    drift: float = 0.0
+    drift_epoch: float = 0.0
+    quality: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def ok(self) -> bool:
+        """True when the clock is determined."""
+        return self.status == "ok"
+
+    def to_reference(self, t_camera: np.ndarray | float) -> np.ndarray | float:
+        """Camera-clock seconds to reference seconds."""
+        return t_camera + self.time_offset + self.drift * (t_camera - self.drift_epoch)
+
+    def from_reference(self, t_reference: np.ndarray | float) -> np.ndarray | float:
+        """Reference seconds to camera-clock seconds (inverse of :meth:`to_reference`)."""
+        return (t_reference - self.time_offset + self.drift * self.drift_epoch) / (1 + self.drift)
+
+
+# --------------------------------------------------------------------------- grid signals
+
+
+@dataclass
+class _GridSignal:
+    """A signature on the camera's grid ``k * step`` from index ``k0``, mean-free, weighted."""
+
+    k0: int
+    values: np.ndarray  # (N, C) weighted, mean-free derivative of the signature
+    present: np.ndarray  # (N,) 1 inside the track, 0 in gaps
+    energy: np.ndarray  # (N,) sum over channels of values**2
+
+
+def _resample(times: np.ndarray, values: np.ndarray, grid: np.ndarray) -> np.ndarray:
+    """Linear interpolation of ``(T, C)`` samples at ``grid`` (inside the sample span)."""
+    idx = np.clip(np.searchsorted(times, grid, side="right") - 1, 0, len(times) - 2)
+    frac = ((grid - times[idx]) / (times[idx + 1] - times[idx]))[:, None]
+    return values[idx] * (1 - frac) + values[idx + 1] * frac
+
+
+def _grid_signal(signature: PoseSignature, step: float) -> _GridSignal | None:
+    times = signature.times
+    k0, k1 = math.ceil(times[0] / step), math.floor(times[-1] / step)
+    if k1 - k0 < 4:
+        return None
+    grid = np.arange(k0, k1 + 1) * step
+    weights = signature.weights
+    total = weights.sum(axis=0)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        mean = np.where(total > 0, np.nansum(signature.values * weights, axis=0) / total, 0.0)
+    centred = np.where(weights > 0, signature.values - mean, 0.0)
+    values = _resample(times, centred, grid)
+    w = _resample(times, weights, grid)
+    derivative = np.gradient(values, step, axis=0) * w
+    return _GridSignal(k0, derivative, np.ones(len(grid)), (derivative**2).sum(axis=1))
+
+
+# --------------------------------------------------------------------------- correlation
+
+
+@dataclass
+class _Curve:
+    """Pooled correlation sums of one body pair over absolute lag indices ``first..``."""
+
+    first: int  # absolute lag index (lag = index * step) of element 0
+    sab: np.ndarray
+    saa: np.ndarray
+    sbb: np.ndarray
+    count: np.ndarray
+
+    def correlation(self) -> np.ndarray:
+        with np.errstate(invalid="ignore", divide="ignore"):
+            return self.sab / np.sqrt(self.saa * self.sbb)
+
+
+def _correlate(a: _GridSignal, b: _GridSignal, nfft: int, cache: dict[int, Any]) -> _Curve:
+    """All-lag sums for ``tau = (a.k0 - b.k0 + k) * step``: a[n] against b[n - k]."""
+
+    def spectra(signal: _GridSignal) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        key = id(signal)
+        if key not in cache:
+            cache[key] = (
+                rfft(signal.values, n=nfft, axis=0),
+                rfft(signal.present, n=nfft),
+                rfft(signal.energy, n=nfft),
+            )
+        return cache[key]
+
+    fa, pa, ea = spectra(a)
+    fb, pb, eb = spectra(b)
+    sab = irfft((fa * np.conj(fb)).sum(axis=1), n=nfft)
+    saa = irfft(ea * np.conj(pb), n=nfft)
+    sbb = irfft(pa * np.conj(eb), n=nfft)
+    count = irfft(pa * np.conj(pb), n=nfft)
+    na, nb = len(a.present), len(b.present)
+    # circular lags: k in [-(nb-1), na-1]; reorder to ascending
+    order = np.r_[nfft - (nb - 1) : nfft, 0:na]
+    return _Curve(
+        a.k0 - b.k0 - (nb - 1),
+        sab[order],
+        np.maximum(saa[order], 0),
+        np.maximum(sbb[order], 0),
+        np.round(count[order]),
+    )
+
+
+@dataclass
+class _Candidate:
+    """One body pair's correlation peak."""
+
+    index_a: int
+    index_b: int
+    curve: _Curve
+    lag_index: int  # absolute lag index of the peak
+    peak: float
+    sharpness: float
+    ambiguity: float
+    overlap: float  # seconds
+
+    @property
+    def score(self) -> float:
+        return self.peak * self.sharpness
+
+
+def _peak(curve: _Curve, params: SyncParams) -> tuple[int, float, float, float, float] | None:
+    """(lag index, peak, sharpness, ambiguity, overlap s) of a curve, None when nothing valid."""
+    step = params.grid_step
+    r = curve.correlation()
+    lags = (curve.first + np.arange(len(r))) * step
+    valid = (curve.count * step >= params.min_overlap) & np.isfinite(r)
+    if params.max_offset > 0:
+        valid &= np.abs(lags) <= params.max_offset
+    if valid.sum() < 5:
+        return None
+    rv = np.where(valid, r, -np.inf)
+    best = int(np.argmax(rv))
+    peak = float(r[best])
+    spread = r[valid]
+    median = float(np.median(spread))
+    mad = 1.4826 * float(np.median(np.abs(spread - median)))
+    sharpness = (peak - median) / max(mad, 1e-6)
+    # second best peak away from the main lobe, as a fraction of the best
+    exclusion = max(3, round(0.25 / step))
+    far = np.abs(np.arange(len(r)) - best) > exclusion
+    others = rv[far]
+    ambiguity = float(others.max() / peak) if np.isfinite(others).any() and peak > 0 else 0.0
+    return curve.first + best, peak, sharpness, max(ambiguity, 0.0), float(curve.count[best] * step)
+
+
+# --------------------------------------------------------------------------- refinement
+
+
+@dataclass
+class _Spline:
+    """A track's mean-free signature derivative as a cubic spline, with weights on a grid.
+
+    ``values`` is evaluated at arbitrary (shifted) times; ``weights`` are tabulated every
+    ``step`` from ``start`` and looked up by nearest sample, which is plenty for weights and
+    much cheaper than interpolating them at every trial lag.
+    """
+
+    start: float
+    end: float
+    step: float
+    values: Any
+    weights: np.ndarray  # (N, C) on start + k * step
+
+    @classmethod
+    def build(cls, signature: PoseSignature, step: float) -> _Spline:
+        times, weights = signature.times, signature.weights
+        total = weights.sum(axis=0)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            mean = np.where(total > 0, np.nansum(signature.values * weights, axis=0) / total, 0.0)
+        centred = np.where(weights > 0, signature.values - mean, 0.0)
+        spline = make_interp_spline(times, centred, k=3).derivative()
+        grid = np.arange(times[0], times[-1], step)
+        return cls(float(times[0]), float(times[-1]), step, spline, _resample(times, weights, grid))
+
+    def weights_at(self, t: np.ndarray) -> np.ndarray:
+        index = np.clip(np.round((t - self.start) / self.step).astype(np.int64), 0, None)
+        return self.weights[np.minimum(index, len(self.weights) - 1)]
+
+
+@dataclass
+class _RefinePair:
+    """One body pair prepared for the continuous lag search: a tabulated on its own grid."""
+
+    a: _Spline
+    b: _Spline
+    times: np.ndarray  # (N,) a's grid
+    values: np.ndarray  # (N, C) a's signature derivative there
+    weights: np.ndarray  # (N, C)
+
+    @classmethod
+    def build(cls, a: _Spline, b: _Spline) -> _RefinePair:
+        times = a.start + np.arange(len(a.weights)) * a.step
+        return cls(a, b, times, a.values(times), a.weights)
+
+    def sums(self, tau: float, span: tuple[float, float]) -> tuple[float, float, float]:
+        """Sums of a·b, a², b² over the common part with b shifted by ``tau``."""
+        lo = max(self.b.start + tau, span[0])
+        hi = min(self.b.end + tau, span[1])
+        i0, i1 = np.searchsorted(self.times, [lo, hi])
+        if i1 - i0 < 4:
+            return 0.0, 0.0, 0.0
+        t = self.times[i0:i1]
+        w = self.weights[i0:i1] * self.b.weights_at(t - tau)
+        va = self.values[i0:i1] * w
+        vb = self.b.values(t - tau) * w
+        return float((va * vb).sum()), float((va * va).sum()), float((vb * vb).sum())
+
+    def overlap(self, tau: float, span: tuple[float, float]) -> float:
+        """Seconds of common data with b shifted by ``tau`` inside ``span``."""
+        lo = max(self.a.start, self.b.start + tau, span[0])
+        hi = min(self.a.end, self.b.end + tau, span[1])
+        return max(0.0, hi - lo)
+
+
+def _pooled_correlation(tau: float, pairs: list[_RefinePair], span: tuple[float, float]) -> float:
+    """Correlation of all body pairs' signature derivatives with b shifted by ``tau``.
+
+    Both signatures are cubic-spline interpolants evaluated on one grid of a's clock (b at
+    ``t - tau``); ``span`` limits the grid for windowed estimates.
+    """
+    sums = np.array([pair.sums(tau, span) for pair in pairs]).sum(axis=0)
+    if sums[1] <= 0 or sums[2] <= 0:
+        return 0.0
+    return float(sums[0] / math.sqrt(sums[1] * sums[2]))
+
+
+def _refine(
+    tau0: float,
+    half_width: float,
+    pairs: list[_RefinePair],
+    span: tuple[float, float] = (-math.inf, math.inf),
+) -> tuple[float, float]:
+    """The lag in ``tau0 ± half_width`` maximising the pooled correlation, and that value."""
+    result = minimize_scalar(
+        lambda tau: -_pooled_correlation(tau, pairs, span),
+        bounds=(tau0 - half_width, tau0 + half_width),
+        method="bounded",
+        options={"xatol": 2e-5},
+    )
+    return float(result.x), float(-result.fun)
+
+
+# --------------------------------------------------------------------------- pair estimate
+
+
+def _refused(a: str, b: str, reason: str, **quality: Any) -> PairOffset:
+    return PairOffset(a, b, status="refused", reason=reason, quality=quality)
+
+
+def estimate_pair_offset(
+    tracks_a: list[BodyTrack],
+    tracks_b: list[BodyTrack],
+    params: SyncParams,
+    *,
+    camera_a: str = "a",
+    camera_b: str = "b",
+) -> PairOffset:
+    """The clock lag ``tau = t_a - t_b`` between two cameras from their body tracks."""
+    step = params.grid_step
+    sig_a, sig_b = (_signatures(tracks, params) for tracks in (tracks_a, tracks_b))
+    if not sig_a or not sig_b:
+        return _refused(camera_a, camera_b, "a camera saw no body track")
+    moving_a = [i for i, s in enumerate(sig_a) if s.motion() >= params.min_motion]
+    moving_b = [j for j, s in enumerate(sig_b) if s.motion() >= params.min_motion]
+    if not moving_a or not moving_b:
+        still = camera_a if not moving_a else camera_b
+        return _refused(
+            camera_a,
+            camera_b,
+            f"the bodies {still} sees hardly move (less than {params.min_motion * 100:.0f} cm "
+            "of joint-distance change), so their motion cannot time the cameras",
+        )
+    span_a = max(sig_a[i].times[-1] - sig_a[i].times[0] for i in moving_a)
+    span_b = max(sig_b[j].times[-1] - sig_b[j].times[0] for j in moving_b)
+    if min(span_a, span_b) < params.min_overlap:
+        return _refused(
+            camera_a,
+            camera_b,
+            f"too short: the longest moving track lasts {min(span_a, span_b):.1f} s, "
+            f"{params.min_overlap:.1f} s are needed",
+        )
+    grid_a = {i: _grid_signal(sig_a[i], step) for i in moving_a}
+    grid_b = {j: _grid_signal(sig_b[j], step) for j in moving_b}
+    grid_a = {i: g for i, g in grid_a.items() if g is not None}
+    grid_b = {j: g for j, g in grid_b.items() if g is not None}
+    length = max(len(g.present) for g in grid_a.values()) + max(
+        len(g.present) for g in grid_b.values()
+    )
+    nfft = next_fast_len(length)
+    cache: dict[int, Any] = {}
+    candidates: list[_Candidate] = []
+    for i, ga in grid_a.items():
+        for j, gb in grid_b.items():
+            curve = _correlate(ga, gb, nfft, cache)
+            found = _peak(curve, params)
+            if found is not None:
+                candidates.append(_Candidate(i, j, curve, *found))
+    if not candidates:
+        return _refused(
+            camera_a,
+            camera_b,
+            f"no body is seen by both cameras for {params.min_overlap:.1f} s at any lag",
+        )
+    good = [
+        c for c in candidates if c.peak >= params.min_peak and c.sharpness >= params.min_sharpness
+    ]
+    best_any = max(candidates, key=lambda c: c.score)
+    if not good:
+        return _refused(
+            camera_a,
+            camera_b,
+            f"no body pair correlates clearly (best peak {best_any.peak:.2f}, sharpness "
+            f"{best_any.sharpness:.1f}; need {params.min_peak} and {params.min_sharpness})",
+            peak=best_any.peak,
+            sharpness=best_any.sharpness,
+            pairs_considered=len(candidates),
+        )
+    used = _consensus(good, params)
+    return _finish(
+        camera_a,
+        camera_b,
+        used=used,
+        candidates=candidates,
+        sig_a=sig_a,
+        sig_b=sig_b,
+        params=params,
+    )
+
+
+def _signatures(tracks: list[BodyTrack], params: SyncParams) -> list[PoseSignature]:
+    out = []
+    for track in tracks:
+        joints = select_joints(track.layout, params.joints)
+        out.append(pose_signature(track, joints, mirror_invariant=params.mirror_invariant))
+    return out
+
+
+def _consensus(good: list[_Candidate], params: SyncParams) -> list[_Candidate]:
+    """The body pairs agreeing with the lag the sharpest pairs vote for."""
+    tolerance = max(1, round(params.consensus_tolerance / params.grid_step))
+    ranked = sorted(good, key=lambda c: c.score, reverse=True)
+    voters = ranked[: max(1, math.ceil(params.best_fraction * len(ranked)))]
+    lags = np.array([c.lag_index for c in voters])
+    weights = np.array([c.score * c.overlap for c in voters])
+    support = [(weights * (np.abs(lags - lag) <= tolerance)).sum() for lag in lags]
+    winner = int(lags[int(np.argmax(support))])
+    # one body of camera a pairs with at most one body of camera b at a time: keep the best
+    used: list[_Candidate] = []
+    for candidate in ranked:
+        if abs(candidate.lag_index - winner) > tolerance:
+            continue
+        used.append(candidate)
+    return used
+
+
+def _pooled_curve(used: list[_Candidate]) -> tuple[int, np.ndarray]:
+    """(first lag index, correlation) of the body pairs' summed correlation sums."""
+    first = min(c.curve.first for c in used)
+    last = max(c.curve.first + len(c.curve.sab) for c in used)
+    sums = np.zeros((3, last - first))
+    for c in used:
+        start = c.curve.first - first
+        stop = start + len(c.curve.sab)
+        sums[:, start:stop] += np.stack([c.curve.sab, c.curve.saa, c.curve.sbb])
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return first, sums[0] / np.sqrt(sums[1] * sums[2])
+
+
+def _parabolic(r: np.ndarray, index: int) -> float:
+    """Sub-sample peak position by a parabola through three samples."""
+    if index <= 0 or index >= len(r) - 1 or not np.isfinite(r[index - 1 : index + 2]).all():
+        return float(index)
+    left, mid, right = r[index - 1], r[index], r[index + 1]
+    denom = left - 2 * mid + right
+    if denom >= 0:
+        return float(index)
+    return index + 0.5 * (left - right) / denom
+
+
+def _finish(
+    camera_a: str,
+    camera_b: str,
+    *,
+    used: list[_Candidate],
+    candidates: list[_Candidate],
+    sig_a: list[PoseSignature],
+    sig_b: list[PoseSignature],
+    params: SyncParams,
+) -> PairOffset:
+    step = params.grid_step
+    first, pooled = _pooled_curve(used)
+    centre = used[0].lag_index - first
+    half = max(3, round(0.1 / step))
+    lo, hi = max(0, centre - half), min(len(pooled), centre + half + 1)
+    local = int(np.nanargmax(pooled[lo:hi])) + lo
+    tau_parabola = (first + _parabolic(pooled, local)) * step
+    splines: dict[tuple[str, int], _Spline] = {}
+    pairs = []
+    for c in used:
+        for side, index, signatures in (("a", c.index_a, sig_a), ("b", c.index_b, sig_b)):
+            if (side, index) not in splines:
+                splines[side, index] = _Spline.build(signatures[index], params.refine_step)
+        pairs.append(_RefinePair.build(splines["a", c.index_a], splines["b", c.index_b]))
+    tau, corr = _refine(tau_parabola, 2 * step, pairs)
+    windows = _windows(tau, pairs, params)
+    quality = {
+        "peak": round(float(np.nanmax(pooled[lo:hi])), 4),
+        "refined_correlation": round(corr, 4),
+        "sharpness": round(max(c.sharpness for c in used), 2),
+        "ambiguity": round(min(c.ambiguity for c in used), 3),
+        "pairs_used": len(used),
+        "pairs_considered": len(candidates),
+        "overlap_s": round(sum(c.overlap for c in used), 1),
+        "windows": len(windows),
+    }
+    keep = slice(max(0, centre - round(2.0 / step)), centre + round(2.0 / step) + 1)
+    return PairOffset(
+        camera_a,
+        camera_b,
+        status="ok",
+        offset=tau,
+        windows=windows,
+        quality=quality,
+        lags=(first + np.arange(len(pooled)))[keep] * step,
+        correlation=pooled[keep],
+        body_pairs=[(c.index_a, c.index_b) for c in used],
+    )
+
+
+def _windows(tau: float, pairs: list[_RefinePair], params: SyncParams) -> np.ndarray:
+    """Lag measured in sliding windows of a's clock: rows (t_b centre, tau, weight, corr)."""
+    start = min(max(p.a.start, p.b.start + tau) for p in pairs)
+    end = max(min(p.a.end, p.b.end + tau) for p in pairs)
+    span = end - start
+    if span < 1.5 * params.window:
+        edges = [(start, end)]
+    else:
+        count = max(2, math.floor(2 * span / params.window) - 1)
+        starts = np.linspace(start, end - params.window, count)
+        edges = [(s, s + params.window) for s in starts]
+    half_width = 2 * params.grid_step + params.max_drift * span
+    rows = []
+    for lo, hi in edges:
+        overlap = sum(p.overlap(tau, (lo, hi)) for p in pairs)
+        if overlap < min(params.min_overlap, 0.5 * (hi - lo)):
+            continue
+        value, corr = _refine(tau, half_width, pairs, (lo, hi))
+        if corr < params.min_peak:
+            continue
+        rows.append((0.5 * (lo + hi) - value, value, overlap * corr**2, corr))
+    return np.array(rows).reshape(-1, 4)
+
+
+# --------------------------------------------------------------------------- N cameras
+
+
+def solve_clocks(
+    cameras: list[str],
+    reference: str,
+    pairs: list[PairOffset],
+    epochs: dict[str, float],
+    params: SyncParams,
+) -> dict[str, CameraClock]:
+    """Globally consistent clocks from all pairwise lags (robust weighted least squares).
+
+    Each window measurement of pair (a, b) at b-time ``t_b`` with lag ``tau`` says
+    ``tau + o_a + d_a (t_b + tau - e_a) - o_b - d_b (t_b - e_b) = 0`` (offsets ``o``, drifts
+    ``d``, epochs ``e``); the reference has ``o = d = 0``. Cameras not linked to the
+    reference through usable pairs are refused with the pairs' reasons.
+    """
+    clocks = {c: CameraClock(c, drift_epoch=epochs.get(c, 0.0)) for c in cameras}
+    clocks[reference] = CameraClock(
+        reference, "ok", time_offset=0.0, drift_epoch=epochs.get(reference, 0.0)
+    )
+    usable = [p for p in pairs if p.ok and len(p.windows)]
+    linked = _linked(reference, usable)
+    for camera in cameras:
+        if camera not in linked:
+            reasons = [
+                f"{p.camera_a}-{p.camera_b}: {p.reason or 'no window measurement'}"
+                for p in pairs
+                if camera in (p.camera_a, p.camera_b)
+            ]
+            clocks[camera].reason = f"cannot link {camera} to the reference {reference}: " + (
+                "; ".join(reasons) if reasons else "no camera pair includes it"
+            )
+    unknown = [c for c in cameras if c in linked and c != reference]
+    if not unknown:
+        return clocks
+    usable = [p for p in usable if p.camera_a in linked and p.camera_b in linked]
+    spans = _drift_spans(usable)
+    with_drift = [
+        c for c in unknown if params.estimate_drift and spans.get(c, 0.0) >= params.min_drift_span
+    ]
+    column = {("o", c): k for k, c in enumerate(unknown)}
+    column.update({("d", c): len(unknown) + k for k, c in enumerate(with_drift)})
+    rows, rhs, weights = [], [], []
+    for pair in usable:
+        for t_b, tau, weight, _ in pair.windows:
+            row = np.zeros(len(column))
+            for camera, sign, at in ((pair.camera_a, 1.0, t_b + tau), (pair.camera_b, -1.0, t_b)):
+                if ("o", camera) in column:
+                    row[column["o", camera]] = sign
+                if ("d", camera) in column:
+                    row[column["d", camera]] = sign * (at - clocks[camera].drift_epoch)
+            rows.append(row)
+            rhs.append(-tau)
+            weights.append(weight)
+    design, target, weight = np.array(rows), np.array(rhs), np.array(weights)
+    solution, residual = _robust_lstsq(design, target, weight)
+    for camera in unknown:
+        clock = clocks[camera]
+        clock.status = "ok"
+        clock.time_offset = float(solution[column["o", camera]])
+        if ("d", camera) in column:
+            clock.drift = float(solution[column["d", camera]])
+        mine = np.array(
+            [camera in (p.camera_a, p.camera_b) for p in usable for _ in range(len(p.windows))]
+        )
+        clock.quality = {
+            "window_residual_ms": round(1e3 * float(np.sqrt(np.mean(residual[mine] ** 2))), 3),
+            "windows": int(mine.sum()),
+            "drift_estimated": ("d", camera) in column,
+        }
+    return clocks
+
+
+def _linked(reference: str, pairs: list[PairOffset]) -> set[str]:
+    linked, frontier = {reference}, [reference]
+    while frontier:
+        camera = frontier.pop()
+        for p in pairs:
+            for here, there in ((p.camera_a, p.camera_b), (p.camera_b, p.camera_a)):
+                if here == camera and there not in linked:
+                    linked.add(there)
+                    frontier.append(there)
+    return linked
+
+
+def _drift_spans(pairs: list[PairOffset]) -> dict[str, float]:
+    """Per camera, the time span its window measurements cover (drift is only defined then)."""
+    times: dict[str, list[float]] = {}
+    for p in pairs:
+        if len(p.windows) < 3:
+            continue
+        for camera in (p.camera_a, p.camera_b):
+            times.setdefault(camera, []).extend(p.windows[:, 0].tolist())
+    return {c: max(t) - min(t) for c, t in times.items()}
+
+
+def _robust_lstsq(
+    design: np.ndarray, target: np.ndarray, weight: np.ndarray, iterations: int = 5
+) -> tuple[np.ndarray, np.ndarray]:
+    """Weighted least squares reweighted with Huber weights (threshold 1.5 robust sigma)."""
+    robust = np.ones_like(weight)
+    solution = np.zeros(design.shape[1])
+    for _ in range(iterations):
+        root = np.sqrt(weight * robust)[:, None]
+        solution = np.linalg.lstsq(design * root, target * root[:, 0], rcond=None)[0]
+        residual = design @ solution - target
+        sigma = max(1.4826 * float(np.median(np.abs(residual))), 2e-4)
+        ratio = np.abs(residual) / (1.5 * sigma)
+        robust = np.where(ratio <= 1, 1.0, 1.0 / np.maximum(ratio, 1e-12))
+    return solution, design @ solution - target
+
+
+def synchronise(
+    tracks: dict[str, list[BodyTrack]],
+    reference: str,
+    params: SyncParams,
+) -> tuple[dict[str, CameraClock], list[PairOffset]]:
+    """Clocks of every camera from their body tracks: all pairs, then the global solve."""
+    cameras = list(tracks)
+    pairs = [
+        estimate_pair_offset(tracks[a], tracks[b], params, camera_a=a, camera_b=b)
+        for k, a in enumerate(cameras)
+        for b in cameras[k + 1 :]
+    ]
+    epochs = {
+        c: 0.5 * (min(t.start for t in ts) + max(t.end for t in ts)) if ts else 0.0
+        for c, ts in tracks.items()
+    }
+    return solve_clocks(cameras, reference, pairs, epochs, params), pairs
