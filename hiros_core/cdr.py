@@ -156,7 +156,8 @@ class Plan:
         """The values of one slot kind as ``(k, width / itemsize)`` of ``dtype``."""
         offsets = self.slots.get(kind)
         if offsets is None or not offsets.size:
-            return np.zeros((0, self.widths.get(kind, 8)), dtype=np.uint8).view(dtype)
+            dtype = np.dtype(dtype)
+            return np.zeros((0, self.widths.get(kind, dtype.itemsize)), dtype=np.uint8).view(dtype)
         raw = data[offsets[:, None] + np.arange(self.widths[kind])]
         return raw.view(dtype)
 
@@ -191,8 +192,8 @@ class PlanBuilder:
         self.buf.append(value)
 
     def string(self, text: str) -> None:
-        """A constant CDR string."""
-        raw = text.encode("utf-8")
+        """A constant CDR string; like rclpy (a C string), it ends at an embedded NUL."""
+        raw = text.encode("utf-8").split(b"\x00", 1)[0]
         self.u32(len(raw) + 1)
         self.buf += raw + b"\x00"
 

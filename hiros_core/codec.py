@@ -53,6 +53,11 @@ def _split_ns(stamps_ns: np.ndarray, what: str) -> np.ndarray:
     return out
 
 
+def _c_string(text: str) -> str:
+    """What a string becomes in CDR: rclpy ends it at the first NUL."""
+    return text.split("\x00", 1)[0]
+
+
 def _join_ns(times: np.ndarray) -> np.ndarray:
     return times["sec"].astype(np.int64) * _NS + times["nanosec"].astype(np.int64)
 
@@ -123,8 +128,8 @@ def _build_group_plan(group: SkeletonGroup) -> Plan:
             builder.i32(layout.parents[link_id])
             builder.i32(int(link_id))
             builder.slot("links", _ROW_BYTES, 8)
-        shapes.append(_SkeletonShape(skeleton.src_frame, layout, marker_ids, link_ids))
-    return builder.build(_GroupShape(group.frame_id, tuple(shapes)))
+        shapes.append(_SkeletonShape(_c_string(skeleton.src_frame), layout, marker_ids, link_ids))
+    return builder.build(_GroupShape(_c_string(group.frame_id), tuple(shapes)))
 
 
 def _rows(arrays: list[np.ndarray], width: int) -> np.ndarray:
@@ -178,9 +183,9 @@ def _decode_group_with(plan: Plan, raw: np.ndarray) -> SkeletonGroup:
     stamp = _join_ns(plan.gather(raw, "stamp", _TIME).ravel())[0]
     head = plan.gather(raw, "head", _HEAD).ravel()
     maxes = plan.gather(raw, "maxes", _MAXES).ravel()
-    box = plan.gather(raw, "box", "<f8")
-    markers = plan.gather(raw, "markers", "<f8")
-    links = plan.gather(raw, "links", "<f8")
+    box = plan.gather(raw, "box", "<f8").reshape(-1, _BOX_FLOATS)
+    markers = plan.gather(raw, "markers", "<f8").reshape(-1, STATE_WIDTH)
+    links = plan.gather(raw, "links", "<f8").reshape(-1, STATE_WIDTH)
     src_times = _join_ns(head)
     skeletons = []
     marker_start = link_start = 0
@@ -436,9 +441,9 @@ def _build_marker_plan(data: MarkerArrayData) -> Plan:
         builder.slot("embedded", 1, 1)
     return builder.build(
         _MarkerShape(
-            tuple(data.frame_ids),
-            tuple(data.namespaces),
-            tuple(data.texts),
+            tuple(map(_c_string, data.frame_ids)),
+            tuple(map(_c_string, data.namespaces)),
+            tuple(map(_c_string, data.texts)),
             np.array([len(p) for p in data.points], dtype=np.intp),
             np.array([len(c) for c in data.point_colors], dtype=np.intp),
             tuple(data.attachments),
@@ -482,7 +487,7 @@ def decode_marker_array(data: bytes | bytearray | memoryview) -> MarkerArrayData
         return markers
     shape: _MarkerShape = plan.meta  # type: ignore[assignment]
     ita = plan.gather(raw, "ita", _ITA).ravel()
-    pose_scale = plan.gather(raw, "pose_scale", "<f8")
+    pose_scale = plan.gather(raw, "pose_scale", "<f8").reshape(-1, 10)
     points = plan.gather(raw, "points", "<f8").reshape(-1, 3)
     point_colors = plan.gather(raw, "point_colors", "<f4").reshape(-1, 4)
     return MarkerArrayData(
@@ -494,7 +499,7 @@ def decode_marker_array(data: bytes | bytearray | memoryview) -> MarkerArrayData
         actions=ita["action"].copy(),
         poses=pose_scale[:, :7].copy(),
         scales=pose_scale[:, 7:].copy(),
-        colors=plan.gather(raw, "color", "<f4").copy(),
+        colors=plan.gather(raw, "color", "<f4").reshape(-1, 4).copy(),
         lifetimes_ns=_join_ns(plan.gather(raw, "lifetime", _TIME).ravel()),
         frame_locked=plan.gather(raw, "locked", np.uint8).ravel().astype(bool),
         points=np.split(points, np.cumsum(shape.point_counts)[:-1]) if len(ita) else [],
