@@ -193,7 +193,11 @@ class PlanBuilder:
 
     def string(self, text: str) -> None:
         """A constant CDR string; like rclpy (a C string), it ends at an embedded NUL."""
-        raw = text.encode("utf-8").split(b"\x00", 1)[0]
+        try:
+            raw = text.encode("utf-8").split(b"\x00", 1)[0]
+        except UnicodeEncodeError as exc:
+            msg = f"cannot encode string {text!r}: {exc.reason}"
+            raise CodecError(msg) from None
         self.u32(len(raw) + 1)
         self.buf += raw + b"\x00"
 
