@@ -11,13 +11,14 @@ from __future__ import annotations
 import itertools
 import re
 from collections import Counter
+from dataclasses import dataclass
 
 import numpy as np
 
 from hiros_core.layouts import Layout
 from hiros_core.model import Skeleton, SkeletonGroup
 
-__all__ = ["build_groups", "camera_frame", "topic_name"]
+__all__ = ["CameraStream", "build_stream", "camera_frame", "topic_name"]
 
 _NOT_NAME = re.compile(r"[^A-Za-z0-9_]+")
 
@@ -39,7 +40,22 @@ def camera_frame(camera: str) -> str:
     return f"{camera}_depth_camera_link"
 
 
-def build_groups(
+@dataclass
+class CameraStream:
+    """One camera's groups and when a recorder would have received each.
+
+    Attributes:
+        groups: SkeletonGroups in camera-clock order.
+        receive_ns: ``(G,)`` int64 log times for a recording (the recorder's clock where the
+            file has one, else the camera stamps).
+
+    """
+
+    groups: list[SkeletonGroup]
+    receive_ns: np.ndarray
+
+
+def build_stream(
     camera: str,
     stamps_ns: np.ndarray,
     body_ids: np.ndarray,
@@ -48,8 +64,9 @@ def build_groups(
     *,
     orientations: np.ndarray | None = None,
     confidences: np.ndarray | None = None,
+    receive_ns: np.ndarray | None = None,
     drops: Counter[str] | None = None,
-) -> list[SkeletonGroup]:
+) -> CameraStream:
     """One SkeletonGroup per distinct stamp of one camera, in time order.
 
     Args:
@@ -60,12 +77,15 @@ def build_groups(
         layout: the joints of ``J``.
         orientations: ``(N, J, 4)`` quaternions x, y, z, w, or None.
         confidences: ``(N, J)`` joint confidences, or None.
+        receive_ns: ``(N,)`` recorder-clock time of each row; a group's is its earliest row's,
+            raised where needed so that log times follow the camera's stamps. Default: the
+            stamps.
         drops: counts rows dropped: ``repeated_detection`` (same stamp and body twice: the
             recorder sampled one camera frame twice; the first copy is kept),
             ``no_joints`` (a detection whose joints are all absent).
 
     Returns:
-        Groups with skeletons sorted by body id; a stamp whose detections were all dropped
+        The stream; skeletons sorted by body id; a stamp whose detections were all dropped
         gives no group.
 
     """
@@ -84,6 +104,13 @@ def build_groups(
     rows, kept_stamps, kept_ids = order[keep], stamps_ns[keep], body_ids[keep]
     starts = np.flatnonzero(np.r_[True, kept_stamps[1:] != kept_stamps[:-1]])
     bounds = [*starts.tolist(), len(rows)] if len(rows) else [0]
+    receive = stamps_ns if receive_ns is None else np.asarray(receive_ns, dtype=np.int64)[order]
+    group_receive = (
+        np.minimum.reduceat(receive[keep], starts) if len(rows) else np.empty(0, np.int64)
+    )
+    # A camera delivers its frames in order: a frame logged before an older one was seen
+    # late by the recorder, so its log time moves up to keep each camera's topic in order.
+    group_receive = np.maximum.accumulate(group_receive) if len(rows) else group_receive
     groups: list[SkeletonGroup] = []
     for begin, end in itertools.pairwise(bounds):
         stamp = int(kept_stamps[begin])
@@ -100,4 +127,4 @@ def build_groups(
             for row, body_id in zip(rows[begin:end], kept_ids[begin:end], strict=True)
         ]
         groups.append(SkeletonGroup(stamp, frame, skeletons))
-    return groups
+    return CameraStream(groups, group_receive)
