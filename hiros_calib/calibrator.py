@@ -1,0 +1,219 @@
+"""Offline spatio-temporal calibration: per-camera skeleton streams in, a Calibration out.
+
+:class:`Calibrator` chains the steps of this package: body tracks per camera
+(:mod:`~hiros_calib.tracks`), clock offsets and drift (:mod:`~hiros_calib.sync`), then camera
+poses (:mod:`~hiros_calib.extrinsics`), and writes the result as the DESIGN.md calibration
+with quality figures per camera. The live version is :class:`hiros_calib.live.LiveCalibrator`.
+"""
+
+from __future__ import annotations
+
+from collections import Counter, defaultdict
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+from hiros_calib.extrinsics import (
+    CameraPose,
+    Correspondences,
+    ExtrinsicsParams,
+    PairPose,
+    associate,
+    estimate_pair_pose,
+    pair_correspondences,
+    solve_poses,
+)
+from hiros_calib.sync import CameraClock, PairOffset, SyncParams, synchronise
+from hiros_calib.tracks import BodyTrack, extract_tracks
+from hiros_core.calibration import Calibration, CameraCalibration
+from hiros_core.errors import CalibrationError
+from hiros_core.model import SkeletonGroup
+
+__all__ = ["CalibrationResult", "Calibrator", "CalibratorParams"]
+
+Progress = Callable[[str, float], None]
+"""Called with a stage description and the fraction (0..1) of the work done."""
+
+
+@dataclass
+class CalibratorParams(SyncParams, ExtrinsicsParams):
+    """Every calibration parameter (ROS parameter names and defaults of the ``calib`` node).
+
+    The time-offset fields come from :class:`~hiros_calib.sync.SyncParams`, the pose fields
+    from :class:`~hiros_calib.extrinsics.ExtrinsicsParams`; ``joints`` serves both.
+    """
+
+    reference: str = ""
+    """Reference camera (its frame is the world); empty: the first camera seen."""
+    world_frame: str = "world"
+    """Name of the world frame written to the calibration file."""
+    max_gap: float = 0.25
+    """A body id unseen for longer than this (s) starts a new track."""
+    min_track_frames: int = 10
+    """Tracks with fewer frames are ignored."""
+    min_confidence: float = 0.5
+    """Joints below this fraction of the driver's confidence scale are left out."""
+    require_all: bool = True
+    """Raise CalibrationError when any camera cannot be calibrated (else leave it out)."""
+
+
+@dataclass
+class CalibrationResult:
+    """Everything a calibration run found, for reports and plots."""
+
+    calibration: Calibration
+    clocks: dict[str, CameraClock]
+    sync_pairs: list[PairOffset]
+    poses: dict[str, CameraPose]
+    pose_pairs: list[PairPose]
+    tracks: dict[str, list[BodyTrack]]
+    refused: dict[str, str] = field(default_factory=dict)
+
+
+class Calibrator:
+    """Clock offsets, drift and poses of N cameras from the people they all watch.
+
+    Feed frames with :meth:`update` (or pass them to :meth:`calibrate`); inputs are per-camera
+    SkeletonGroups in the camera frame and on the camera clock. Drop reasons are counted in
+    ``drops``.
+    """
+
+    def __init__(self, params: CalibratorParams | None = None) -> None:
+        self.params = params or CalibratorParams()
+        self.drops: Counter[str] = Counter()
+        self.result: CalibrationResult | None = None
+        self._groups: dict[str, list[SkeletonGroup]] = defaultdict(list)
+
+    def update(self, group: SkeletonGroup) -> SkeletonGroup:
+        """Keep a camera frame for the next :meth:`calibrate`; returns it unchanged."""
+        if not group.frame_id:
+            self.drops["no_frame_id"] += 1
+            return group
+        self._groups[group.camera].append(group)
+        return group
+
+    def calibrate(
+        self,
+        camera_groups: Mapping[str, Sequence[SkeletonGroup]] | None = None,
+        progress: Progress | None = None,
+    ) -> Calibration:
+        """The calibration of every camera; also kept with all details in ``self.result``.
+
+        Raises:
+            CalibrationError: fewer than two cameras, or (with ``require_all``) a camera
+                whose clock or pose the data cannot determine, with the reason.
+
+        """
+        groups = dict(camera_groups) if camera_groups is not None else dict(self._groups)
+        report = progress or (lambda _stage, _done: None)
+        params = self.params
+        if len(groups) < 2:
+            msg = f"calibration needs at least two cameras, got {sorted(groups)}"
+            raise CalibrationError(msg)
+        reference = params.reference or next(iter(groups))
+        if reference not in groups:
+            msg = f"reference camera {reference!r} is not among the cameras {sorted(groups)}"
+            raise CalibrationError(msg)
+        cameras = [reference, *[c for c in groups if c != reference]]
+        report("body tracks", 0.0)
+        tracks = {
+            camera: extract_tracks(
+                groups[camera],
+                camera,
+                max_gap=params.max_gap,
+                min_frames=params.min_track_frames,
+                min_confidence=params.min_confidence,
+                drops=self.drops,
+            )
+            for camera in cameras
+        }
+        report("clock offsets", 0.1)
+        clocks, sync_pairs = synchronise(tracks, reference, params)
+        refused = {c: clock.reason for c, clock in clocks.items() if not clock.ok}
+        self._check(refused, "clock")
+        report("camera poses", 0.6)
+        pose_pairs = self._pose_pairs(cameras, tracks, clocks)
+        poses = solve_poses([c for c in cameras if clocks[c].ok], reference, pose_pairs, params)
+        refused.update({c: pose.reason for c, pose in poses.items() if not pose.ok})
+        self._check(refused, "pose")
+        calibration = _to_calibration(reference, params.world_frame, groups, clocks, poses)
+        calibration.cameras = {
+            c: calibration.cameras[c] for c in cameras if c in calibration.cameras
+        }
+        for camera, cal in calibration.cameras.items():
+            cal.quality.update(_sync_quality(camera, sync_pairs))
+        self.result = CalibrationResult(
+            calibration, clocks, sync_pairs, poses, pose_pairs, tracks, refused
+        )
+        report("done", 1.0)
+        return calibration
+
+    def _check(self, refused: dict[str, str], what: str) -> None:
+        if refused and self.params.require_all:
+            camera, reason = next(iter(refused.items()))
+            msg = f"cannot determine the {what} of camera {camera}: {reason}"
+            raise CalibrationError(msg)
+
+    def _pose_pairs(
+        self,
+        cameras: list[str],
+        tracks: dict[str, list[BodyTrack]],
+        clocks: dict[str, CameraClock],
+    ) -> list[PairPose]:
+        params = self.params
+        pairs = []
+        for k, a in enumerate(cameras):
+            for b in cameras[k + 1 :]:
+                if not (clocks[a].ok and clocks[b].ok):
+                    continue
+                matches = associate(tracks[a], tracks[b], clocks[a], clocks[b], params)
+                found = [
+                    pair_correspondences(tracks[a][i], tracks[b][j], clocks[a], clocks[b], params)
+                    for i, j, _ in matches
+                ]
+                usable = [c for c in found if c is not None]
+                joined = Correspondences.concatenate(usable) if usable else None
+                pose = estimate_pair_pose(joined, params, camera_a=a, camera_b=b)
+                pose.quality["bodies_associated"] = len(matches)
+                pairs.append(pose)
+        return pairs
+
+
+def _to_calibration(
+    reference: str,
+    world_frame: str,
+    groups: Mapping[str, Sequence[SkeletonGroup]],
+    clocks: dict[str, CameraClock],
+    poses: dict[str, CameraPose],
+) -> Calibration:
+    calibration = Calibration(reference=reference, world_frame=world_frame)
+    for camera, pose in poses.items():
+        clock = clocks[camera]
+        if not (pose.ok and clock.ok):
+            continue
+        frame_id = next((g.frame_id for g in groups[camera] if g.frame_id), camera)
+        quality: dict[str, Any] = {f"time_{k}": v for k, v in clock.quality.items()}
+        quality.update(pose.quality)
+        calibration.cameras[camera] = CameraCalibration(
+            frame_id=frame_id,
+            time_offset=clock.time_offset,
+            drift=clock.drift,
+            drift_epoch=clock.drift_epoch,
+            translation=pose.transform.translation,
+            rotation=pose.transform.quaternion,
+            quality=quality,
+        )
+    return calibration
+
+
+def _sync_quality(camera: str, pairs: list[PairOffset]) -> dict[str, Any]:
+    """Best correlation figures among the camera's usable pairs."""
+    mine = [p for p in pairs if p.ok and camera in (p.camera_a, p.camera_b)]
+    if not mine:
+        return {}
+    best = max(mine, key=lambda p: p.quality["peak"])
+    return {
+        "time_peak": best.quality["peak"],
+        "time_sharpness": best.quality["sharpness"],
+        "time_pairs_used": sum(p.quality["pairs_used"] for p in mine),
+    }
