@@ -10,6 +10,22 @@ from hiros_azure_bridge.driver_format import (
 __all__ = [
     "DriverBridge",
     "DriverBridgeParams",
+    "generic_main",
     "group_to_driver_markers",
     "load_bridge_params",
+    "main",
 ]
+
+
+def main(args: list[str] | None = None) -> None:
+    """``ros2 run hiros azure_bridge`` (rclpy is imported only here)."""
+    from hiros_azure_bridge.node import main as node_main
+
+    node_main(args)
+
+
+def generic_main(args: list[str] | None = None) -> None:
+    """``ros2 run hiros generic_bridge``."""
+    from hiros_azure_bridge.node import generic_main as node_main
+
+    node_main(args)

@@ -117,9 +117,11 @@ class DriverBridgeParams:
 def load_bridge_params(path: str | Path) -> tuple[DriverBridgeParams, dict[str, Any]]:
     """Read a generic bridge description: the bridge parameters and the rest (topics).
 
-    The file is a mapping whose keys are ``DriverBridgeParams`` fields plus free keys such as
-    ``topic`` and ``output_topic`` for the node. A relative ``layout`` file path is taken
-    relative to the YAML file. Raises ConfigError naming the file and the bad key.
+    The file is a mapping whose keys are ``DriverBridgeParams`` fields plus keys for the node
+    (``cameras``, ``input_topic``, ``output_topic``, ``input_qos``), either plain or as a ROS
+    parameter file (``generic_bridge: ros__parameters: {...}``). A relative ``layout`` file
+    path is taken relative to the YAML file. Raises ConfigError naming the file and the bad
+    key.
     """
     path = Path(path)
     try:
@@ -127,6 +129,11 @@ def load_bridge_params(path: str | Path) -> tuple[DriverBridgeParams, dict[str, 
     except (OSError, yaml.YAMLError) as exc:
         msg = f"cannot read bridge description {path}: {exc}"
         raise ConfigError(msg) from exc
+    if isinstance(spec, dict) and len(spec) == 1:
+        # a ROS parameter file: ``<node>: ros__parameters: {...}``
+        (section,) = spec.values()
+        if isinstance(section, dict) and isinstance(section.get("ros__parameters"), dict):
+            spec = section["ros__parameters"]
     if not isinstance(spec, dict):
         msg = f"bridge description {path} must be a mapping of parameters"
         raise ConfigError(msg)

@@ -1,0 +1,121 @@
+"""The ``azure_bridge`` and ``generic_bridge`` nodes: driver MarkerArrays -> SkeletonGroups.
+
+Per camera: ``/<cam>/body_tracking_data`` (raw CDR) -> ``decode_marker_array`` ->
+``DriverBridge.update`` -> ``encode_group`` -> ``/<cam>/skeletons`` (raw CDR), in the camera's
+frame and clock, nothing corrected (DESIGN.md). Topic names are templates in which
+``{camera}`` is replaced by each name of the ``cameras`` parameter.
+
+``generic_bridge`` is the same node under another name, meant to be configured for another
+driver: by a parameter file (``--ros-args --params-file my_driver.yaml``) or by the
+``description`` parameter naming a YAML file with the same keys, e.g. for a Kinect v2 driver::
+
+    cameras: [kinect_left, kinect_right]
+    input_topic: /{camera}/body_markers
+    layout: kinect_v2            # or a layout YAML file
+    id_scheme: body_major
+    id_stride: 100
+    position_scale: 0.001        # the driver publishes millimetres
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections import Counter
+from dataclasses import dataclass, field
+
+from rclpy.parameter import Parameter
+from visualization_msgs.msg import MarkerArray
+
+from hiros_azure_bridge.driver_format import DriverBridge, DriverBridgeParams, load_bridge_params
+from hiros_core.codec import decode_marker_array, encode_group
+from hiros_ros import HirosNode, run_node
+from hiros_ros.node import camera_qos, pipeline_qos
+from hiros_skeleton_msgs.msg import SkeletonGroup as SkeletonGroupMsg
+
+__all__ = ["BridgeNode", "BridgeNodeParams", "generic_main", "main"]
+
+
+@dataclass
+class BridgeNodeParams(DriverBridgeParams):
+    """The bridge nodes' ROS parameters: the driver's id scheme plus cameras and topics.
+
+    Attributes:
+        cameras: camera names (topic namespaces).
+        input_topic: driver topic template (``{camera}`` is replaced).
+        output_topic: SkeletonGroup topic template.
+        input_qos: ``sensor_data`` (best effort; also hears reliable drivers) or ``reliable``.
+        description: optional YAML file whose values replace these parameters (generic
+            drivers; see the module docstring).
+
+    """
+
+    cameras: list[str] = field(default_factory=lambda: ["k01"])
+    input_topic: str = "/{camera}/body_tracking_data"
+    output_topic: str = "/{camera}/skeletons"
+    input_qos: str = "sensor_data"
+    description: str = ""
+
+
+class BridgeNode(HirosNode):
+    """One DriverBridge, subscription and publisher per camera."""
+
+    def __init__(self, node_name: str = "azure_bridge") -> None:
+        super().__init__(node_name)
+        self.params = self.declare_params(BridgeNodeParams)
+        if self.params.description:
+            self._apply_description(self.params.description)
+        bridge_fields = {f.name for f in dataclasses.fields(DriverBridgeParams)}
+        bridge_params = DriverBridgeParams(
+            **{k: v for k, v in dataclasses.asdict(self.params).items() if k in bridge_fields}
+        )
+        self.bridges: dict[str, DriverBridge] = {}
+        self._seen: dict[str, Counter[str]] = {}
+        for camera in self.params.cameras:
+            source = self.params.input_topic.format(camera=camera)
+            target = self.params.output_topic.format(camera=camera)
+            self.bridges[camera] = DriverBridge(bridge_params)
+            self._seen[camera] = Counter()
+            publisher = self.create_raw_publisher(SkeletonGroupMsg, target, pipeline_qos())
+            self.create_raw_subscription(
+                MarkerArray,
+                source,
+                lambda data, c=camera, p=publisher: self.on_markers(c, p, data),
+                camera_qos(self.params.input_qos),
+            )
+            self.get_logger().info(f"{source} -> DriverBridge({bridge_params.layout}) -> {target}")
+
+    def _apply_description(self, path: str) -> None:
+        """Replace the parameters by those of a description file, visibly (set_parameters)."""
+        bridge, extra = load_bridge_params(path)
+        node_fields = {"cameras", "input_topic", "output_topic", "input_qos"}
+        values = dataclasses.asdict(bridge) | {k: v for k, v in extra.items() if k in node_fields}
+        if "cameras" in values:
+            values["cameras"] = [str(c) for c in values["cameras"]]
+        self.params = dataclasses.replace(self.params, **values)
+        self.set_parameters(
+            [
+                Parameter(name, value=value)
+                for name, value in values.items()
+                if not (isinstance(value, list) and not value)
+            ]
+        )
+
+    def on_markers(self, camera: str, publisher: object, data: bytes) -> None:
+        """Decode, convert, publish; a dropped message publishes nothing."""
+        bridge = self.bridges[camera]
+        group = bridge.update(decode_marker_array(data))
+        self.absorb_drops(
+            Counter({f"{camera}.{k}": v for k, v in bridge.drops.items()}), self._seen[camera]
+        )
+        if group is not None:
+            self.publish_raw(publisher, encode_group(group))
+
+
+def main(args: list[str] | None = None) -> None:
+    """``ros2 run hiros azure_bridge``."""
+    run_node(lambda: BridgeNode("azure_bridge"), args)
+
+
+def generic_main(args: list[str] | None = None) -> None:
+    """``ros2 run hiros generic_bridge``."""
+    run_node(lambda: BridgeNode("generic_bridge"), args)
