@@ -7,12 +7,16 @@ and is pitched down by that aim plus ``tilt_range`` degrees, so people's feet st
 
 Setups:
 
-| setup | cameras |
-|---|---|
-| ``room`` | N cameras (default 3): k01 and k02 face each other (180° apart), the rest fill the free side of the circle |
-| ``facing`` | 2 cameras 180° apart |
-| ``ring`` | N cameras evenly spaced around the circle |
-| a YAML file | the poses of a calibration file (DESIGN.md format); its clock figures are kept when non-zero |
+===========  ======================================================================
+setup        cameras
+===========  ======================================================================
+``room``     N cameras (default 3): k01 and k02 face each other (180° apart), the others
+             spread over one side of the circle between them
+``facing``   2 cameras 180° apart
+``ring``     N cameras evenly spaced around the circle
+a YAML file  the poses of a calibration file (DESIGN.md format); its clock figures are
+             kept when non-zero
+===========  ======================================================================
 
 Clocks: the reference clock is k01's (offset 0, drift 0), and it reads ``clock_start`` (a Unix
 time, like the driver's host stamps) at simulation time 0. Every other camera gets an offset

@@ -12,22 +12,32 @@ built once from the rest pose), so mapping a whole clip is one matrix product. J
 matched by role with aliases so that the CMU files, the Xsens MVN export and the common
 "LeftUpLeg/LeftArm" naming all work.
 
-| Azure joint | from the BVH |
-|---|---|
-| HipLeft/Right, KneeLeft/Right, ShoulderLeft/Right, ElbowLeft/Right, WristLeft/Right | the joint of that role (CMU ``LeftHip``, Xsens ``LeftHip``, ``LeftUpLeg``...) |
-| AnkleLeft/Right | ``LeftAnkle`` / ``LeftFoot`` |
-| FootLeft/Right | ``LeftToe`` / ``LeftToeBase`` (ball of the foot) |
-| Pelvis | midpoint of the two hips (the Kinect pelvis sits between the hip joints) |
-| SpineNaval, SpineChest, Neck, Head | points at 0.22, 0.40, 0.664 and 0.763 of the spine polyline (pelvis → root → spine joints → head → head top), by rest-pose arc length |
-| ClavicleLeft/Right | 0.8 × Neck + 0.2 × Shoulder |
-| HandLeft/Right, HandTipLeft/Right | wrist + 0.095 m and 0.19 m along the wrist → finger-end direction, scaled by arm length / 0.51 m |
-| ThumbLeft/Right | wrist + wrist rotation × (0.09 m along the hand + 0.09 m forward in the rest pose) |
-| Nose, EyeLeft/Right, EarLeft/Right | Head + head rotation × fixed offsets (left, up, forward): nose (0, 0.113, 0.112), eyes (±0.026, 0.12, 0.066), ears (±0.083, 0.057, −0.026) m |
+==================  ===========================================================================
+Azure joint         from the BVH
+==================  ===========================================================================
+Hip, Knee,          the joint of that role on each side: ``LeftHip``, ``LeftKnee``,
+Shoulder, Elbow,    ``LeftShoulder``, ``LeftElbow``, ``LeftWrist`` (CMU, Xsens) or ``LeftUpLeg``,
+Wrist               ``LeftLeg``, ``LeftArm``, ``LeftForeArm``, ``LeftHand``
+Ankle               ``LeftAnkle`` or ``LeftFoot``
+Foot                ``LeftToe`` or ``LeftToeBase`` (ball of the foot)
+Pelvis              midpoint of the two hips (the Kinect pelvis sits between the hip joints)
+Neck, Head          the BVH ``Neck`` and ``Head`` joints
+SpineNaval,         points at 0.33 and 0.60 of the spine polyline pelvis → root → spine
+SpineChest          joints → neck, by rest-pose arc length (they bend with the spine)
+Clavicle            0.8 × Neck + 0.2 × Shoulder
+Hand, HandTip       wrist + 0.095 m and 0.19 m along the wrist → finger-end direction (wrist
+                    rotation × rest direction), scaled by arm length / 0.51 m
+Thumb               wrist + wrist rotation × (0.09 m along the hand + 0.09 m forward in the rest
+                    pose), same scale
+Nose, Eye, Ear      Head + head rotation × offsets (left, up, forward) in metres: nose
+                    (0, 0.113, 0.112), eyes (±0.026, 0.12, 0.066), ears (±0.083, 0.057, −0.026)
+==================  ===========================================================================
 
 The fractions and offsets were measured on the real Azure Kinect stream of
 ``unipd_bpe_sample`` (median over 355 frames, in a pelvis/neck/hip body frame for the torso and
 a neck/head/ear frame for the face): Kinect pelvis → SpineNaval 0.176 m, → SpineChest 0.318 m,
-→ Neck 0.532 m, → Head 0.611 m, for a subject whose Xsens pelvis → head top is 0.801 m.
+→ Neck 0.532 m, → Head 0.611 m; the same subject's Xsens neck and head joints are 0.561 m and
+0.647 m above the pelvis, the CMU subject's 0.41 m and 0.50 m (a smaller skeleton).
 """
 
 from __future__ import annotations
@@ -43,7 +53,7 @@ __all__ = ["BVH_TO_WORLD", "map_to_azure", "mapping_weights"]
 BVH_TO_WORLD = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]])
 """Rotation taking BVH axes (Y up) to the world frame (Z up): ``world = BVH_TO_WORLD @ bvh``."""
 
-_SPINE_FRACTIONS = {"SpineNaval": 0.22, "SpineChest": 0.40, "Neck": 0.664, "Head": 0.763}
+_SPINE_FRACTIONS = {"SpineNaval": 0.33, "SpineChest": 0.60}
 _CLAVICLE_TO_SHOULDER = 0.2
 _HAND, _HAND_TIP, _ARM_REFERENCE = 0.095, 0.19, 0.51
 _THUMB_ALONG, _THUMB_FORWARD = 0.09, 0.09
@@ -107,8 +117,7 @@ class _Roles:
                 for role, aliases in _ALIASES.items()
             }
         self.head = _find(names, ("Head",), "Head", src)
-        ends = [i for i, p in enumerate(motion.parents) if p == self.head]
-        self.head_end = ends[0] if ends else None
+        self.neck = _find(names, ("Neck", "Neck1", "LowerNeck"), "Neck", src)
         rest = _rest_positions(motion)
         self.finger_end: dict[str, int] = {}
         self.thumb_end: dict[str, int | None] = {}
@@ -139,21 +148,15 @@ def mapping_weights(motion: BvhMotion) -> np.ndarray:
     pelvis[[roles.side["Left"]["Hip"], roles.side["Right"]["Hip"]]] = 0.5
     weights[idx("Pelvis")] = pelvis
 
-    # Spine polyline: pelvis, then the root ... head chain, then the head top (or a head-length
-    # extension when the file has no end site).
+    weights[idx("Neck"), roles.neck] = 1.0
+    weights[idx("Head"), roles.head] = 1.0
+    # SpineNaval and SpineChest: fractions of the spine polyline pelvis -> root -> ... -> neck,
+    # by rest-pose arc length, so that a bending spine bends them too.
     chain_rows = [pelvis]
-    for joint in _ancestors(motion.parents, roles.head):
+    for joint in _ancestors(motion.parents, roles.neck):
         row = np.zeros(len(motion.joint_names))
         row[joint] = 1.0
         chain_rows.append(row)
-    if roles.head_end is not None:
-        top = np.zeros(len(motion.joint_names))
-        top[roles.head_end] = 1.0
-    else:
-        parent = int(motion.parents[roles.head])
-        top = 2.0 * chain_rows[-1]
-        top[parent] -= 1.0
-    chain_rows.append(top)
     chain = np.stack(chain_rows)
     points = chain @ rest
     arc = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(points, axis=0), axis=1))])

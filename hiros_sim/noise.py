@@ -20,8 +20,9 @@ occlude too.
 
 Confidence levels follow the Azure Kinect Body Tracking SDK (``k4abt_joint_confidence_level_t``):
 0 NONE (outside the field of view), 1 LOW (occluded, predicted), 2 MEDIUM (seen). They become
-the model's confidence through ``CONFIDENCE_OF_LEVEL`` (0, 0.5, 1.0; level 3 HIGH, which the SDK
-reserves, would be 1.0).
+the model's confidence through ``CONFIDENCE_OF_LEVEL`` = level / 3 (0, 1/3, 2/3; level 3 HIGH,
+which the SDK reserves, would be 1.0), the same convention as ``hiros_azure_bridge`` so that
+levels survive the trip through the driver's MarkerArray.
 """
 
 from __future__ import annotations
@@ -43,7 +44,7 @@ __all__ = [
 ]
 
 LEVEL_NONE, LEVEL_LOW, LEVEL_MEDIUM = 0, 1, 2
-CONFIDENCE_OF_LEVEL = np.array([0.0, 0.5, 1.0, 1.0])
+CONFIDENCE_OF_LEVEL = np.arange(4) / 3.0
 """Model confidence of each SDK level: NONE, LOW, MEDIUM, HIGH."""
 
 _IDX = AZURE_KINECT.index
@@ -96,22 +97,18 @@ def occluded(positions: np.ndarray) -> np.ndarray:
 
     """
     centres, radii = _spheres(positions)  # (P, N, S, 3)
-    n_people, n_frames = positions.shape[:2]
     hidden = np.zeros(positions.shape[:3], dtype=bool)
-    for occluder in range(n_people):  # a few people: loop over occluders, vectorise the rest
-        c = centres[occluder][None]  # (1, N, S, 3)
-        ray = positions  # (P, N, J, 3), from the origin
-        length2 = np.einsum("pnjc,pnjc->pnj", ray, ray)[..., None]  # (P, N, J, 1)
-        along = np.einsum(
-            "pnjc,pnsc->pnjs", ray, np.broadcast_to(c, (n_people, n_frames, *c.shape[2:]))
-        )
+    length2 = np.einsum("pnjc,pnjc->pnj", positions, positions)[..., None]  # (P, N, J, 1)
+    length = np.sqrt(length2)
+    for occluder in range(positions.shape[0]):  # a few people: loop over occluders only
+        c = centres[occluder]  # (N, S, 3)
+        along = np.einsum("pnjc,nsc->pnjs", positions, c)  # ray · centre
+        centre2 = np.einsum("nsc,nsc->ns", c, c)[None, :, None, :]
         with np.errstate(invalid="ignore", divide="ignore"):
-            s = along / length2  # (P, N, J, S) fraction along the ray of the closest point
-            closest = s[..., None] * ray[:, :, :, None, :]
-            dist = np.linalg.norm(closest - c[:, :, None], axis=-1)
-            length = np.sqrt(length2)
-            in_front = s * length < length - radii
-            blocked = (dist < radii) & in_front & (s > 0)
+            # squared distance from the sphere centre to the ray's line, and where along it
+            dist2 = centre2 - along * along / length2
+            s = along / length2
+            blocked = (dist2 < radii * radii) & (s > 0) & (s * length < length - radii)
         blocked = blocked.any(axis=-1)
         blocked[occluder][:, _MIDLINE] = False  # the spine is inside its own torso spheres
         hidden |= blocked

@@ -2,11 +2,18 @@
 
 A simulation folder holds:
 
-| file | what |
-|---|---|
-| ``recording.mcap`` | Azure-driver ``visualization_msgs/MarkerArray`` on ``/<cam>/body_tracking_data`` (needs ``hiros_azure_bridge`` and ``hiros_core.recording``) |
-| ``truth.npz`` | ``times (T,)`` reference seconds, ``positions (P, T, 32, 3)`` world frame, ``person_ids (P,)``, ``clip_names (P,)``, and one row per published skeleton: ``det_camera`` (index into ``cameras``), ``det_stamp_ns``, ``det_sdk_id``, ``det_person`` (-1 = ghost) |
-| ``calibration.yaml`` | true camera poses and clocks (DESIGN.md calibration format) |
+====================  =================================================================
+file                  what
+====================  =================================================================
+``recording.mcap``    Azure-driver ``visualization_msgs/MarkerArray`` on
+                      ``/<cam>/body_tracking_data``, log time = arrival at the recorder
+``truth.npz``         ``times (T,)`` reference seconds, ``positions (P, T, 32, 3)`` world
+                      frame (float32), ``person_ids (P,)``, ``clip_names (P,)``,
+                      ``cameras``, and one row per published skeleton: ``det_camera``
+                      (index into ``cameras``), ``det_stamp_ns``, ``det_sdk_id``,
+                      ``det_person`` (-1 = ghost); ``params`` (JSON of SimParams)
+``calibration.yaml``  true camera poses and clocks (DESIGN.md calibration format)
+====================  =================================================================
 """
 
 from __future__ import annotations
@@ -61,17 +68,32 @@ def save_truth(result: SimResult, out_dir: str | Path) -> Path:
 def write_recording(result: SimResult, out_dir: str | Path) -> Path:
     """Write the recording (MCAP), the truth and the calibration into ``out_dir``.
 
+    An existing ``recording.mcap`` in the folder is replaced.
+
+    An existing ``recording.mcap`` in the folder is replaced.
+
     Raises:
         RecordingError: the folder cannot be written.
 
     """
+    from hiros_azure_bridge import group_to_driver_markers
+    from hiros_core.recording import RecordingWriter
+
     out = save_truth(result, out_dir)
-    try:
-        from hiros_azure_bridge import groups_to_marker_arrays
-        from hiros_core.recording import RecordingWriter
-    except ImportError:
-        return out
-    del groups_to_marker_arrays, RecordingWriter
+    recording = out / RECORDING_FILE
+    if recording.exists():
+        recording.unlink()
+    # one time-ordered stream across cameras, by arrival at the recorder
+    entries = [
+        (int(receive), name, k)
+        for name, groups in result.camera_groups.items()
+        for k, receive in enumerate(result.receive_ns[name][: len(groups)])
+    ]
+    entries.sort()
+    with RecordingWriter(recording) as writer:
+        for receive, name, k in entries:
+            data = group_to_driver_markers(result.camera_groups[name][k])
+            writer.write_marker_array(f"/{name}/body_tracking_data", data, receive)
     return out
 
 

@@ -108,24 +108,40 @@ class SimParams:
     drift_ppm: float = 30.0
     start_spread: float = 0.5
     """Cameras start recording within this many seconds of each other."""
-    jitter: float = 0.0005
-    drop_rate: float = 0.003
+    jitter: float = 0.00047
+    """Std of the frame stamps around the regular grid, seconds (fitted: 0.47 ms)."""
+    drop_rate: float = 0.0056
+    """Frames never published (fitted: 0.56 %)."""
+    latency: float = 0.06
+    """Seconds from a frame's capture to its arrival at the recorder (the log time)."""
 
-    # joint noise (see hiros_sim.noise)
-    noise_base: float = 0.012
-    noise_per_metre: float = 0.004
-    depth_axis_gain: float = 1.5
+    # joint noise (see hiros_sim.noise); figures from hiros_sim.fit on the UNIPD-BPE take
+    noise_base: float = 0.0105
+    """Lateral joint noise sigma at depth 0, metres (fitted: 10.5 mm)."""
+    noise_per_metre: float = 0.0043
+    """Growth of the sigma per metre of depth (fitted: 4.3 mm/m)."""
+    depth_axis_gain: float = 1.19
+    """Sigma along the camera's z axis relative to x, y (fitted: 1.19)."""
+    joint_bias: float = 0.025
+    """Sigma of a fixed per camera, person and joint offset, metres (fitted RMS: 25 mm)."""
     oblique_gain: float = 1.0
-    occluded_gain: float = 3.0
+    """Extra sigma, as a fraction, for a body seen from the side (not in the take: a guess)."""
+    occluded_gain: float = 2.5
+    """Sigma factor of hidden joints (the take's ankles, hidden by the bending torso: ~2.4x)."""
     out_of_view_gain: float = 4.0
-    noise_correlation_time: float = 0.15
-    """Seconds for the joint error's autocorrelation to fall to 1/e."""
+    noise_correlation_time: float = 0.21
+    """Seconds for the joint error's autocorrelation to fall to 1/e (fitted: 212 ms)."""
 
     # SDK mistakes
-    miss_rate: float = 0.005
+    miss_rate: float = 0.0056
+    """Frames where a visible person is not reported (fitted: 0.56 % empty frames)."""
     flip_probability: float = 0.5
     """Chance that a stretch of a person facing away is reported front/back flipped."""
     facing_away_cos: float = -0.5
+    flip_rate: float = 3.0
+    """Front/back flip episodes (0.5-3 s) per person per camera per minute in any view. The
+    real take shows 37 % flipped frames on an upright subject facing the camera; the default
+    (about 9 %) is milder."""
     swap_rate: float = 2.0
     """Left/right swap episodes per person per camera per minute."""
     ghost_rate: float = 1.0
@@ -208,6 +224,7 @@ class SimResult:
     truth: Truth
     calibration: Calibration
     labels: dict[str, list[np.ndarray]] = field(default_factory=dict)
+    receive_ns: dict[str, np.ndarray] = field(default_factory=dict)
 
 
 @lru_cache(maxsize=16)
@@ -264,6 +281,7 @@ class _Stream:
     """One camera's observations before they become groups."""
 
     stamps_ns: np.ndarray  # (N,)
+    receive_ns: np.ndarray  # (N,) reference clock
     kept: np.ndarray  # (N,) frame published
     positions: np.ndarray  # (P, N, 32, 3) camera frame, with noise
     levels: np.ndarray  # (P, N, 32) SDK confidence levels
@@ -272,13 +290,14 @@ class _Stream:
     ghosts: list[tuple[int, int, int, np.ndarray, np.ndarray]]  # start, stop, id, pos, levels
 
 
-def _observe(  # noqa: PLR0915 - one pass over the camera's imperfections, in order
+def _observe(
     cam: CameraCalibration,
     truth: Truth,
     clips: list[Clip],
     params: SimParams,
     rng: np.random.Generator,
 ) -> _Stream:
+    """Everything one camera reports, as arrays over its frames."""
     noisy = params.noise
     rate = params.rate
     start_ref = params.clock_start + rng.uniform(0.0, params.start_spread)
@@ -290,6 +309,7 @@ def _observe(  # noqa: PLR0915 - one pass over the camera's imperfections, in or
     stamps_ns = start_ns + np.round(offsets * 1e9).astype(np.int64)
     kept = rng.random(n_frames) >= params.drop_rate if noisy else np.ones(n_frames, bool)
     t_ref = camera_to_reference(cam, stamps_ns * 1e-9)
+    receive_ns = np.round((t_ref + params.latency) * 1e9).astype(np.int64)
 
     world = truth.at(t_ref)  # (P, N, 32, 3)
     rotation = Rotation.from_quat(cam.rotation).as_matrix()
@@ -299,95 +319,135 @@ def _observe(  # noqa: PLR0915 - one pass over the camera's imperfections, in or
     hidden = occluded(positions)
     levels = np.where(joint_in, np.where(hidden, LEVEL_LOW, LEVEL_MEDIUM), LEVEL_NONE)
     detected = present & (joint_in.mean(axis=-1) >= 0.5)
-    n_people = positions.shape[0]
     if noisy:
         detected &= rng.random(detected.shape) >= params.miss_rate
-
-    forward = body_forward(world) @ rotation  # (P, N, 3) camera frame
-    pelvis = positions[:, :, _IDX("Pelvis")]
-    with np.errstate(invalid="ignore", divide="ignore"):
-        to_camera = -pelvis / np.linalg.norm(pelvis, axis=-1, keepdims=True)
-        facing_cos = np.einsum("pnc,pnc->pn", forward, to_camera)
-
-    if noisy:
-        obliqueness = np.sqrt(np.clip(1.0 - facing_cos**2, 0.0, 1.0))
-        depth = np.abs(positions[..., 2])
-        sigma = (params.noise_base + params.noise_per_metre * depth) * (
-            1.0 + params.oblique_gain * obliqueness
-        )[..., None]
-        sigma = sigma * np.where(hidden, params.occluded_gain, 1.0)
-        sigma = sigma * np.where(joint_in, 1.0, params.out_of_view_gain)
-        rho = float(np.exp(-1.0 / (rate * params.noise_correlation_time)))
-        error = ar1_noise(rng, positions.shape, rho) * sigma[..., None]
-        error[..., 2] *= params.depth_axis_gain
-        positions = positions + error
-
-        away = detected & (facing_cos < params.facing_away_cos)
-        episodes = _runs(away)
-        flip_episode = rng.random(episodes.max() + 1) < params.flip_probability
-        flipped = away & flip_episode[episodes]
-        if flipped.any():
-            positions[flipped] = flip_front_back(positions[flipped], forward[flipped])
-            levels[flipped] = levels[flipped][:, AZURE_KINECT.mirror]
-        for p in range(n_people):
-            for _ in range(rng.poisson(params.swap_rate * params.duration / 60.0)):
-                first = rng.integers(0, n_frames)
-                stop = min(n_frames, first + int(rng.uniform(0.2, 1.0) * rate))
-                perm = LEGS_SWAP if rng.random() < 0.7 else AZURE_KINECT.mirror
-                span = slice(first, stop)
-                positions[p, span] = positions[p, span][:, perm]
-                levels[p, span] = levels[p, span][:, perm]
-
-    # SDK ids: a new id when a person is seen again after reid_gap, or at random changes
-    frame = np.arange(n_frames)
-    new_track = np.zeros_like(detected)
-    gap = int(round(params.reid_gap * rate))
-    for p in range(n_people):
-        seen = np.flatnonzero(detected[p])
-        if seen.size:
-            starts = seen[np.concatenate([[True], np.diff(seen) > gap])]
-            new_track[p, starts] = True
-        if noisy:
-            changes = rng.integers(
-                0, n_frames, rng.poisson(params.id_change_rate * params.duration / 60.0)
-            )
-            new_track[p, changes] |= detected[p, changes]
+        forward = body_forward(world) @ rotation  # (P, N, 3) camera frame
+        positions = _joint_noise(positions, forward, joint_in, hidden, params=params, rng=rng)
+        _sdk_mistakes(positions, levels, forward, detected, params=params, rng=rng)
     ghosts_spec = []
     if noisy:
         for _ in range(rng.poisson(params.ghost_rate * params.duration / 60.0)):
             first = int(rng.integers(0, n_frames))
             stop = min(n_frames, first + max(1, int(rng.uniform(0.2, 1.5) * rate)))
             ghosts_spec.append((first, stop))
-    # ids in order of appearance across people and ghosts, 1, 2, 3, ... like the SDK
-    events = [(int(f), 0, p) for p, f in zip(*np.nonzero(new_track), strict=True)]
-    events += [(first, 1, g) for g, (first, _) in enumerate(ghosts_spec)]
-    events.sort(key=lambda e: (e[0], e[1], e[2]))
+    ids, ghost_ids = _sdk_ids(detected, ghosts_spec, params, rng)
+    ghosts = []
+    for (first, stop), ghost_id in zip(ghosts_spec, ghost_ids, strict=True):
+        pose, ghost_levels = _ghost_pose(cam, clips, rng)
+        jitter = rng.normal(0.0, 0.03, (stop - first, *pose.shape))
+        ghosts.append((first, stop, ghost_id, pose[None] + jitter, ghost_levels))
+    return _Stream(stamps_ns, receive_ns, kept, positions, levels, detected, ids, ghosts)
+
+
+def _facing_cos(positions: np.ndarray, forward: np.ndarray) -> np.ndarray:
+    """``(P, N)`` cosine between each body's facing and the direction to the camera."""
+    pelvis = positions[:, :, _IDX("Pelvis")]
+    with np.errstate(invalid="ignore", divide="ignore"):
+        to_camera = -pelvis / np.linalg.norm(pelvis, axis=-1, keepdims=True)
+        return np.einsum("pnc,pnc->pn", forward, to_camera)
+
+
+def _joint_noise(
+    positions: np.ndarray,
+    forward: np.ndarray,
+    joint_in: np.ndarray,
+    hidden: np.ndarray,
+    *,
+    params: SimParams,
+    rng: np.random.Generator,
+) -> np.ndarray:
+    """Positions plus correlated noise and a fixed bias (model in ``hiros_sim.noise``)."""
+    obliqueness = np.sqrt(np.clip(1.0 - _facing_cos(positions, forward) ** 2, 0.0, 1.0))
+    depth = np.abs(positions[..., 2])
+    sigma = (params.noise_base + params.noise_per_metre * depth) * (
+        1.0 + params.oblique_gain * obliqueness
+    )[..., None]
+    sigma = sigma * np.where(hidden, params.occluded_gain, 1.0)
+    sigma = sigma * np.where(joint_in, 1.0, params.out_of_view_gain)
+    rho = float(np.exp(-1.0 / (params.rate * params.noise_correlation_time)))
+    error = ar1_noise(rng, positions.shape, rho) * sigma[..., None]
+    error[..., 2] *= params.depth_axis_gain
+    n_people = positions.shape[0]
+    bias = rng.normal(0.0, params.joint_bias, (n_people, 1, AZURE_KINECT.n_joints, 3))
+    return positions + error + bias
+
+
+def _sdk_mistakes(
+    positions: np.ndarray,
+    levels: np.ndarray,
+    forward: np.ndarray,
+    detected: np.ndarray,
+    *,
+    params: SimParams,
+    rng: np.random.Generator,
+) -> None:
+    """Front/back flips and left/right swaps, in place."""
+    n_people, n_frames = detected.shape
+    rate = params.rate
+    away = detected & (_facing_cos(positions, forward) < params.facing_away_cos)
+    episodes = _runs(away)
+    flip_episode = rng.random(episodes.max() + 1) < params.flip_probability
+    flipped = away & flip_episode[episodes]
+    for p in range(n_people):
+        for _ in range(rng.poisson(params.flip_rate * params.duration / 60.0)):
+            first = int(rng.integers(0, n_frames))
+            flipped[p, first : first + int(rng.uniform(0.5, 3.0) * rate)] = True
+    flipped &= detected
+    if flipped.any():
+        positions[flipped] = flip_front_back(positions[flipped], forward[flipped])
+        levels[flipped] = levels[flipped][:, AZURE_KINECT.mirror]
+    for p in range(n_people):
+        for _ in range(rng.poisson(params.swap_rate * params.duration / 60.0)):
+            first = rng.integers(0, n_frames)
+            stop = min(n_frames, first + int(rng.uniform(0.2, 1.0) * rate))
+            perm = LEGS_SWAP if rng.random() < 0.7 else AZURE_KINECT.mirror
+            span = slice(first, stop)
+            positions[p, span] = positions[p, span][:, perm]
+            levels[p, span] = levels[p, span][:, perm]
+
+
+def _sdk_ids(
+    detected: np.ndarray,
+    ghosts: list[tuple[int, int]],
+    params: SimParams,
+    rng: np.random.Generator,
+) -> tuple[np.ndarray, list[int]]:
+    """``(P, N)`` SDK body ids and each ghost's id.
+
+    Like the SDK, ids count up from 1 in order of appearance; a person gets a new id when seen
+    again after ``reid_gap`` seconds and at random changes (``id_change_rate``).
+    """
+    n_people, n_frames = detected.shape
+    new_track = np.zeros_like(detected)
+    gap = round(params.reid_gap * params.rate)
+    for p in range(n_people):
+        seen = np.flatnonzero(detected[p])
+        if seen.size:
+            new_track[p, seen[np.concatenate([[True], np.diff(seen) > gap])]] = True
+        if params.noise:
+            count = rng.poisson(params.id_change_rate * params.duration / 60.0)
+            changes = rng.integers(0, n_frames, count)
+            new_track[p, changes] |= detected[p, changes]
+    events = [(int(f), 0, int(p)) for p, f in zip(*np.nonzero(new_track), strict=True)]
+    events += [(first, 1, g) for g, (first, _) in enumerate(ghosts)]
+    events.sort()
     ids = np.zeros((n_people, n_frames), dtype=np.int64)
-    ghost_ids = {}
-    next_id = 1
-    for first, kind, who in events:
+    ghost_ids = [0] * len(ghosts)
+    for next_id, (first, kind, who) in enumerate(events, start=1):
         if kind == 0:
             ids[who, first] = next_id
         else:
             ghost_ids[who] = next_id
-        next_id += 1
-    # carry each id forward until the next new track
+    # each id holds until the person's next new track
+    frame = np.arange(n_frames)
     for p in range(n_people):
-        marks = np.where(ids[p] > 0, frame, -1)
-        last = np.maximum.accumulate(marks)
+        last = np.maximum.accumulate(np.where(ids[p] > 0, frame, -1))
         ids[p] = np.where(last >= 0, ids[p][np.maximum(last, 0)], 0)
-
-    ghosts = []
-    for g, (first, stop) in enumerate(ghosts_spec):
-        pose, ghost_levels = _ghost_pose(cam, clips, params, rng)
-        count = stop - first
-        jitter = rng.normal(0.0, 0.03, (count, *pose.shape))
-        ghosts.append((first, stop, ghost_ids[g], pose[None] + jitter, ghost_levels))
-    return _Stream(stamps_ns, kept, positions, levels, detected, ids, ghosts)
+    return ids, ghost_ids
 
 
 def _ghost_pose(
-    cam: CameraCalibration, clips: list[Clip], params: SimParams, rng: np.random.Generator
+    cam: CameraCalibration, clips: list[Clip], rng: np.random.Generator
 ) -> tuple[np.ndarray, np.ndarray]:
     """A spurious body in the camera frame: a random mocap pose, somewhere in view, distorted."""
     clip = clips[int(rng.integers(len(clips)))]
@@ -409,43 +469,69 @@ def _ghost_pose(
     return positions, levels
 
 
+def _rows(positions: np.ndarray, levels: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Marker and link rows ``(..., 32, 20)`` of many skeletons at once (see hiros_core.model).
+
+    Equivalent to ``Skeleton.from_positions`` with every joint present, without its per-skeleton
+    cost: links are the midpoints of their joints with the smaller confidence.
+    """
+    shape = positions.shape[:-1]
+    confidences = CONFIDENCE_OF_LEVEL[levels]
+    markers = np.full((*shape, 20), np.nan)
+    markers[..., 0] = confidences
+    markers[..., 1:4] = positions
+    links = np.full((*shape, 20), np.nan)
+    parents, children = AZURE_KINECT.link_parents, AZURE_KINECT.link_children
+    links[..., children, 0] = np.fmin(confidences[..., parents], confidences[..., children])
+    links[..., children, 1:4] = 0.5 * (positions[..., parents, :] + positions[..., children, :])
+    return markers, links
+
+
+def _skeleton(
+    markers: np.ndarray, links: np.ndarray, skeleton_id: int, stamp: int, frame_id: str
+) -> Skeleton:
+    link_present = np.zeros(AZURE_KINECT.n_joints, dtype=bool)
+    link_present[AZURE_KINECT.link_children] = True
+    return Skeleton(
+        id=skeleton_id,
+        src_time_ns=stamp,
+        src_frame=frame_id,
+        layout=AZURE_KINECT,
+        markers=markers,
+        links=links,
+        marker_present=np.ones(AZURE_KINECT.n_joints, dtype=bool),
+        link_present=link_present,
+    )
+
+
 def _groups(
-    name: str, frame_id: str, stream: _Stream, person_ids: np.ndarray
+    frame_id: str, stream: _Stream, person_ids: np.ndarray
 ) -> tuple[list[SkeletonGroup], list[np.ndarray]]:
     groups, labels = [], []
-    confidences = CONFIDENCE_OF_LEVEL[stream.levels]
+    markers, links = _rows(stream.positions, stream.levels)
+    ghost_rows = [
+        _rows(poses, np.broadcast_to(levels, poses.shape[:2]))
+        for *_, poses, levels in stream.ghosts
+    ]
     for n in np.flatnonzero(stream.kept):
         stamp = int(stream.stamps_ns[n])
         skeletons, truth_ids = [], []
         for p in np.flatnonzero(stream.detected[:, n]):
             skeletons.append(
-                Skeleton.from_positions(
-                    stream.positions[p, n],
-                    AZURE_KINECT,
-                    skeleton_id=int(stream.ids[p, n]),
-                    src_time_ns=stamp,
-                    src_frame=frame_id,
-                    confidences=confidences[p, n],
-                )
+                _skeleton(markers[p, n], links[p, n], int(stream.ids[p, n]), stamp, frame_id)
             )
             truth_ids.append(int(person_ids[p]))
-        for first, stop, ghost_id, poses, levels in stream.ghosts:
+        for (first, stop, ghost_id, _, _), (g_markers, g_links) in zip(
+            stream.ghosts, ghost_rows, strict=True
+        ):
             if first <= n < stop:
                 skeletons.append(
-                    Skeleton.from_positions(
-                        poses[n - first],
-                        AZURE_KINECT,
-                        skeleton_id=ghost_id,
-                        src_time_ns=stamp,
-                        src_frame=frame_id,
-                        confidences=CONFIDENCE_OF_LEVEL[levels],
-                    )
+                    _skeleton(g_markers[n - first], g_links[n - first], ghost_id, stamp, frame_id)
                 )
                 truth_ids.append(-1)
         order = np.argsort([s.id for s in skeletons], kind="stable")
         groups.append(SkeletonGroup(stamp, frame_id, [skeletons[i] for i in order]))
         labels.append(np.array(truth_ids, dtype=np.int64)[order])
-    del name
     return groups, labels
 
 
@@ -485,11 +571,12 @@ def simulate(params: SimParams | None = None, progress: object = None) -> SimRes
         clock_start=params.clock_start,
     )
     clips = [person.clip for person in people]
-    camera_groups, labels = {}, {}
+    camera_groups, labels, receive = {}, {}, {}
     camera_seeds = np.random.SeedSequence([params.seed, 1]).spawn(len(calibration.cameras))
     for k, (name, cam) in enumerate(calibration.cameras.items()):
         stream = _observe(cam, truth, clips, params, np.random.default_rng(camera_seeds[k]))
-        camera_groups[name], labels[name] = _groups(name, cam.frame_id, stream, truth.person_ids)
+        camera_groups[name], labels[name] = _groups(cam.frame_id, stream, truth.person_ids)
+        receive[name] = stream.receive_ns[stream.kept]
         report(name, 2 + k, len(calibration.cameras) + 2)
     report("done", len(calibration.cameras) + 2, len(calibration.cameras) + 2)
-    return SimResult(replace(params), camera_groups, truth, calibration, labels)
+    return SimResult(replace(params), camera_groups, truth, calibration, labels, receive)
