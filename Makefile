@@ -16,7 +16,7 @@ $(STAMP): $(SETUP_INPUTS)
 	$(PY) -m pip install --quiet --disable-pip-version-check -r requirements.txt -c constraints.txt
 	tools/build_interfaces.sh $(VENV) hiros_skeleton_msgs
 	@$(PY) -c "import tf2_msgs.msg" 2>/dev/null || tools/build_interfaces.sh $(VENV) third_party/tf2_msgs
-	$(PY) -m pip install --quiet --disable-pip-version-check --no-deps --no-build-isolation -e .
+	$(PY) -m pip install --quiet --disable-pip-version-check --no-deps --no-build-isolation --config-settings editable_mode=compat -e .
 	tools/install_ament_layout.sh $(VENV)
 	@touch $(STAMP)
 	@echo "hiros is set up in $(VENV)"

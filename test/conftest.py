@@ -10,7 +10,7 @@ import pytest
 
 REPO = Path(__file__).resolve().parent.parent
 SHARED_DATA = REPO.parent / "shared" / "data"
-_domains = itertools.count(int(os.environ.get("HIROS_TEST_DOMAIN_BASE", 40)) + os.getpid() % 40)
+_domains = itertools.count(int(os.environ.get("HIROS_TEST_DOMAIN_BASE", "40")) + os.getpid() % 40)
 
 
 def shared_data(*parts: str) -> Path:

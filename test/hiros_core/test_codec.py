@@ -25,7 +25,9 @@ msgs = pytest.importorskip("hiros_skeleton_msgs.msg")
 viz = pytest.importorskip("visualization_msgs.msg")
 
 floats = st.floats(allow_nan=True, allow_infinity=True, width=64)
-names = st.text(st.characters(exclude_characters="\x00", exclude_categories=("Cs",)), max_size=40)  # non-ASCII included
+names = st.text(
+    st.characters(exclude_characters="\x00", exclude_categories=("Cs",)), max_size=40
+)  # non-ASCII included
 stamps = st.integers(min_value=-(2**31) * 10**9, max_value=(2**31 - 1) * 10**9 + 999_999_999)
 
 
@@ -53,12 +55,10 @@ def skeletons(draw: st.DrawFn) -> Skeleton:
     return skeleton
 
 
-groups = st.builds(
-    SkeletonGroup, stamps, names, st.lists(skeletons(), max_size=8)
-)
+groups = st.builds(SkeletonGroup, stamps, names, st.lists(skeletons(), max_size=8))
 
 
-def padding_free_equal(ours: bytes, theirs: bytes, encode_with_pad) -> bool:  # noqa: ANN001
+def padding_free_equal(ours: bytes, theirs: bytes, encode_with_pad) -> bool:
     """Compare two encodings everywhere except where the encoder only wrote padding."""
     if len(ours) != len(theirs):
         return False
@@ -68,11 +68,11 @@ def padding_free_equal(ours: bytes, theirs: bytes, encode_with_pad) -> bool:  # 
     return bool(np.array_equal(a[mask], b[mask]))
 
 
-def encode_with_padding_byte(encode, value, fill: int) -> bytes:  # noqa: ANN001
+def encode_with_padding_byte(encode, value, fill: int) -> bytes:
     """Encode with padding filled by ``fill`` (to locate padding), bypassing the plan cache."""
     original = cdr_module.PlanBuilder.align
 
-    def align(self, size: int) -> None:  # noqa: ANN001
+    def align(self, size: int) -> None:
         start = len(self.buf)
         original(self, size)
         self.buf[start:] = bytes([fill]) * (len(self.buf) - start)
@@ -90,7 +90,7 @@ def encode_with_padding_byte(encode, value, fill: int) -> bytes:  # noqa: ANN001
         codec._MARKER_PLANS.by_key.clear()
 
 
-def to_rclpy_group(group: SkeletonGroup):  # noqa: ANN201
+def to_rclpy_group(group: SkeletonGroup):
     """The same group as rclpy message objects, built field by field from the model."""
     from hiros_bench.codec import _rclpy_group
 
@@ -142,7 +142,7 @@ def marker_arrays(draw: st.DrawFn) -> MarkerArrayData:
     return data
 
 
-def to_rclpy_markers(data: MarkerArrayData):  # noqa: ANN201
+def to_rclpy_markers(data: MarkerArrayData):
     from geometry_msgs.msg import Point
     from std_msgs.msg import ColorRGBA
     from visualization_msgs.msg import UVCoordinate
@@ -153,7 +153,9 @@ def to_rclpy_markers(data: MarkerArrayData):  # noqa: ANN201
     for i, marker in enumerate(message.markers):
         marker.ns, marker.text = data.namespaces[i], data.texts[i]
         marker.points = [Point(x=x, y=y, z=z) for x, y, z in data.points[i].tolist()]
-        marker.colors = [ColorRGBA(r=r, g=g, b=b, a=a) for r, g, b, a in data.point_colors[i].tolist()]
+        marker.colors = [
+            ColorRGBA(r=r, g=g, b=b, a=a) for r, g, b, a in data.point_colors[i].tolist()
+        ]
         extra = data.attachments[i]
         marker.texture_resource = extra.texture_resource
         marker.texture.data = list(extra.texture_data)
@@ -189,7 +191,9 @@ def test_second_decode_uses_the_plan_and_agrees() -> None:
 
 
 def test_unsorted_markers_from_other_tools_decode() -> None:
-    from hiros_skeleton_msgs.msg import Marker, Skeleton as SkeletonMsg, SkeletonGroup as GroupMsg
+    from hiros_skeleton_msgs.msg import Marker
+    from hiros_skeleton_msgs.msg import Skeleton as SkeletonMsg
+    from hiros_skeleton_msgs.msg import SkeletonGroup as GroupMsg
 
     message = GroupMsg(skeletons=[SkeletonMsg(id=1, max_markers=32)])
     for joint in (5, 0, 31):
@@ -204,7 +208,9 @@ def test_unsorted_markers_from_other_tools_decode() -> None:
 
 
 def test_unknown_names_make_a_decoded_layout_that_re_encodes() -> None:
-    from hiros_skeleton_msgs.msg import Link, Marker, Skeleton as SkeletonMsg, SkeletonGroup as GroupMsg
+    from hiros_skeleton_msgs.msg import Link, Marker
+    from hiros_skeleton_msgs.msg import Skeleton as SkeletonMsg
+    from hiros_skeleton_msgs.msg import SkeletonGroup as GroupMsg
 
     skeleton = SkeletonMsg(id=2, max_markers=3, max_links=3)
     skeleton.markers = [Marker(id=0, name="root"), Marker(id=2, name="tip")]

@@ -1,0 +1,124 @@
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from hiros_core import (
+    AZURE_KINECT,
+    KINECT_V2,
+    Calibration,
+    CalibrationError,
+    CameraCalibration,
+    LayoutError,
+    RigidTransform,
+    Skeleton,
+    SkeletonGroup,
+    camera_from_frame,
+    get_layout,
+    load_calibration,
+    save_calibration,
+)
+
+
+def test_azure_layout_tree_and_mirror() -> None:
+    assert AZURE_KINECT.n_joints == 32
+    assert AZURE_KINECT.index("HandTipLeft") == 9
+    assert AZURE_KINECT.parents[AZURE_KINECT.index("KneeRight")] == AZURE_KINECT.index("HipRight")
+    assert len(AZURE_KINECT.link_children) == 31
+    mirror = AZURE_KINECT.mirror
+    assert mirror[AZURE_KINECT.index("ElbowLeft")] == AZURE_KINECT.index("ElbowRight")
+    assert np.array_equal(mirror[mirror], np.arange(32))
+    assert mirror[AZURE_KINECT.index("Nose")] == AZURE_KINECT.index("Nose")
+    assert KINECT_V2.n_joints == 25
+    assert np.array_equal(KINECT_V2.mirror[KINECT_V2.mirror], np.arange(25))
+
+
+def test_layout_from_yaml_and_errors(tmp_path) -> None:
+    path = tmp_path / "three.yaml"
+    path.write_text("name: three\njoints: [Root, Mid, TipLeft]\nparents: [-1, 0, 1]\n")
+    layout = get_layout(path)
+    assert layout.joint_names == ("Root", "Mid", "TipLeft")
+    assert layout.link_names[2] == "Mid-TipLeft"
+    path.write_text("joints: [A, B]\nparents: [-1, 5]\n")
+    with pytest.raises(LayoutError, match="invalid parent"):
+        get_layout(path)
+    with pytest.raises(LayoutError, match="unknown skeleton layout"):
+        get_layout("openpose")
+
+
+def test_from_positions_marks_missing_joints_and_builds_links() -> None:
+    positions = np.arange(96, dtype=float).reshape(32, 3)
+    positions[5] = np.nan
+    skeleton = Skeleton.from_positions(positions, skeleton_id=4, src_frame="k02_depth_camera_link")
+    assert not skeleton.marker_present[5]
+    assert skeleton.marker_present.sum() == 31
+    assert not skeleton.link_present[5]  # ShoulderLeft missing: its link too
+    assert not skeleton.link_present[6]  # and the link of its child
+    np.testing.assert_allclose(skeleton.links[1, 1:4], (positions[0] + positions[1]) / 2)
+    assert skeleton.camera == "k02"
+    group = SkeletonGroup(0, "k02_depth_camera_link", [skeleton, skeleton.copy()])
+    assert group.positions().shape == (2, 32, 3)
+    assert group.same_as(group.copy())
+
+
+def test_camera_names_from_frames() -> None:
+    assert camera_from_frame("k01_depth_camera_link") == "k01"
+    assert camera_from_frame("/world") == "world"
+
+
+def test_rigid_transform_moves_a_whole_skeleton() -> None:
+    transform = RigidTransform.from_quaternion(
+        [0, 0, np.sin(np.pi / 4), np.cos(np.pi / 4)], [1, 0, 0]
+    )
+    skeleton = Skeleton.from_positions(np.tile([1.0, 0.0, 0.0], (32, 1)))
+    skeleton.orientations[:] = [0, 0, 0, 1]
+    skeleton.velocities[:] = [1.0, 0.0, 0.0]
+    moved = transform.apply_to_skeleton(skeleton)
+    np.testing.assert_allclose(moved.positions[0], [1.0, 1.0, 0.0], atol=1e-12)
+    np.testing.assert_allclose(moved.velocities[0], [0.0, 1.0, 0.0], atol=1e-12)
+    np.testing.assert_allclose(
+        np.abs(moved.orientations[0]), [0, 0, np.sin(np.pi / 4), np.cos(np.pi / 4)]
+    )
+    back = transform.inverse().apply_to_skeleton(moved)
+    np.testing.assert_allclose(back.positions, skeleton.positions, atol=1e-12)
+
+
+def test_calibration_file_round_trip_and_time_formula(tmp_path) -> None:
+    calibration = Calibration(
+        "k01",
+        cameras={
+            "k01": CameraCalibration("k01_depth_camera_link"),
+            "k02": CameraCalibration(
+                "k02_depth_camera_link", time_offset=1.5, drift=1e-4, drift_epoch=10.0,
+                translation=np.array([1.0, 2.0, 3.0]), quality={"peak": np.float64(0.9)},
+            ),
+        },
+    )  # fmt: skip
+    path = tmp_path / "calib.yaml"
+    save_calibration(calibration, path)
+    loaded = load_calibration(path)
+    k02 = loaded.camera("k02")
+    assert k02.to_reference_time(20.0) == pytest.approx(20.0 + 1.5 + 1e-4 * 10.0)
+    assert k02.quality["peak"] == pytest.approx(0.9)
+    np.testing.assert_allclose(k02.extrinsics.apply(np.zeros(3)), [1.0, 2.0, 3.0])
+    with pytest.raises(CalibrationError, match="not in the calibration"):
+        loaded.camera("k09")
+
+
+@pytest.mark.parametrize(
+    ("text", "message"),
+    [
+        ("cameras: 3", "mapping"),
+        ("cameras: {k01: {rotation: [0, 0, 0, 2]}}", "unit quaternion"),
+        ("cameras: {k01: {translation: [1, 2]}}", "translation needs 3"),
+        ("reference: k05\ncameras: {k01: {}}", "reference camera"),
+        ("cameras: {k01: {time_offset: soon}}", "could not convert"),
+    ],
+)
+def test_bad_calibration_files_name_the_problem(tmp_path, text: str, message: str) -> None:
+    path = tmp_path / "bad.yaml"
+    path.write_text(text)
+    with pytest.raises(CalibrationError, match=message):
+        load_calibration(path)
+    with pytest.raises(CalibrationError, match="cannot read"):
+        load_calibration(tmp_path / "missing.yaml")
