@@ -178,7 +178,7 @@ def measure() -> list[tuple[str, float, float]]:
     ]
 
 
-def run(console) -> list[str]:  # noqa: ANN001 - rich Console
+def run(console, quick: bool = False) -> list[str]:  # noqa: ANN001 - rich Console
     """Print the table and return its lines; the last line gives the smallest ratio."""
     rows = measure()
     lines = [f"{'operation':42s} {'rclpy ms':>10s} {'hiros ms':>10s} {'ratio':>7s}"]
