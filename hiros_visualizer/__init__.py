@@ -1,0 +1,12 @@
+"""hiros_visualizer: coloured skeleton markers for any SkeletonGroup topic."""
+
+from hiros_visualizer.markers import VisualizerParams, id_color, skeleton_markers
+
+__all__ = ["VisualizerParams", "id_color", "main", "skeleton_markers"]
+
+
+def main(args: list[str] | None = None) -> None:
+    """``ros2 run hiros visualizer`` (rclpy is imported only here)."""
+    from hiros_visualizer.node import main as node_main
+
+    node_main(args)

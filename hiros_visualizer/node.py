@@ -1,0 +1,46 @@
+"""``visualizer`` node: SkeletonGroup topics -> ``<topic>/markers`` (MarkerArray)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+from hiros_ros import HirosNode, run_node
+from hiros_ros.node import pipeline_qos
+from hiros_skeleton_msgs.msg import SkeletonGroup as SkeletonGroupMsg
+from visualization_msgs.msg import MarkerArray
+
+from hiros_core.codec import decode_group, encode_marker_array
+from hiros_visualizer.markers import VisualizerParams, skeleton_markers
+
+
+@dataclass
+class VisualizerNodeParams(VisualizerParams):
+    """Drawing parameters plus the topics to draw."""
+
+    topics: list[str] = field(default_factory=lambda: ["/hiros/filter"])
+
+
+class VisualizerNode(HirosNode):
+    """For each topic, publishes its skeletons as markers on ``<topic>/markers``."""
+
+    def __init__(self) -> None:
+        super().__init__("visualizer")
+        self.params = self.declare_params(VisualizerNodeParams)
+        for topic in self.params.topics:
+            publisher = self.create_raw_publisher(MarkerArray, f"{topic}/markers", pipeline_qos())
+            self.create_raw_subscription(
+                SkeletonGroupMsg,
+                topic,
+                lambda data, topic=topic, publisher=publisher: self.on_group(topic, publisher, data),
+                pipeline_qos(),
+            )
+
+    def on_group(self, topic: str, publisher: object, data: bytes) -> None:
+        """Decode, draw, publish."""
+        markers = skeleton_markers(decode_group(data), topic.strip("/"), self.params)
+        self.publish_raw(publisher, encode_marker_array(markers))
+
+
+def main(args: list[str] | None = None) -> None:
+    """Run the node until Ctrl-C."""
+    run_node(VisualizerNode, args)
