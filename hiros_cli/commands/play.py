@@ -1,0 +1,198 @@
+"""Replay a recording onto live ROS 2 topics at the recorded speed.
+
+Every message is published exactly as recorded (raw CDR: header stamps untouched) at its log
+time relative to the first message played, divided by --rate. /clock (rosgraph_msgs/Clock)
+carries the recording's log time, so nodes started with use_sim_time:=true run on the
+recording's clock. Needs the ROS 2 environment (make setup); topics whose message package is
+not installed are skipped with a warning.
+
+Examples:
+  hiros play sample.mcap                           # everything, real time, /clock
+  hiros play take.mcap --rate 2 --loop             # twice as fast, over and over
+  hiros play take.mcap --start 30 --topics /k01/body_tracking_data /k02/body_tracking_data
+  hiros play take.mcap --remap /k01/body_tracking_data:=/cam_a/body_tracking_data
+
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import time
+from collections import Counter
+from collections.abc import Callable, Iterable, Iterator
+from pathlib import Path
+from typing import Any, TypeVar
+
+from hiros_core.errors import ConfigError, RecordingError
+from hiros_core.recording import RecordedMessage, RecordingReader
+
+T = TypeVar("T")
+
+HELP = "replay a recording onto live ROS topics at recorded speed (with /clock)"
+
+CLOCK_PERIOD = 0.01
+"""Seconds of wall time between /clock messages (100 Hz, as ``ros2 bag play --clock``)."""
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """Options of ``hiros play``."""
+    parser.add_argument("recording", type=Path, metavar="REC", help=".mcap/.db3/.bag or folder")
+    parser.add_argument("--rate", type=float, default=1.0, help="speed factor (default 1)")
+    parser.add_argument("--loop", action="store_true", help="start over at the end")
+    parser.add_argument(
+        "--start", type=float, default=0.0, help="skip the first START seconds (default 0)"
+    )
+    parser.add_argument("--topics", nargs="+", metavar="TOPIC", help="play only these topics")
+    parser.add_argument(
+        "--remap", nargs="+", default=[], metavar="FROM:=TO", help="publish FROM on TO"
+    )
+    parser.add_argument("--no-clock", action="store_true", help="do not publish /clock")
+    parser.add_argument(
+        "--delay",
+        type=float,
+        default=1.0,
+        help="seconds to wait before playing, so that subscribers are discovered (default 1)",
+    )
+
+
+def parse_remaps(pairs: Iterable[str]) -> dict[str, str]:
+    """``["/a:=/b"]`` -> ``{"/a": "/b"}``; raises ConfigError on a malformed pair."""
+    remaps = {}
+    for pair in pairs:
+        source, sep, target = pair.partition(":=")
+        if not sep or not source or not target:
+            msg = f"--remap {pair!r} must look like /from/topic:=/to/topic"
+            raise ConfigError(msg)
+        remaps[source] = target
+    return remaps
+
+
+def playback_schedule(
+    items: Iterable[T],
+    *,
+    rate: float = 1.0,
+    start: float = 0.0,
+    log_time: Callable[[T], int] = int,  # type: ignore[assignment]
+) -> Iterator[tuple[T, float]]:
+    """``(item, wall seconds after the start of play)`` for each item that is played.
+
+    Items logged before ``start`` seconds after the first one are skipped; the first played
+    item goes out at 0, later ones at their log-time distance from it divided by ``rate``.
+    """
+    if rate <= 0:
+        msg = f"--rate must be positive, not {rate}"
+        raise ConfigError(msg)
+    first = origin = None
+    for item in items:
+        stamp = log_time(item)
+        if first is None:
+            first = stamp
+        if stamp < first + start * 1e9:
+            continue
+        if origin is None:
+            origin = stamp
+        yield item, (stamp - origin) / 1e9 / rate
+
+
+def message_class(msgtype: str) -> type | None:
+    """The rclpy class of ``package/msg/Type``, None when its package is not installed."""
+    package, _, name = msgtype.split("/")
+    try:
+        return getattr(importlib.import_module(f"{package}.msg"), name)
+    except (ImportError, AttributeError):
+        return None
+
+
+class Player:
+    """Publishes a recording's messages on time, and /clock in between."""
+
+    def __init__(self, node: Any, topics: dict[str, str], args: argparse.Namespace) -> None:
+        from rclpy.qos import DurabilityPolicy, QoSProfile
+        from rosgraph_msgs.msg import Clock
+
+        self.args = args
+        self.remaps = parse_remaps(args.remap)
+        self.publishers = {}
+        for topic, msgtype in topics.items():
+            cls = message_class(msgtype)
+            if cls is None:
+                node.get_logger().warning(f"skipping {topic}: {msgtype} is not installed")
+                continue
+            qos = QoSProfile(depth=100)
+            if topic == "/tf_static":
+                qos.durability = DurabilityPolicy.TRANSIENT_LOCAL
+            self.publishers[topic] = node.create_publisher(cls, self.remaps.get(topic, topic), qos)
+        self.clock = None if args.no_clock else node.create_publisher(Clock, "/clock", 10)
+        self.clock_msg = Clock()
+        self.counts: Counter[str] = Counter()
+
+    def publish_clock(self, log_time_ns: int) -> None:
+        """/clock at a recording log time."""
+        if self.clock is not None:
+            sec, nanosec = divmod(int(log_time_ns), 1_000_000_000)
+            self.clock_msg.clock.sec, self.clock_msg.clock.nanosec = sec, nanosec
+            self.clock.publish(self.clock_msg)
+
+    def play(self, messages: Iterable[RecordedMessage]) -> int:
+        """Publish every message at its time; returns how many were published."""
+        played = 0
+        wall_start = time.monotonic()
+        origin = None
+        for message, offset in playback_schedule(
+            messages, rate=self.args.rate, start=self.args.start, log_time=_log_time
+        ):
+            origin = message.log_time_ns if origin is None else origin
+            while (remaining := wall_start + offset - time.monotonic()) > 0:
+                elapsed = time.monotonic() - wall_start
+                self.publish_clock(origin + int(elapsed * self.args.rate * 1e9))
+                time.sleep(min(remaining, CLOCK_PERIOD))
+            self.publish_clock(message.log_time_ns)
+            self.publishers[message.topic].publish(message.data)
+            self.counts[self.remaps.get(message.topic, message.topic)] += 1
+            played += 1
+        return played
+
+
+def _log_time(message: RecordedMessage) -> int:
+    return message.log_time_ns
+
+
+def run(args: argparse.Namespace) -> int:
+    """Play until the end (or forever with --loop, until Ctrl-C)."""
+    from hiros_ros import prepare_ros_environment
+
+    prepare_ros_environment()
+    import rclpy
+
+    list(playback_schedule([], rate=args.rate))  # a bad --rate fails before ROS starts
+    parse_remaps(args.remap)
+    with RecordingReader(args.recording) as reader:
+        topics = dict(reader.topics)
+    if args.topics:
+        missing = sorted(set(args.topics) - set(topics))
+        if missing:
+            msg = f"{args.recording} has no topic {', '.join(missing)} (it has {sorted(topics)})"
+            raise RecordingError(msg)
+        topics = {t: topics[t] for t in args.topics}
+    rclpy.init()
+    node = rclpy.create_node("hiros_play")
+    player = Player(node, topics, args)
+    try:
+        time.sleep(max(args.delay, 0.0))  # DDS discovery runs in the background meanwhile
+        while True:
+            with RecordingReader(args.recording) as reader:
+                played = player.play(reader.messages(player.publishers))
+                for problem in reader.problems:
+                    node.get_logger().warning(problem)
+            if not args.loop or played == 0:
+                break
+    except KeyboardInterrupt:
+        pass
+    finally:
+        node.destroy_node()
+        if rclpy.ok():
+            rclpy.shutdown()
+    for topic, count in sorted(player.counts.items()):
+        print(f"{topic}: {count} messages")
+    return 0
