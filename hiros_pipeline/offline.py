@@ -37,6 +37,7 @@ class RunSummary:
         people: stage -> distinct skeleton ids seen.
         duration: seconds of recording (reference clock) covered by the tracker output.
         wall_time: seconds the run took.
+
     """
 
     frames_in: Counter[str] = field(default_factory=Counter)
@@ -71,7 +72,7 @@ def message_count(path: str | Path) -> int | None:
         with path.open("rb") as stream:
             summary = make_reader(stream).get_summary()
         return summary.statistics.message_count if summary and summary.statistics else None
-    except Exception:  # noqa: BLE001 - a damaged index only costs the progress total
+    except Exception:
         return None
 
 

@@ -11,10 +11,11 @@ from collections import Counter
 from dataclasses import dataclass, field
 from typing import NamedTuple
 
+from hiros_merger import Merger, MergerParams
+
 from hiros_core.calibration import Calibration
 from hiros_core.model import SkeletonGroup
 from hiros_filter import Filter, FilterParams
-from hiros_merger import Merger, MergerParams
 from hiros_optimizer import Optimizer, OptimizerParams
 from hiros_tracker import Tracker, TrackerParams
 
@@ -47,9 +48,12 @@ class Pipeline:
 
     Attributes:
         tracker, merger, optimizer, filter: the stage objects (their state is the pipeline's).
+
     """
 
-    def __init__(self, params: PipelineParams | None = None, calibration: Calibration | None = None) -> None:
+    def __init__(
+        self, params: PipelineParams | None = None, calibration: Calibration | None = None
+    ) -> None:
         self.params = params or PipelineParams()
         self.tracker = Tracker(self.params.tracker, calibration)
         self.merger = Merger(self.params.merger)

@@ -46,12 +46,16 @@ def skeleton_markers(
     data.lifetimes_ns[:] = round(params.lifetime * 1e9)
     data.points, data.texts = [], []
     for index, skeleton in enumerate(group.skeletons):
-        joints = skeleton.positions[skeleton.marker_present & np.isfinite(skeleton.positions).all(1)]
+        joints = skeleton.positions[
+            skeleton.marker_present & np.isfinite(skeleton.positions).all(1)
+        ]
         layout = skeleton.layout
         children = layout.link_children
         parents = layout.link_parents
         drawn = skeleton.marker_present[children] & skeleton.marker_present[parents]
-        segments = np.stack([skeleton.positions[parents[drawn]], skeleton.positions[children[drawn]]], 1)
+        segments = np.stack(
+            [skeleton.positions[parents[drawn]], skeleton.positions[children[drawn]]], 1
+        )
         segments = segments[np.isfinite(segments).all(axis=(1, 2))].reshape(-1, 3)
         head = joints[:, 2].argmax() if len(joints) else None
         label_at = joints[head] + [0.0, 0.0, 0.25] if head is not None else np.zeros(3)

@@ -1,0 +1,147 @@
+"""An HTML report of a run's evaluation: tables and matplotlib figures a person wants to read."""
+
+from __future__ import annotations
+
+import html
+from pathlib import Path
+
+import numpy as np
+
+from hiros_core.layouts import AZURE_KINECT
+from hiros_eval.run import RunEvaluation
+
+__all__ = ["write_report"]
+
+
+def _figure(path: Path, draw) -> str:  # noqa: ANN001 - callable(ax/fig)
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig = draw(plt)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return f'<img src="{html.escape(path.name)}" alt="{html.escape(path.stem)}">'
+
+
+def _error_per_stage(plt, evaluation: RunEvaluation):  # noqa: ANN001, ANN202
+    fig, ax = plt.subplots(figsize=(7, 3.5))
+    names = [f"camera {c}" for c in evaluation.cameras] + list(evaluation.stages)
+    values = [v * 100 for v in evaluation.cameras.values()] + [
+        s.mpjpe * 100 for s in evaluation.stages.values()
+    ]
+    colors = ["#bbbbbb"] * len(evaluation.cameras) + ["#3a7bd5"] * len(evaluation.stages)
+    ax.bar(names, values, color=colors)
+    ax.set_ylabel("MPJPE (cm)")
+    ax.set_title("Joint error: single cameras vs each stage")
+    ax.tick_params(axis="x", rotation=30)
+    return fig
+
+
+def _error_per_joint(plt, evaluation: RunEvaluation):  # noqa: ANN001, ANN202
+    fig, ax = plt.subplots(figsize=(10, 3.8))
+    width = 0.8 / max(len(evaluation.stages), 1)
+    for k, (stage, figures) in enumerate(evaluation.stages.items()):
+        ax.bar(np.arange(32) + k * width, figures.per_joint * 100, width, label=stage)
+    ax.set_xticks(np.arange(32) + 0.4, AZURE_KINECT.joint_names, rotation=90, fontsize=7)
+    ax.set_ylabel("MPJPE (cm)")
+    ax.legend(fontsize=8)
+    ax.set_title("Joint error per joint")
+    return fig
+
+
+def _angle_curves(plt, evaluation: RunEvaluation):  # noqa: ANN001, ANN202
+    from hiros_eval.body import joint_angles
+
+    fig, axes = plt.subplots(2, 2, figsize=(10, 5.5), sharex=True)
+    for ax, angle in zip(
+        axes.ravel(), ("knee_left", "hip_left", "elbow_right", "shoulder_right"), strict=True
+    ):
+        for stage in ("tracker", "filter"):
+            figures = evaluation.stages.get(stage)
+            if not figures or not figures.person_series:
+                continue
+            person = min(figures.person_series)
+            times, estimate, truth = figures.person_series[person]
+            order = np.argsort(times)
+            ax.plot(times[order], joint_angles(estimate[order])[angle], lw=0.8, label=stage)
+            if stage == "filter":
+                ax.plot(
+                    times[order], joint_angles(truth[order])[angle], "k--", lw=0.8, label="truth"
+                )
+        ax.set_title(angle.replace("_", " "))
+        ax.set_ylabel("degrees")
+    axes[0, 0].legend(fontsize=8)
+    for ax in axes[1]:
+        ax.set_xlabel("time (s)")
+    return fig
+
+
+def _table(headers: list[str], rows: list[list[str]]) -> str:
+    head = "".join(f"<th>{html.escape(h)}</th>" for h in headers)
+    body = "".join(
+        "<tr>" + "".join(f"<td>{html.escape(c)}</td>" for c in row) + "</tr>" for row in rows
+    )
+    return f"<table><tr>{head}</tr>{body}</table>"
+
+
+def write_report(
+    evaluation: RunEvaluation, directory: str | Path, title: str = "hiros evaluation"
+) -> Path:
+    """``directory/report.html`` with its PNG figures beside it."""
+    directory = Path(directory)
+    directory.mkdir(parents=True, exist_ok=True)
+    images = [
+        _figure(directory / "error_per_stage.png", lambda plt: _error_per_stage(plt, evaluation)),
+        _figure(directory / "error_per_joint.png", lambda plt: _error_per_joint(plt, evaluation)),
+        _figure(directory / "joint_angles.png", lambda plt: _angle_curves(plt, evaluation)),
+    ]
+    stage_rows = [
+        [
+            stage,
+            f"{s.mpjpe * 100:.2f}",
+            f"{s.limb_cv * 100:.2f}",
+            f"{s.angle_rmse.get('mean', float('nan')):.2f}",
+            f"{s.identity.idf1:.3f}",
+            str(s.identity.id_switches),
+            str(s.identity.fragments),
+        ]
+        for stage, s in evaluation.stages.items()
+    ]
+    calibration_rows = [
+        [
+            c,
+            f"{a.time_error_ms:.2f}",
+            f"{a.rotation_error_deg:.3f}",
+            f"{a.translation_error_cm:.2f}",
+        ]
+        for c, a in evaluation.calibration.items()
+    ]
+    camera_rows = [[c, f"{v * 100:.2f}"] for c, v in evaluation.cameras.items()]
+    stage_headers = ["stage", "MPJPE (cm)", "limb CV (%)", "angle RMSE (deg)", "IDF1"]
+    stage_headers += ["ID switches", "fragments"]
+    calibration_headers = ["camera", "time error (ms)", "rotation error (deg)"]
+    calibration_headers += ["translation error (cm)"]
+    style = (
+        "body{font-family:sans-serif;max-width:1100px;margin:2em auto;color:#222}"
+        "table{border-collapse:collapse;margin:1em 0}"
+        "td,th{border:1px solid #ccc;padding:4px 10px;text-align:right}"
+        "th{background:#f0f3f8}img{max-width:100%;margin:1em 0}"
+    )
+    page = f"""<!doctype html><html><head><meta charset="utf-8"><title>{html.escape(title)}</title>
+<style>{style}</style></head><body>
+<h1>{html.escape(title)}</h1>
+<h2>Pipeline stages</h2>
+{_table(stage_headers, stage_rows)}
+<h2>Single cameras (true calibration, no tracking)</h2>
+{_table(["camera", "MPJPE (cm)"], camera_rows)}
+<h2>Calibration against the truth</h2>
+{_table(calibration_headers, calibration_rows)}
+<h2>Figures</h2>
+{"".join(images)}
+</body></html>"""
+    path = directory / "report.html"
+    path.write_text(page)
+    return path

@@ -1,0 +1,166 @@
+"""Accuracy of a whole ``hiros run`` output against the simulator's truth, stage by stage.
+
+The output is in the estimated world (the reference camera's frame and clock); the truth is in
+the simulator's world. ``align_to_truth`` moves the output there with the *true* pose and clock
+of the reference camera, so every figure includes the calibration's own error, as a user
+would see it.
+"""
+
+from __future__ import annotations
+
+from collections import defaultdict
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import yaml
+
+from hiros_core.calibration import Calibration
+from hiros_core.codec import decode_group
+from hiros_core.errors import RecordingError
+from hiros_core.geometry import RigidTransform
+from hiros_core.model import SkeletonGroup
+from hiros_core.recording import RecordingReader
+from hiros_eval.body import joint_angle_rmse, limb_length_cv, mpjpe
+from hiros_eval.calibration import CameraAccuracy, compare_calibration
+from hiros_eval.tracking import IdentityMetrics, TruthLike, identity_metrics, match_to_truth
+
+__all__ = [
+    "RunEvaluation",
+    "StageEvaluation",
+    "align_to_truth",
+    "evaluate_stage",
+    "read_run",
+]
+
+STAGES = ("tracker", "merger", "optimizer", "filter")
+
+
+@dataclass
+class StageEvaluation:
+    """Figures of one stage's output (distances in m, angles in degrees)."""
+
+    stage: str
+    mpjpe: float
+    per_joint: np.ndarray
+    limb_cv: float
+    angle_rmse: dict[str, float]
+    identity: IdentityMetrics
+    matched: int
+    person_series: dict[int, tuple[np.ndarray, np.ndarray, np.ndarray]] = field(repr=False)
+    """true person -> (times (N,), estimate (N, J, 3), truth (N, J, 3)) for plots."""
+
+
+@dataclass
+class RunEvaluation:
+    """Every stage's figures, the single cameras' and the calibration's."""
+
+    stages: dict[str, StageEvaluation]
+    cameras: dict[str, float]
+    calibration: dict[str, CameraAccuracy]
+
+
+def read_run(path: str | Path) -> tuple[dict[str, list[SkeletonGroup]], Calibration]:
+    """Each stage's groups and the calibration used, from a ``hiros run`` MCAP."""
+    outputs: dict[str, list[SkeletonGroup]] = {stage: [] for stage in STAGES}
+    calibration = None
+    wanted = {f"/hiros/{stage}" for stage in STAGES} | {"/hiros/calibration"}
+    with RecordingReader(path) as reader:
+        for message in reader.messages(wanted & set(reader.topics)):
+            if message.topic == "/hiros/calibration":
+                text = bytes(message.data[8:]).split(b"\x00", 1)[0].decode()
+                calibration = Calibration.from_dict(
+                    yaml.safe_load(text), f"{path} /hiros/calibration"
+                )
+            else:
+                outputs[message.topic.rsplit("/", 1)[1]].append(decode_group(message.data))
+    if calibration is None:
+        msg = f"{path} has no /hiros/calibration topic: is it the output of `hiros run`?"
+        raise RecordingError(msg)
+    return outputs, calibration
+
+
+def align_to_truth(
+    groups: Sequence[SkeletonGroup], used: Calibration, true: Calibration
+) -> list[SkeletonGroup]:
+    """Groups moved from the estimated world and clock into the truth's."""
+    reference = used.reference
+    used_ref, true_ref = used.camera(reference), true.camera(reference)
+    space: RigidTransform = true_ref.extrinsics @ used_ref.extrinsics.inverse()
+
+    def clock(stamp_ns: int) -> int:
+        camera_time = (
+            stamp_ns * 1e-9 - used_ref.time_offset + used_ref.drift * used_ref.drift_epoch
+        ) / (1.0 + used_ref.drift)
+        return round(float(true_ref.to_reference_time(camera_time)) * 1e9)
+
+    aligned = []
+    for group in groups:
+        skeletons = []
+        for skeleton in group.skeletons:
+            moved = space.apply_to_skeleton(skeleton)
+            moved.src_time_ns = clock(skeleton.src_time_ns)
+            skeletons.append(moved)
+        aligned.append(SkeletonGroup(clock(group.stamp_ns), true.world_frame, skeletons))
+    return aligned
+
+
+def evaluate_stage(
+    stage: str, groups: Sequence[SkeletonGroup], truth: TruthLike
+) -> StageEvaluation:
+    """MPJPE (overall, per joint), limb-length CV, joint-angle RMSE and identity figures."""
+    frames, at, matches, _ = match_to_truth(groups, truth)
+    series: dict[int, list[tuple[float, np.ndarray, np.ndarray]]] = defaultdict(list)
+    for frame, people, match in zip(frames, at, matches, strict=True):
+        for hypothesis, person in enumerate(match):
+            if person >= 0:
+                series[int(person)].append(
+                    (frame.stamp_ns * 1e-9, frame.positions[hypothesis], people[person])
+                )
+    person_series = {
+        person: (
+            np.array([t for t, _, _ in rows]),
+            np.stack([e for _, e, _ in rows]),
+            np.stack([g for _, _, g in rows]),
+        )
+        for person, rows in series.items()
+    }
+    if person_series:
+        estimate = np.concatenate([s[1] for s in person_series.values()])
+        target = np.concatenate([s[2] for s in person_series.values()])
+        overall, per_joint = mpjpe(estimate, target)
+        angles = joint_angle_rmse(estimate, target)
+        cvs = [np.nanmedian(limb_length_cv(s[1])) for s in person_series.values() if len(s[1]) > 1]
+        limb_cv = float(np.nanmean(cvs)) if cvs else float("nan")
+    else:
+        overall, per_joint, angles, limb_cv = float("nan"), np.full(32, np.nan), {}, float("nan")
+    return StageEvaluation(
+        stage=stage,
+        mpjpe=overall,
+        per_joint=per_joint,
+        limb_cv=limb_cv,
+        angle_rmse=angles,
+        identity=identity_metrics(groups, truth),
+        matched=sum(len(s[0]) for s in person_series.values()),
+        person_series=person_series,
+    )
+
+
+def evaluate_run(
+    outputs: dict[str, list[SkeletonGroup]],
+    used: Calibration,
+    true: Calibration,
+    truth: TruthLike,
+    camera_groups: dict[str, list[SkeletonGroup]] | None = None,
+) -> RunEvaluation:
+    """All figures of one run; ``camera_groups`` adds each single camera's MPJPE."""
+    from hiros_eval.tracking import camera_mpjpe
+
+    stages = {
+        stage: evaluate_stage(stage, align_to_truth(groups, used, true), truth)
+        for stage, groups in outputs.items()
+        if groups
+    }
+    cameras = camera_mpjpe(camera_groups, true, truth) if camera_groups else {}
+    return RunEvaluation(stages, cameras, compare_calibration(used, true))
