@@ -88,7 +88,14 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def _print_summary(console: Console, evaluation, summary, timings, out: Path, report: Path) -> None:  # noqa: ANN001
+def _print_summary(  # noqa: PLR0917 - the four results of the demo and where they went
+    console: Console,
+    evaluation,
+    summary,
+    timings,
+    out: Path,
+    report: Path,  # noqa: ANN001
+) -> None:
     table = Table(title="hiros demo: 3 cameras, 3 people, 60 s, simulated from real mocap")
     table.add_column("figure")
     table.add_column("value", justify="right")
