@@ -15,9 +15,14 @@ import argparse
 import shutil
 import time
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from rich.console import Console
 from rich.table import Table
+
+if TYPE_CHECKING:
+    from hiros_eval.run import RunEvaluation
+    from hiros_pipeline.offline import RunSummary
 
 HELP = "calibrate, run and evaluate on the bundled sample; writes a report"
 
@@ -90,11 +95,11 @@ def run(args: argparse.Namespace) -> int:
 
 def _print_summary(  # noqa: PLR0917 - the four results of the demo and where they went
     console: Console,
-    evaluation,
-    summary,
-    timings,
+    evaluation: RunEvaluation,
+    summary: RunSummary,
+    timings: dict[str, float],
     out: Path,
-    report: Path,  # noqa: ANN001
+    report: Path,
 ) -> None:
     table = Table(title="hiros demo: 3 cameras, 3 people, 60 s, simulated from real mocap")
     table.add_column("figure")
