@@ -40,12 +40,19 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def load_pipeline_params(path: Path | None):  # noqa: ANN201 - PipelineParams, imported lazily
     """PipelineParams from config/pipeline.yaml (or ``path``), else the stages' defaults."""
+    from hiros_core.parameters import (
+        build_params,
+        dataclass_defaults,
+        load_config_defaults,
+        stage_config_defaults,
+    )
     from hiros_pipeline import PipelineParams
-    from hiros_ros.params import build_params, dataclass_defaults, load_config_defaults
 
     values = dataclass_defaults(PipelineParams)
+    values.update({k: v for k, v in stage_config_defaults().items() if k in values})
     file_values = load_config_defaults("pipeline", path)
-    unknown = sorted(set(file_values) - set(values) - {"input_topics", "calibration_file"})
+    node_only = {"cameras", "input", "camera_qos", "calibration_file", "calib_node"}
+    unknown = sorted(set(file_values) - set(values) - node_only)
     if path is not None and unknown:
         msg = f"{path}: unknown pipeline parameters {unknown}"
         raise ConfigError(msg)

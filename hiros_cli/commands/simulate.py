@@ -55,6 +55,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--ghost-rate", type=float, help="ghost bodies per camera per minute")
     parser.add_argument("--swap-rate", type=float, help="left/right swaps per person per minute")
     parser.add_argument(
+        "--set",
+        action="append",
+        default=[],
+        metavar="KNOB=VALUE",
+        help="any SimParams field, e.g. --set flip_rate=10 --set fov=90,70 (repeatable)",
+    )
+    parser.add_argument(
         "--sample", action="store_true", help="use the demo's parameters (hiros_sim.sample_params)"
     )
     parser.add_argument(
@@ -89,7 +96,33 @@ def _params(args: argparse.Namespace):  # noqa: ANN202 - SimParams, imported laz
         "ghost_rate": args.ghost_rate,
         "swap_rate": args.swap_rate,
     }
-    return replace(params, **{k: v for k, v in overrides.items() if v is not None})
+    overrides = {k: v for k, v in overrides.items() if v is not None}
+    overrides.update(_knobs(params, args.set))
+    return replace(params, **overrides)
+
+
+def _knobs(params: object, settings: list[str]) -> dict[str, object]:
+    """``KNOB=VALUE`` strings to typed SimParams overrides (type of the field's default)."""
+    out: dict[str, object] = {}
+    for setting in settings:
+        name, sep, text = setting.partition("=")
+        name = name.strip().replace("-", "_")
+        if not sep or not hasattr(params, name):
+            msg = f"--set {setting!r}: expected KNOB=VALUE with a SimParams field as KNOB"
+            raise ConfigError(msg)
+        default = getattr(params, name)
+        try:
+            if isinstance(default, bool):
+                value: object = text.strip().lower() in {"1", "true", "yes", "on"}
+            elif isinstance(default, tuple):
+                value = tuple(type(d)(v) for d, v in zip(default, text.split(","), strict=True))
+            else:
+                value = type(default)(text)
+        except (TypeError, ValueError) as exc:
+            msg = f"--set {setting!r}: {exc}"
+            raise ConfigError(msg) from exc
+        out[name] = value
+    return out
 
 
 def _fit_noise() -> int:

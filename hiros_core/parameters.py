@@ -1,0 +1,137 @@
+"""Parameters dataclasses and ROS parameter files, without ROS (used by nodes and offline).
+
+Precedence, lowest first: the dataclass default, the node's YAML file (ROS parameter-file format,
+``<node>: ros__parameters: {...}`` or ``/**: ros__parameters: {...}``), then anything given on the
+command line (``--ros-args -p name:=value`` or ``--params-file``), which rclpy applies itself.
+Nested dataclasses become dotted names (``gating.max_distance``).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import os
+import sys
+import typing
+from pathlib import Path
+from typing import Any, TypeVar
+
+import yaml
+
+from hiros_core.errors import ConfigError
+
+T = TypeVar("T")
+
+__all__ = [
+    "build_params",
+    "config_path",
+    "dataclass_defaults",
+    "load_config_defaults",
+    "stage_config_defaults",
+]
+
+
+def config_path(node_name: str) -> Path | None:
+    """Where ``<node_name>.yaml`` lives: ``HIROS_CONFIG_DIR``, the installed share, the repo."""
+    candidates = []
+    if os.environ.get("HIROS_CONFIG_DIR"):
+        candidates.append(Path(os.environ["HIROS_CONFIG_DIR"]))
+    for prefix in filter(None, os.environ.get("AMENT_PREFIX_PATH", "").split(os.pathsep)):
+        candidates.append(Path(prefix) / "share" / "hiros" / "config")
+    candidates.append(Path(sys.prefix) / "share" / "hiros" / "config")
+    candidates.append(Path(__file__).resolve().parent.parent / "config")
+    for directory in candidates:
+        path = directory / f"{node_name}.yaml"
+        if path.is_file():
+            return path
+    return None
+
+
+def load_config_defaults(node_name: str, path: Path | None = None) -> dict[str, Any]:
+    """Flat ``{dotted.name: value}`` of a node's parameter file (empty when there is none)."""
+    path = path or config_path(node_name)
+    if path is None:
+        return {}
+    try:
+        document = yaml.safe_load(path.read_text()) or {}
+    except (OSError, yaml.YAMLError) as exc:
+        msg = f"cannot read parameter file {path}: {exc}"
+        raise ConfigError(msg) from exc
+    values: dict[str, Any] = {}
+    for key in ("/**", node_name, f"/{node_name}"):
+        section = document.get(key, {}) if isinstance(document, dict) else {}
+        values.update(_flatten((section or {}).get("ros__parameters", {}) or {}))
+    return values
+
+
+def _flatten(tree: dict[str, Any], prefix: str = "") -> dict[str, Any]:
+    flat: dict[str, Any] = {}
+    for key, value in tree.items():
+        name = f"{prefix}{key}"
+        if isinstance(value, dict):
+            flat.update(_flatten(value, f"{name}."))
+        else:
+            flat[name] = value
+    return flat
+
+
+def dataclass_defaults(params_type: type, prefix: str = "") -> dict[str, Any]:
+    """Flat ``{dotted.name: default}`` of a (possibly nested) parameters dataclass."""
+    out: dict[str, Any] = {}
+    hints = typing.get_type_hints(params_type)
+    for f in dataclasses.fields(params_type):
+        name = f"{prefix}{f.name}"
+        if dataclasses.is_dataclass(hints[f.name]):
+            out.update(dataclass_defaults(hints[f.name], f"{name}."))
+        elif f.default is not dataclasses.MISSING:
+            out[name] = f.default
+        elif f.default_factory is not dataclasses.MISSING:
+            out[name] = f.default_factory()
+        else:
+            msg = f"parameter {name} of {params_type.__name__} has no default"
+            raise ConfigError(msg)
+    return out
+
+
+def build_params(params_type: type[T], values: dict[str, Any], prefix: str = "") -> T:
+    """Instantiate a (nested) parameters dataclass from flat dotted values."""
+    hints = typing.get_type_hints(params_type)
+    kwargs = {}
+    for f in dataclasses.fields(params_type):
+        name = f"{prefix}{f.name}"
+        if dataclasses.is_dataclass(hints[f.name]):
+            kwargs[f.name] = build_params(hints[f.name], values, f"{name}.")
+        elif name in values:
+            kwargs[f.name] = _coerce(values[name], hints[f.name], name)
+    return params_type(**kwargs)
+
+
+def _coerce(value: Any, hint: Any, name: str) -> Any:
+    origin = typing.get_origin(hint)
+    try:
+        if hint is float:
+            return float(value)
+        if hint is int:
+            return int(value)
+        if hint is bool:
+            return bool(value)
+        if hint is str:
+            return str(value)
+        if origin in (list, tuple):
+            (item,) = typing.get_args(hint)[:1] or (str,)
+            items = [_coerce(v, item, name) for v in (value or [])]
+            return tuple(items) if origin is tuple else items
+    except (TypeError, ValueError) as exc:
+        msg = f"parameter {name}: cannot use {value!r} as {hint}"
+        raise ConfigError(msg) from exc
+    return value
+
+
+def stage_config_defaults(
+    stages: tuple[str, ...] = ("tracker", "merger", "optimizer", "filter"),
+) -> dict[str, Any]:
+    """Each stage node's YAML values under the stage's name (``tracker.max_delay``, ...).
+
+    The composed pipeline and ``hiros run`` read the stage nodes' own files, so a parameter is
+    tuned in one place whichever way the stages run; ``pipeline.yaml`` may override them.
+    """
+    return {f"{stage}.{k}": v for stage in stages for k, v in load_config_defaults(stage).items()}

@@ -1,0 +1,103 @@
+"""``pipeline`` node: bridge and all four stages in one process, no serialisation between them.
+
+Camera topics in (Azure-driver ``/<cam>/body_tracking_data`` or ``/<cam>/skeletons``), every
+stage's output out on ``/hiros/{tracker,merger,optimizer,filter}``. Stages receive the previous
+stage's objects directly; only the published copies are encoded (with the fast codec).
+"""
+
+from __future__ import annotations
+
+from collections import Counter
+from dataclasses import dataclass, field
+
+from visualization_msgs.msg import MarkerArray
+
+from hiros_core.calibration import Calibration, load_calibration
+from hiros_core.codec import decode_group, decode_marker_array, encode_group
+from hiros_core.parameters import stage_config_defaults
+from hiros_pipeline.pipeline import STAGES, Pipeline, PipelineParams
+from hiros_ros import HirosNode, declare_params, run_node
+from hiros_ros.calibration_follower import CalibrationFollower
+from hiros_ros.node import camera_qos, pipeline_qos
+from hiros_skeleton_msgs.msg import SkeletonGroup as SkeletonGroupMsg
+
+
+@dataclass
+class PipelineNodeParams(PipelineParams):
+    """The stages' parameters plus where the cameras and the calibration come from."""
+
+    cameras: list[str] = field(default_factory=lambda: ["k01", "k02", "k03"])
+    input: str = "driver"  # "driver": /<cam>/body_tracking_data; "skeletons": /<cam>/skeletons
+    camera_qos: str = "sensor_data"
+    calibration_file: str = ""
+    calib_node: str = "/calib"
+
+
+class PipelineNode(HirosNode):
+    """Composed pipeline: each camera frame goes through ``Pipeline.update``."""
+
+    def __init__(self) -> None:
+        super().__init__("pipeline")
+        self.params = declare_params(
+            self, PipelineNodeParams, extra_defaults=stage_config_defaults()
+        )
+        calibration = (
+            load_calibration(self.params.calibration_file)
+            if self.params.calibration_file
+            else Calibration(reference="")
+        )
+        self.pipeline = Pipeline(self.params, calibration)
+        self.follower = CalibrationFollower(
+            self, calibration, self.pipeline.set_calibration, self.params.calib_node
+        )
+        self.publishers_ = {
+            stage: self.create_raw_publisher(SkeletonGroupMsg, f"/hiros/{stage}", pipeline_qos())
+            for stage in STAGES
+        }
+        self._seen_drops: Counter[str] = Counter()
+        self._bridges = {}
+        for camera in self.params.cameras:
+            self._subscribe(camera)
+        self.get_logger().info(
+            f"cameras {self.params.cameras} ({self.params.input}) -> "
+            + ", ".join(f"/hiros/{s}" for s in STAGES)
+        )
+
+    def _subscribe(self, camera: str) -> None:
+        qos = camera_qos(self.params.camera_qos)
+        if self.params.input == "driver":
+            from hiros_azure_bridge import DriverBridge, DriverBridgeParams
+
+            bridge = DriverBridge(DriverBridgeParams())
+            self._bridges[camera] = bridge
+            self.create_raw_subscription(
+                MarkerArray,
+                f"/{camera}/body_tracking_data",
+                lambda data, bridge=bridge: self.on_group(bridge.update(decode_marker_array(data))),
+                qos,
+            )
+        else:
+            self.create_raw_subscription(
+                SkeletonGroupMsg,
+                f"/{camera}/skeletons",
+                lambda data: self.on_group(decode_group(data)),
+                qos,
+            )
+
+    def on_group(self, group) -> None:  # noqa: ANN001 - SkeletonGroup | None from a bridge
+        """One camera frame through the stages; publish what each stage produced."""
+        if group is None:
+            return
+        outputs = self.pipeline.update(group)
+        for stage, result in zip(STAGES, outputs, strict=True):
+            if result.skeletons:
+                self.publish_raw(self.publishers_[stage], encode_group(result))
+        drops = self.pipeline.drops
+        for bridge in self._bridges.values():
+            drops.update({f"bridge: {k}": v for k, v in bridge.drops.items()})
+        self.absorb_drops(drops, self._seen_drops)
+
+
+def main(args: list[str] | None = None) -> None:
+    """``ros2 run hiros pipeline``."""
+    run_node(PipelineNode, args)
