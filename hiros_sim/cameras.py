@@ -129,7 +129,7 @@ def _draw_clocks(
         if cam.time_offset == 0.0 and cam.drift == 0.0:
             cam.time_offset = float(rng.uniform(-max_time_offset, max_time_offset))
             cam.drift = float(rng.normal(0.0, drift_ppm * 1e-6))
-        cam.drift_epoch = float(np.round(clock_start - cam.time_offset, 3))
+            cam.drift_epoch = float(np.round(clock_start - cam.time_offset, 3))
 
 
 def camera_to_reference(cam: CameraCalibration, t_camera: np.ndarray) -> np.ndarray:

@@ -14,9 +14,10 @@ AR(1) process with correlation time ``noise_correlation_time``. ``obliqueness`` 
 (0 seen from the front or back, 1 from the side).
 
 Self-occlusion: a joint is hidden when the ray from the camera to it passes through a body part
-in front of it; bodies are approximated by spheres along the pelvis → neck axis (radius 0.15 m)
-and one head sphere (0.085 m), which also hides the face from behind. Other people's spheres
-occlude too.
+whose centre is at least 3 cm nearer the camera; bodies are approximated by five spheres along
+the pelvis → neck axis (radius 0.15 m) and one head sphere (0.10 m, 7 cm above the Head joint),
+which hides the face from behind and the far ear from the side. Other people's spheres occlude
+too.
 
 Confidence levels follow the Azure Kinect Body Tracking SDK (``k4abt_joint_confidence_level_t``):
 0 NONE (outside the field of view), 1 LOW (occluded, predicted), 2 MEDIUM (seen). They become
@@ -48,7 +49,9 @@ CONFIDENCE_OF_LEVEL = np.arange(4) / 3.0
 """Model confidence of each SDK level: NONE, LOW, MEDIUM, HIGH."""
 
 _IDX = AZURE_KINECT.index
-_TORSO_RADIUS, _HEAD_RADIUS = 0.15, 0.085
+_TORSO_RADIUS, _HEAD_RADIUS = 0.15, 0.10
+_IN_FRONT = 0.03
+"""A sphere occludes a joint only if its centre is this much (m) nearer the camera."""
 _TORSO_SPHERES = np.linspace(0.0, 1.0, 5)
 _MIDLINE = np.array(
     [_IDX(n) for n in ("Pelvis", "SpineNaval", "SpineChest", "Neck", "Head")], dtype=np.int64
@@ -81,7 +84,7 @@ def _spheres(positions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     pelvis = positions[:, :, _IDX("Pelvis")]
     neck = positions[:, :, _IDX("Neck")]
     torso = pelvis[:, :, None] + _TORSO_SPHERES[None, None, :, None] * (neck - pelvis)[:, :, None]
-    head = positions[:, :, _IDX("Head")] + 0.06 * (neck - pelvis) / np.linalg.norm(
+    head = positions[:, :, _IDX("Head")] + 0.07 * (neck - pelvis) / np.linalg.norm(
         neck - pelvis, axis=-1, keepdims=True
     )
     centres = np.concatenate([torso, head[:, :, None]], axis=2)
@@ -108,7 +111,7 @@ def occluded(positions: np.ndarray) -> np.ndarray:
             # squared distance from the sphere centre to the ray's line, and where along it
             dist2 = centre2 - along * along / length2
             s = along / length2
-            blocked = (dist2 < radii * radii) & (s > 0) & (s * length < length - radii)
+            blocked = (dist2 < radii * radii) & (s > 0) & (s * length < length - _IN_FRONT)
         blocked = blocked.any(axis=-1)
         blocked[occluder][:, _MIDLINE] = False  # the spine is inside its own torso spheres
         hidden |= blocked

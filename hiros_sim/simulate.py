@@ -116,21 +116,22 @@ class SimParams:
     """Seconds from a frame's capture to its arrival at the recorder (the log time)."""
 
     # joint noise (see hiros_sim.noise); figures from hiros_sim.fit on the UNIPD-BPE take
-    noise_base: float = 0.0105
-    """Lateral joint noise sigma at depth 0, metres (fitted: 10.5 mm)."""
-    noise_per_metre: float = 0.0043
-    """Growth of the sigma per metre of depth (fitted: 4.3 mm/m)."""
-    depth_axis_gain: float = 1.19
-    """Sigma along the camera's z axis relative to x, y (fitted: 1.19)."""
-    joint_bias: float = 0.025
-    """Sigma of a fixed per camera, person and joint offset, metres (fitted RMS: 25 mm)."""
+    noise_base: float = 0.012
+    """Lateral joint noise sigma at depth 0, metres (fitted: 12.0 mm)."""
+    noise_per_metre: float = 0.004
+    """Growth of the sigma per metre of depth (fitted: 4.0 mm/m over 2.8-4.0 m)."""
+    depth_axis_gain: float = 1.2
+    """Sigma along the camera's z axis relative to x, y (fitted: 1.20)."""
+    joint_bias: float = 0.026
+    """Sigma of a fixed per camera, person and joint offset, metres (fitted RMS: 25.6 mm)."""
     oblique_gain: float = 1.0
     """Extra sigma, as a fraction, for a body seen from the side (not in the take: a guess)."""
-    occluded_gain: float = 2.5
-    """Sigma factor of hidden joints (the take's ankles, hidden by the bending torso: ~2.4x)."""
+    occluded_gain: float = 2.0
+    """Sigma factor of hidden joints (the take's ankles, hidden by the bending torso, err
+    1.6-2.2x the median joint)."""
     out_of_view_gain: float = 4.0
-    noise_correlation_time: float = 0.21
-    """Seconds for the joint error's autocorrelation to fall to 1/e (fitted: 212 ms)."""
+    noise_correlation_time: float = 0.22
+    """Seconds for the joint error's autocorrelation to fall to 1/e (fitted: 220 ms)."""
 
     # SDK mistakes
     miss_rate: float = 0.0056
