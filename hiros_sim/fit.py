@@ -67,12 +67,13 @@ import numpy as np
 
 from hiros_core.errors import RecordingError
 from hiros_core.layouts import AZURE_KINECT
+from hiros_data import DATA_DIR
 from hiros_sim.bvh import read_bvh
 from hiros_sim.mapping import map_to_azure
 
 __all__ = ["NoiseFit", "align", "fit_noise", "read_kinect_csv"]
 
-_DATA = Path(__file__).resolve().parent.parent / "hiros_data" / "unipd_bpe_sample"
+_DATA = DATA_DIR / "unipd_bpe_sample"
 DEFAULT_BVH = _DATA / "sbj01_bend1.bvh.gz"
 DEFAULT_CSV = _DATA / "sbj01_bend1KinectPos.csv.gz"
 

@@ -23,7 +23,6 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
 from functools import lru_cache
-from pathlib import Path
 
 import numpy as np
 from scipy.spatial.transform import Rotation
@@ -32,6 +31,7 @@ from hiros_core.calibration import Calibration, CameraCalibration
 from hiros_core.errors import ConfigError
 from hiros_core.layouts import AZURE_KINECT
 from hiros_core.model import Skeleton, SkeletonGroup
+from hiros_data import DATA_DIR
 from hiros_sim.bvh import read_bvh
 from hiros_sim.cameras import camera_to_reference, make_setup, reference_to_camera
 from hiros_sim.noise import (
@@ -49,7 +49,7 @@ from hiros_sim.people import Clip, PersonPath, body_forward, prepare_clip
 
 __all__ = ["SimParams", "SimResult", "Truth", "default_bvh_files", "simulate"]
 
-_DATA = Path(__file__).resolve().parent.parent / "hiros_data"
+_DATA = DATA_DIR
 _IDX = AZURE_KINECT.index
 _MAX_PEOPLE = 6
 
