@@ -1,6 +1,6 @@
 """Tracker: a persistent track id for every camera detection, across cameras and over time.
 
-Data flow of ``Tracker.update`` (one call per camera frame, the node calls exactly this):
+Data flow of ``Tracker.update`` (one call per camera frame; the node calls exactly this):
 
 1. the camera's group is moved into the world frame and onto the reference clock
    (``CameraCorrection``);
@@ -8,16 +8,24 @@ Data flow of ``Tracker.update`` (one call per camera frame, the node calls exact
    late can be processed before it (frames are released in reference-time order);
 3. each released frame is associated with the tracks: every track is predicted to the frame's
    corrected time with a constant-velocity model, the cost of a (track, detection) pair is the
-   mean joint distance (the cheaper of the pose and its left/right mirror, so that a camera's
-   front/back flip or side swap does not break the match), gated, and solved with
-   ``scipy.optimize.linear_sum_assignment`` — confirmed tracks first, tentative tracks second;
-4. unmatched detections start tentative tracks, confirmed after ``min_hits`` hits unless they
-   sit on top of a confirmed track (a ghost or duplicate body); tracks without hits expire.
+   mean joint distance, gated, and solved with ``scipy.optimize.linear_sum_assignment`` —
+   confirmed tracks first, tentative tracks with what is left;
+4. unmatched detections start tentative tracks; a tentative track is confirmed after
+   ``min_hits`` hits from ``min_cameras`` cameras (or after ``single_camera_confirm`` seconds),
+   unless it sits on a confirmed track (a duplicate body); tracks without hits expire.
 
-The output is Hi-ROS's: one skeleton per camera detection of a confirmed track, ``id`` = track
-id, ``src_frame`` = the camera's frame, ``src_time`` = the corrected stamp, world-frame poses,
-mirrored detections relabelled, and each joint's velocity (m/s) filled from the track when the
-camera gave none. Shapes: ``T`` tracks, ``D`` detections, ``J`` joints; positions in metres.
+Side swaps: the body is split into mirror parts (for the Azure Kinect layout: arms, legs, eyes,
+ears — each a left/right pair of limbs hanging off the midline). For each pair and part the
+cost takes the cheaper of the detection's labelling and its mirror, so a front/back flip
+(everything swapped) or the SDK's leg swap neither breaks the match nor reaches the output:
+detections are relabelled to their track's sides. When most cameras disagree with a track's
+sides (the track was born from a flipped view), the track is relabelled instead.
+
+Output (Hi-ROS's): one skeleton per camera detection of a confirmed track, ``id`` = track id,
+``src_frame`` = the camera's frame, ``src_time`` = the corrected stamp, world-frame poses, each
+joint's velocity (m/s) filled from the track where the camera gave none.
+
+Shapes: ``T`` tracks, ``D`` detections, ``J`` joints, ``K`` mirror parts; metres, seconds.
 """
 
 from __future__ import annotations
@@ -26,11 +34,13 @@ import heapq
 import itertools
 from collections import Counter, deque
 from dataclasses import dataclass
+from functools import cache
 
 import numpy as np
 from scipy.optimize import linear_sum_assignment
 
 from hiros_core.calibration import Calibration, CameraCalibration
+from hiros_core.layouts import Layout
 from hiros_core.model import Skeleton, SkeletonGroup
 from hiros_tracker.correction import CameraCorrection
 
@@ -48,30 +58,40 @@ class TrackerParams:
     Attributes:
         max_delay: seconds a frame waits for late frames of other cameras before it is
             processed; frames older than the last processed one are dropped as ``late``.
-        gate_distance: metres; a detection farther than this (mean joint distance) from a
-            track's prediction cannot be assigned to it.
+        gate_distance: metres; a detection farther than this (weighted mean joint distance)
+            from a track's prediction cannot be assigned to it.
         gate_growth: metres per second; the gate widens by this for each second a track went
-            unseen, so that a person whose camera dropped out can be picked up again.
+            unseen, so that a person whose cameras dropped out can be picked up again.
         min_hits: hits a tentative track needs to be confirmed (and output).
+        min_cameras: distinct cameras a tentative track must be seen by to be confirmed
+            (capped at the number of calibrated cameras); one camera's ghost bodies fail it.
+        single_camera_confirm: seconds after which a tentative track seen by fewer cameras is
+            confirmed anyway (a person only one camera sees); longer than a ghost body lasts.
         tentative_timeout: seconds a tentative track survives without a hit.
         track_timeout: seconds a confirmed track survives without a hit.
-        max_prediction: seconds of constant-velocity extrapolation at most; beyond, a track
-            waits where it was last predicted.
+        max_prediction: seconds of constant-velocity extrapolation at most.
         position_smoothing: weight (0..1] of a new detection in the track's reference pose.
-        velocity_window: seconds of history the per-joint velocity is fitted over.
+        velocity_window: seconds of history the per-joint velocities are fitted over.
+        body_id_bonus: metres taken off the cost when a camera reports the body id it gave the
+            track's previous detection: a tie-breaker when two people are close, small enough
+            that positions overrule a camera's own id changes and swaps.
         velocity_weight: metres of cost per m/s of velocity difference (0: positions only;
             used when detections carry velocities).
         orientation_weight: metres of cost per radian of joint orientation difference
             (0: positions only; used when detections carry orientations).
-        mirror_check: compare each detection also with its left/right mirror and keep the
+        mirror_check: compare each mirror part also with its left/right mirror and keep the
             cheaper labelling (front/back flips, side swaps).
-        mirror_margin: metres the mirror must be cheaper by before a detection is relabelled.
-        mirror_vote: when most cameras currently disagree with a track's labelling, relabel
-            the track (its first detection was the flipped one).
+        mirror_margin: metres (mean over a part's joints) the mirror must be cheaper by.
+        mirror_vote: relabel a track when most cameras currently seeing it call its sides
+            mirrored.
         duplicate_distance: metres; a tentative track closer than this to a confirmed track
-            when it would be confirmed is a ghost or duplicate body and is deleted.
+            when it would be confirmed is a duplicate body and is deleted.
+        joint_weight_decay: a joint's weight in the cost is this to the power of its depth in
+            the skeleton tree (pelvis 1, hips 0.5, knees 0.25, ...): the body's core places a
+            person; limbs swing, get occluded and are the first a flip throws off.
         min_joints: joints a detection and a track must share for a cost to exist.
-        min_confidence: joints of lower confidence are left out of the cost.
+        min_confidence: joints of lower confidence are left out of the cost (the SDK's NONE
+            level, 0, marks joints outside the view).
 
     """
 
@@ -79,31 +99,159 @@ class TrackerParams:
     gate_distance: float = 0.5
     gate_growth: float = 0.5
     min_hits: int = 8
+    min_cameras: int = 2
+    single_camera_confirm: float = 2.0
     tentative_timeout: float = 0.3
     track_timeout: float = 2.0
     max_prediction: float = 0.5
     position_smoothing: float = 0.6
     velocity_window: float = 0.25
+    body_id_bonus: float = 0.1
     velocity_weight: float = 0.0
     orientation_weight: float = 0.0
     mirror_check: bool = True
     mirror_margin: float = 0.02
     mirror_vote: bool = True
     duplicate_distance: float = 0.25
+    joint_weight_decay: float = 0.5
     min_joints: int = 4
-    min_confidence: float = 0.0
+    min_confidence: float = 0.1
+
+
+@dataclass(frozen=True)
+class _MirrorParts:
+    """A layout's left/right structure.
+
+    Attributes:
+        mirror: ``(J,)`` the layout's left/right permutation.
+        part: ``(J,)`` mirror part of each joint, ``-1`` on the midline.
+        onehot: ``(J, K)`` part membership.
+
+    """
+
+    mirror: np.ndarray
+    part: np.ndarray
+    onehot: np.ndarray
+
+    @property
+    def count(self) -> int:
+        """Number of parts K."""
+        return self.onehot.shape[1]
+
+    def permutation(self, flips: np.ndarray) -> np.ndarray:
+        """``(..., J)`` joint order relabelling the parts flagged in ``flips`` ``(..., K)``."""
+        sided = self.part >= 0
+        flipped = np.zeros((*flips.shape[:-1], len(self.part)), dtype=bool)
+        flipped[..., sided] = flips[..., self.part[sided]]
+        return np.where(flipped, self.mirror, np.arange(len(self.part)))
+
+
+@cache
+def _mirror_parts(layout: Layout) -> _MirrorParts:
+    """Split a layout into mirror parts: a sided joint belongs to its topmost sided ancestor."""
+    mirror, parents = layout.mirror, layout.parents
+    roots = []
+    for joint in range(layout.n_joints):
+        if mirror[joint] == joint:
+            roots.append(-1)
+            continue
+        top = joint
+        while parents[top] >= 0 and mirror[parents[top]] != parents[top]:
+            top = parents[top]
+        roots.append(min(top, int(mirror[top])))
+    keys = sorted({r for r in roots if r >= 0})
+    part = np.array([keys.index(r) if r >= 0 else -1 for r in roots], dtype=np.int64)
+    onehot = np.zeros((layout.n_joints, len(keys)))
+    onehot[part >= 0, part[part >= 0]] = 1.0
+    return _MirrorParts(mirror, part, onehot)
+
+
+@cache
+def _joint_weights(layout: Layout, decay: float) -> np.ndarray:
+    """``(J,)`` cost weight of each joint: ``decay ** depth`` in the layout's tree.
+
+    The root and the joints next to it place a body reliably; hands, feet and head swing, get
+    occluded and are the first a front/back flip throws a metre off, so they count less.
+    """
+    depth = np.zeros(layout.n_joints)
+    for joint in range(layout.n_joints):
+        parent = layout.parents[joint]
+        while parent >= 0:
+            depth[joint] += 1
+            parent = layout.parents[parent]
+    return decay**depth
+
+
+def _pair_costs(
+    predicted: np.ndarray,
+    detections: np.ndarray,
+    weights: np.ndarray,
+    parts: _MirrorParts | None,
+    *,
+    min_joints: int,
+    margin: float,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Weighted mean joint distance of every (track, detection) pair, sides chosen per part.
+
+    Args:
+        predicted: ``(T, J, 3)`` track poses at the detections' time.
+        detections: ``(D, J, 3)``, NaN for joints left out.
+        weights: ``(J,)`` joint weights of the mean.
+        parts: the layout's mirror parts, or None to compare labels as given.
+        min_joints: pairs sharing fewer joints cost ``inf``.
+        margin: metres a part's mirror must be cheaper by (plain mean over its joints).
+
+    Returns:
+        ``(T, D)`` costs in metres and ``(T, D, K)`` flags of the parts taken mirrored.
+
+    """
+    distance = np.linalg.norm(predicted[:, None] - detections[None], axis=3)  # (T, D, J)
+    if parts is None:
+        flips = np.zeros((*distance.shape[:2], 0), dtype=bool)
+    else:
+        mirrored = np.linalg.norm(predicted[:, None] - detections[None][:, :, parts.mirror], axis=3)
+        shared_d, shared_m = np.isfinite(distance), np.isfinite(mirrored)
+        sum_d = np.where(shared_d, distance, 0.0) @ parts.onehot  # (T, D, K)
+        sum_m = np.where(shared_m, mirrored, 0.0) @ parts.onehot
+        count_d, count_m = shared_d @ parts.onehot, shared_m @ parts.onehot
+        with np.errstate(invalid="ignore", divide="ignore"):
+            flips = (count_m > 0) & (sum_m / count_m + margin < sum_d / np.maximum(count_d, 1))
+        sided = parts.part >= 0
+        joint_flips = np.zeros(distance.shape, dtype=bool)
+        joint_flips[..., sided] = flips[..., parts.part[sided]]
+        distance = np.where(joint_flips, mirrored, distance)
+    shared = np.isfinite(distance)
+    count = shared.sum(axis=2)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        cost = np.where(shared, distance, 0.0) @ weights / (shared @ weights)
+    cost[count < min_joints] = np.inf
+    return cost, flips
+
+
+def _velocity_sums(times: float, positions: np.ndarray) -> np.ndarray:
+    """``(J, 9)`` one sample's terms of the least-squares slope: n, t, t², p (3), t·p (3)."""
+    valid = np.isfinite(positions).all(axis=1)
+    sums = np.zeros((len(positions), 9))
+    sums[valid, 0] = 1.0
+    sums[valid, 1] = times
+    sums[valid, 2] = times * times
+    sums[valid, 3:6] = positions[valid]
+    sums[valid, 6:9] = times * positions[valid]
+    return sums
 
 
 class _Track:
-    """One person's state: a reference pose, per-joint velocities and recent detections.
+    """One person's state.
 
     ``positions`` ``(J, 3)`` is the smoothed pose at ``time_ns``; ``velocities`` ``(J, 3)`` is
-    fitted over ``history`` with one intercept per camera, so that a constant offset between
-    two cameras' calibrations does not read as motion.
+    the least-squares slope of the recent detections with one intercept per camera (so that a
+    constant offset between two cameras' calibrations does not read as motion), kept as running
+    sums per camera (``sums[camera]`` ``(J, 9)``) over ``velocity_window``.
     """
 
     __slots__ = (
-        "camera_votes",
+        "born_ns",
+        "cameras",
         "confirmed",
         "hits",
         "id",
@@ -111,102 +259,60 @@ class _Track:
         "orientations",
         "positions",
         "records",
+        "sums",
         "time_ns",
         "velocities",
         "velocity",
+        "votes",
     )
 
-    def __init__(
-        self, track_id: int, positions: np.ndarray, orientations: np.ndarray, time_ns: int
-    ) -> None:
+    def __init__(self, track_id: int, positions: np.ndarray, time_ns: int) -> None:
         self.id = track_id
         self.positions = positions.copy()
-        self.orientations = orientations.copy()
+        self.orientations = np.full((len(positions), 4), np.nan)
         self.velocities = np.zeros_like(positions)
         self.velocity = np.zeros(3)
-        self.time_ns = time_ns
-        self.last_hit_ns = time_ns
+        self.born_ns = self.time_ns = self.last_hit_ns = time_ns
         self.hits = 0
         self.confirmed = False
+        self.cameras: dict[int, int] = {}  # camera code -> the camera's last body id for it
         self.records: deque[tuple[int, int, np.ndarray]] = deque()
-        self.camera_votes: dict[int, tuple[int, bool]] = {}
+        self.sums: dict[int, np.ndarray] = {}
+        self.votes: dict[int, tuple[int, np.ndarray]] = {}
 
     def predict(self, time_ns: int, max_prediction: float) -> np.ndarray:
         """``(J, 3)`` pose extrapolated to ``time_ns`` with the body's mean velocity."""
         dt = float(np.clip((time_ns - self.time_ns) * _NS, -max_prediction, max_prediction))
         return self.positions + self.velocity * dt
 
-    def mirror(self, mirror: np.ndarray) -> None:
-        """Swap the track's left and right labels (pose, velocities, history)."""
-        self.positions = self.positions[mirror]
-        self.orientations = self.orientations[mirror]
-        self.velocities = self.velocities[mirror]
-        self.records = deque((t, cam, pos[mirror]) for t, cam, pos in self.records)
-        self.camera_votes = {cam: (t, not vote) for cam, (t, vote) in self.camera_votes.items()}
+    def add_record(self, time_ns: int, camera: int, positions: np.ndarray, window_ns: int) -> None:
+        """Add a detection to the velocity fit and forget those older than the window."""
+        sums = _velocity_sums((time_ns - self.born_ns) * _NS, positions)
+        self.records.append((time_ns, camera, sums))
+        self.sums[camera] = self.sums.get(camera, 0.0) + sums
+        while self.records and self.records[0][0] < time_ns - window_ns:
+            _, old_camera, old = self.records.popleft()
+            self.sums[old_camera] -= old
+            if self.sums[old_camera][:, 0].max() < 0.5:
+                del self.sums[old_camera]
+        stacked = np.stack(list(self.sums.values()))  # (C, J, 9)
+        n = np.maximum(stacked[..., 0], 1.0)
+        sxx = (stacked[..., 2] - stacked[..., 1] ** 2 / n).sum(axis=0)  # (J,)
+        sxy = (stacked[..., 6:9] - stacked[..., 1:2] * stacked[..., 3:6] / n[..., None]).sum(0)
+        determined = sxx > 1e-5
+        if determined.any():
+            self.velocities = np.where(
+                determined[:, None], sxy / np.where(determined, sxx, 1.0)[:, None], 0.0
+            )
+            self.velocity = sxy[determined].sum(axis=0) / sxx[determined].sum()
 
-
-def _fit_velocities(
-    times: np.ndarray, cameras: np.ndarray, positions: np.ndarray
-) -> tuple[np.ndarray, np.ndarray, bool]:
-    """Least-squares joint velocities with one intercept per camera (fixed effects).
-
-    Args:
-        times: ``(N,)`` seconds.
-        cameras: ``(N,)`` camera codes.
-        positions: ``(N, J, 3)`` with NaN for missing joints.
-
-    Returns:
-        ``(J, 3)`` per-joint velocities (0 where not determined), ``(3,)`` pooled body velocity,
-        and whether any camera gave two or more samples.
-
-    """
-    codes, group = np.unique(cameras, return_inverse=True)
-    valid = np.isfinite(positions).all(axis=2)  # (N, J)
-    weight = valid.astype(float)
-    filled = np.where(valid[..., None], positions, 0.0)
-    onehot = np.zeros((len(times), len(codes)))
-    onehot[np.arange(len(times)), group] = 1.0
-    count = onehot.T @ weight  # (C, J)
-    safe = np.maximum(count, 1.0)
-    mean_t = (onehot.T @ (weight * times[:, None])) / safe  # (C, J)
-    mean_p = np.einsum("nc,nj,njk->cjk", onehot, weight, filled) / safe[..., None]
-    dt = (times[:, None] - mean_t[group]) * weight  # (N, J)
-    dp = (filled - mean_p[group]) * weight[..., None]  # (N, J, 3)
-    sxx = (dt * dt).sum(axis=0)  # (J,)
-    sxy = np.einsum("nj,njk->jk", dt, dp)  # (J, 3)
-    determined = sxx > 1e-6
-    velocities = np.zeros_like(sxy)
-    velocities[determined] = sxy[determined] / sxx[determined, None]
-    total = sxx.sum()
-    body = sxy.sum(axis=0) / total if total > 1e-6 else np.zeros(3)
-    return velocities, body, bool(determined.any())
-
-
-def _pair_costs(predicted: np.ndarray, detections: np.ndarray, min_joints: int) -> np.ndarray:
-    """``(T, D)`` mean joint distance between predicted tracks and detections.
-
-    Args:
-        predicted: ``(T, J, 3)``.
-        detections: ``(D, J, 3)``, NaN for joints left out.
-        min_joints: pairs sharing fewer joints cost ``inf``.
-
-    """
-    distance = np.linalg.norm(predicted[:, None] - detections[None], axis=3)  # (T, D, J)
-    shared = np.isfinite(distance)
-    count = shared.sum(axis=2)
-    total = np.where(shared, distance, 0.0).sum(axis=2)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        cost = total / count
-    cost[count < min_joints] = np.inf
-    return cost
-
-
-def _angle_costs(tracks: np.ndarray, detections: np.ndarray) -> np.ndarray:
-    """``(T, D)`` mean rotation angle (rad) between track and detection joint quaternions."""
-    dot = np.abs(np.einsum("tjk,djk->tdj", tracks, detections))
-    angle = 2.0 * np.arccos(np.clip(dot, 0.0, 1.0))
-    shared = np.isfinite(angle)
-    return np.where(shared, angle, 0.0).sum(axis=2) / np.maximum(shared.sum(axis=2), 1)
+    def relabel(self, permutation: np.ndarray) -> None:
+        """Reorder the track's joints (swap the sides of some parts)."""
+        self.positions = self.positions[permutation]
+        self.orientations = self.orientations[permutation]
+        self.velocities = self.velocities[permutation]
+        self.records = deque((t, cam, sums[permutation]) for t, cam, sums in self.records)
+        self.sums = {cam: sums[permutation] for cam, sums in self.sums.items()}
 
 
 class Tracker:
@@ -276,8 +382,7 @@ class Tracker:
         heapq.heappush(self._buffer, (corrected.stamp_ns, next(self._sequence), camera, corrected))
         if self._newest_ns is None or corrected.stamp_ns > self._newest_ns:
             self._newest_ns = corrected.stamp_ns
-        horizon = self._newest_ns - round(self.params.max_delay * 1e9)
-        return self._release(horizon)
+        return self._release(self._newest_ns - round(self.params.max_delay * 1e9))
 
     def flush(self) -> SkeletonGroup:
         """Process every buffered frame now (end of a recording)."""
@@ -299,63 +404,53 @@ class Tracker:
     def _process(self, frame: SkeletonGroup, camera: str) -> list[Skeleton]:
         """Associate one world-frame camera frame with the tracks; return confirmed outputs."""
         code = self._camera_codes.setdefault(camera, len(self._camera_codes))
-        detections = self._valid_detections(frame.skeletons)
         self._expire(frame.stamp_ns)
+        detections = self._valid_detections(frame.skeletons)
         if not detections:
             return []
         params = self.params
-        layout = detections[0].layout
-        times = np.array([d.src_time_ns for d in detections], dtype=np.int64)
+        parts = _mirror_parts(detections[0].layout)
+        stamp = detections[0].src_time_ns
         positions = np.stack([d.positions for d in detections])  # (D, J, 3)
-        present = np.stack([d.marker_present for d in detections])
-        usable = present & np.isfinite(positions).all(axis=2)
+        usable = np.stack([d.marker_present for d in detections])
         if params.min_confidence > 0:
-            confidences = np.stack([d.confidences for d in detections])
-            usable &= ~(confidences < params.min_confidence)
-        cost_positions = np.where(usable[..., None], positions, np.nan)
+            usable &= ~(np.stack([d.confidences for d in detections]) < params.min_confidence)
+        positions = np.where(usable[..., None], positions, np.nan)
 
-        assigned: dict[int, tuple[_Track, bool]] = {}
+        no_flip = np.zeros(parts.count, dtype=bool)
+        assigned: dict[int, tuple[_Track, np.ndarray]] = {}
         free = list(range(len(detections)))
         for confirmed in (True, False):
             tracks = [t for t in self._tracks if t.confirmed == confirmed]
             if tracks and free:
-                matches = self._match(
-                    tracks,
-                    detections,
-                    cost_positions,
-                    free,
-                    stamp=int(times[0]),
-                    mirror=layout.mirror,
-                )
-                for det, track, mirrored in matches:
-                    assigned[det] = (track, mirrored)
+                for det, track, flips in self._match(
+                    tracks, detections, positions, free, stamp=stamp, camera=code
+                ):
+                    assigned[det] = (track, flips)
                 free = [d for d in free if d not in assigned]
 
         outputs: list[Skeleton] = []
         for det, detection in enumerate(detections):
-            canonical = positions[det]
             if det in assigned:
-                track, mirrored = assigned[det]
+                track, flips = assigned[det]
+            elif np.isfinite(positions[det]).all(axis=1).sum() >= params.min_joints:
+                track, flips = self._new_track(positions[det], stamp), no_flip
             else:
-                if usable[det].sum() < params.min_joints:
-                    self.drops["too few joints"] += 1
-                    continue
-                track = self._new_track(canonical, detection.orientations, int(times[det]))
-                mirrored = False
-            if mirrored:
-                canonical = canonical[layout.mirror]
-            relabel = self._hit(
-                track, canonical, detection, time_ns=int(times[det]), camera=code, mirrored=mirrored
+                self.drops["too few joints"] += 1
+                continue
+            canonical = positions[det][parts.permutation(flips)]
+            flips = flips ^ self._hit(
+                track, canonical, detection, parts, time_ns=stamp, camera=code, flips=flips
             )
             if track.confirmed:
-                outputs.append(self._labelled(detection, track, mirrored != relabel))
+                outputs.append(self._labelled(detection, track, parts.permutation(flips)))
         return outputs
 
     def _valid_detections(self, skeletons: list[Skeleton]) -> list[Skeleton]:
-        """Skeletons with enough finite joints and the layout of the first one."""
+        """Skeletons with a finite joint and the layout of the first one (and of the tracks)."""
         valid: list[Skeleton] = []
         for skeleton in skeletons:
-            if valid and skeleton.layout.n_joints != valid[0].layout.n_joints:
+            if valid and skeleton.layout is not valid[0].layout:
                 self.drops["layout differs within a frame"] += 1
             elif not (skeleton.marker_present & np.isfinite(skeleton.positions).all(1)).any():
                 self.drops["no finite joint"] += 1
@@ -374,29 +469,28 @@ class Tracker:
         free: list[int],
         *,
         stamp: int,
-        mirror: np.ndarray,
-    ) -> list[tuple[int, _Track, bool]]:
-        """Optimal assignment of ``free`` detections to ``tracks``: (detection, track, mirrored)."""
+        camera: int,
+    ) -> list[tuple[int, _Track, np.ndarray]]:
+        """Optimal assignment of ``free`` detections to ``tracks``: (detection, track, flips)."""
         params = self.params
+        parts = _mirror_parts(detections[0].layout)
         predicted = np.stack([t.predict(stamp, params.max_prediction) for t in tracks])
-        candidates = positions[free]
-        cost = _pair_costs(predicted, candidates, params.min_joints)
-        mirrored = np.zeros(cost.shape, dtype=bool)
-        if params.mirror_check:
-            cost_mirrored = _pair_costs(predicted, candidates[:, mirror], params.min_joints)
-            mirrored = cost_mirrored + params.mirror_margin < cost
-            cost = np.where(mirrored, cost_mirrored, cost)
-        if params.velocity_weight > 0:
-            cost = cost + params.velocity_weight * self._velocity_costs(
-                tracks, detections, free, mirror, mirrored
-            )
-        if params.orientation_weight > 0:
-            track_q = np.stack([t.orientations for t in tracks])
-            det_q = np.stack([detections[d].orientations for d in free])
-            angle = np.where(
-                mirrored, _angle_costs(track_q, det_q[:, mirror]), _angle_costs(track_q, det_q)
-            )
-            cost = cost + params.orientation_weight * angle
+        cost, flips = _pair_costs(
+            predicted,
+            positions[free],
+            _joint_weights(detections[0].layout, params.joint_weight_decay),
+            parts if params.mirror_check else None,
+            min_joints=params.min_joints,
+            margin=params.mirror_margin,
+        )
+        if not params.mirror_check:
+            flips = np.zeros((*cost.shape, parts.count), dtype=bool)
+        if params.velocity_weight > 0 or params.orientation_weight > 0:
+            cost = cost + self._motion_costs(tracks, [detections[d] for d in free], parts, flips)
+        if params.body_id_bonus:
+            body_ids = np.array([detections[d].id for d in free])
+            known = np.array([t.cameras.get(camera, -1) for t in tracks])
+            cost = cost - params.body_id_bonus * ((known[:, None] == body_ids) & (body_ids >= 0))
         unseen = np.array([(stamp - t.last_hit_ns) * _NS for t in tracks])
         gate = params.gate_distance + params.gate_growth * np.clip(unseen, 0.0, None)
         feasible = np.isfinite(cost) & (cost <= gate[:, None])
@@ -404,30 +498,38 @@ class Tracker:
             return []
         rows, cols = linear_sum_assignment(np.where(feasible, cost, _INFEASIBLE))
         return [
-            (free[c], tracks[r], bool(mirrored[r, c]))
+            (free[c], tracks[r], flips[r, c])
             for r, c in zip(rows, cols, strict=True)
             if feasible[r, c]
         ]
 
-    def _velocity_costs(
+    def _motion_costs(
         self,
         tracks: list[_Track],
         detections: list[Skeleton],
-        free: list[int],
-        mirror: np.ndarray,
-        mirrored: np.ndarray,
+        parts: _MirrorParts,
+        flips: np.ndarray,
     ) -> np.ndarray:
-        """``(T, D)`` mean joint velocity difference (m/s); 0 where detections carry none."""
-        track_v = np.stack([t.velocities for t in tracks])
-        det_v = np.stack([detections[d].velocities for d in free])
-        direct = _pair_costs(track_v, det_v, 1)
-        swapped = _pair_costs(track_v, det_v[:, mirror], 1)
-        cost = np.where(mirrored, swapped, direct)
-        return np.where(np.isfinite(cost), cost, 0.0)
+        """``(T, D)`` weighted velocity (m/s) and orientation (rad) differences, 0 if unknown."""
+        params = self.params
+        order = parts.permutation(flips)  # (T, D, J): each pair's relabelling
+        pick = np.arange(len(detections))[None, :, None]
+        cost = np.zeros(flips.shape[:2])
+        if params.velocity_weight > 0:
+            det_v = np.stack([d.velocities for d in detections])[pick, order]  # (T, D, J, 3)
+            track_v = np.stack([t.velocities for t in tracks])[:, None]
+            cost += params.velocity_weight * _nan_mean(np.linalg.norm(det_v - track_v, axis=3))
+        if params.orientation_weight > 0:
+            det_q = np.stack([d.orientations for d in detections])[pick, order]
+            track_q = np.stack([t.orientations for t in tracks])[:, None]
+            dot = np.abs((det_q * track_q).sum(axis=3))
+            angle = 2.0 * np.arccos(np.clip(dot, 0.0, 1.0))
+            cost += params.orientation_weight * _nan_mean(angle)
+        return cost
 
     # -------------------------------------------------------------------------------- updates
-    def _new_track(self, positions: np.ndarray, orientations: np.ndarray, time_ns: int) -> _Track:
-        track = _Track(self._next_id, positions, orientations, time_ns)
+    def _new_track(self, positions: np.ndarray, time_ns: int) -> _Track:
+        track = _Track(self._next_id, positions, time_ns)
         self._next_id += 1
         self._tracks.append(track)
         return track
@@ -437,77 +539,78 @@ class Tracker:
         track: _Track,
         canonical: np.ndarray,
         detection: Skeleton,
+        parts: _MirrorParts,
         *,
         time_ns: int,
         camera: int,
-        mirrored: bool,
-    ) -> bool:
+        flips: np.ndarray,
+    ) -> np.ndarray:
         """Fold one detection (already in the track's labelling) into the track.
 
-        Returns True when the track itself was relabelled (mirror vote), so the caller flips
-        the output labelling of this detection too.
+        Returns ``(K,)`` the parts whose sides the track itself swapped (mirror vote), which
+        the caller swaps in this detection's output too.
         """
         params = self.params
-        predicted_time = max(time_ns, track.time_ns)
-        predicted = track.predict(predicted_time, params.max_prediction)
+        now = max(time_ns, track.time_ns)
+        predicted = track.predict(now, params.max_prediction)
         measured = np.isfinite(canonical).all(axis=1)
         alpha = params.position_smoothing if track.hits else 1.0
-        track.positions = np.where(
+        updated = np.where(
             measured[:, None], predicted + alpha * (canonical - predicted), predicted
         )
-        unknown = ~np.isfinite(track.positions).all(axis=1)
-        track.positions[unknown] = canonical[unknown]
-        track.time_ns = predicted_time
+        unknown = ~np.isfinite(updated).all(axis=1)
+        updated[unknown] = canonical[unknown]
+        track.positions = updated
+        track.time_ns = now
         track.last_hit_ns = max(track.last_hit_ns, time_ns)
         track.hits += 1
+        track.cameras[camera] = detection.id
         orientations = detection.orientations
-        if np.isfinite(orientations).any():
-            track.orientations = (
-                orientations[detection.layout.mirror] if mirrored else orientations.copy()
-            )
-
-        horizon = time_ns - round(params.velocity_window * 1e9)
-        track.records.append((time_ns, camera, canonical))
-        while track.records and track.records[0][0] < horizon:
-            track.records.popleft()
-        if len(track.records) >= 2:
-            t0 = track.records[0][0]
-            times = np.array([(r[0] - t0) * _NS for r in track.records])
-            cams = np.array([r[1] for r in track.records])
-            stacked = np.stack([r[2] for r in track.records])
-            velocities, body, determined = _fit_velocities(times, cams, stacked)
-            if determined:
-                track.velocities = velocities
-                track.velocity = body
+        if params.orientation_weight > 0 and np.isfinite(orientations).any():
+            track.orientations = orientations[parts.permutation(flips)]
+        track.add_record(time_ns, camera, canonical, round(params.velocity_window * 1e9))
 
         if not track.confirmed and track.hits >= params.min_hits:
-            self._confirm(track, time_ns)
-        relabel = False
+            self._confirm(track, detection.layout, time_ns)
         if params.mirror_check and params.mirror_vote and track.confirmed:
-            relabel = self._vote(track, camera, time_ns, mirrored, detection.layout.mirror)
-        return relabel
+            return self._vote(track, parts, camera, time_ns, flips)
+        return np.zeros_like(flips)
 
     def _vote(
-        self, track: _Track, camera: int, time_ns: int, mirrored: bool, mirror: np.ndarray
-    ) -> bool:
-        """Relabel a track when most cameras seeing it now call its labelling mirrored."""
-        track.camera_votes[camera] = (time_ns, mirrored)
+        self, track: _Track, parts: _MirrorParts, camera: int, time_ns: int, flips: np.ndarray
+    ) -> np.ndarray:
+        """Swap a track's sides of the parts that most cameras seeing it now call mirrored."""
+        track.votes[camera] = (time_ns, flips)
         recent = time_ns - round(self.params.velocity_window * 1e9)
-        votes = [vote for t, vote in track.camera_votes.values() if t >= recent]
-        if len(votes) >= 2 and 2 * sum(votes) > len(votes):
-            track.mirror(mirror)
-            return True
-        return False
+        votes = [vote for t, vote in track.votes.values() if t >= recent]
+        if len(votes) < 2:
+            return np.zeros_like(flips)
+        swap = 2 * np.sum(votes, axis=0) > len(votes)
+        if swap.any():
+            track.relabel(parts.permutation(swap))
+            track.votes = {cam: (t, vote ^ swap) for cam, (t, vote) in track.votes.items()}
+        return swap
 
-    def _confirm(self, track: _Track, time_ns: int) -> None:
-        """Confirm a tentative track unless it duplicates a confirmed one (ghost body)."""
+    def _confirm(self, track: _Track, layout: Layout, time_ns: int) -> None:
+        """Confirm a tentative track seen enough, unless it duplicates a confirmed one."""
+        params = self.params
+        cameras = min(params.min_cameras, max(len(self.correction.cameras), 1))
+        old_enough = (time_ns - track.born_ns) * _NS >= params.single_camera_confirm
+        if len(track.cameras) < cameras and not old_enough:
+            return
         confirmed = [t for t in self._tracks if t.confirmed]
         if confirmed:
-            predicted = np.stack(
-                [t.predict(time_ns, self.params.max_prediction) for t in confirmed]
+            predicted = np.stack([t.predict(time_ns, params.max_prediction) for t in confirmed])
+            weights = _joint_weights(layout, params.joint_weight_decay)
+            distance, _ = _pair_costs(
+                predicted,
+                track.positions[None],
+                weights,
+                None,
+                min_joints=params.min_joints,
+                margin=0.0,
             )
-            distance = _pair_costs(predicted, track.positions[None], self.params.min_joints)
-            if (distance < self.params.duplicate_distance).any():
+            if (distance < params.duplicate_distance).any():
                 self._tracks.remove(track)
                 self.drops["duplicate of a confirmed track"] += 1
                 return
@@ -515,24 +618,32 @@ class Tracker:
 
     def _expire(self, now_ns: int) -> None:
         params = self.params
-        kept = []
-        for track in self._tracks:
-            unseen = (now_ns - track.last_hit_ns) * _NS
-            timeout = params.track_timeout if track.confirmed else params.tentative_timeout
-            if unseen <= timeout:
-                kept.append(track)
-        self._tracks = kept
+        self._tracks = [
+            track
+            for track in self._tracks
+            if (now_ns - track.last_hit_ns) * _NS
+            <= (params.track_timeout if track.confirmed else params.tentative_timeout)
+        ]
 
-    def _labelled(self, detection: Skeleton, track: _Track, mirrored: bool) -> Skeleton:
-        """The output skeleton of one detection: track id, labels fixed, velocities filled."""
-        out = detection  # already a copy owned by the tracker (made by the correction)
-        if mirrored:
-            mirror = detection.layout.mirror
-            out.markers = out.markers[mirror]
-            out.marker_present = out.marker_present[mirror]
-            out.links = out.links[mirror]
-            out.link_present = out.link_present[mirror]
+    def _labelled(self, detection: Skeleton, track: _Track, order: np.ndarray) -> Skeleton:
+        """The output skeleton of one detection: track id, sides fixed, velocities filled.
+
+        The detection is the tracker's own copy (made by the correction), so it is changed in
+        place. Link ids are child joint ids, so links take the joints' order.
+        """
+        out = detection
+        if (order != np.arange(len(order))).any():
+            out.markers = out.markers[order]
+            out.marker_present = out.marker_present[order]
+            out.links = out.links[order]
+            out.link_present = out.link_present[order]
         out.id = track.id
         missing = out.marker_present & ~np.isfinite(out.velocities).all(axis=1)
         out.velocities[missing] = track.velocities[missing]
         return out
+
+
+def _nan_mean(values: np.ndarray) -> np.ndarray:
+    """Mean over the last axis ignoring NaN; 0 where all are NaN."""
+    finite = np.isfinite(values)
+    return np.where(finite, values, 0.0).sum(axis=-1) / np.maximum(finite.sum(axis=-1), 1)

@@ -1,5 +1,8 @@
 """Small synthetic multi-camera scenes for the tracker tests: walking people seen by a camera ring.
 
+Handed out as the ``scenes`` fixture (a namespace of the helpers below) because tests run with
+``--import-mode=importlib``, where test modules cannot import sibling modules.
+
 World frame z up; cameras (Azure convention: x right, y down, z forward) on a ring looking at
 the centre. A person is a fixed-limb-length 32-joint pose (AZURE_KINECT) placed on a path with a
 swinging gait, so limb lengths stay constant while joints move.
@@ -9,8 +12,10 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from types import SimpleNamespace
 
 import numpy as np
+import pytest
 
 from hiros_core.calibration import Calibration, CameraCalibration
 from hiros_core.layouts import AZURE_KINECT
@@ -176,3 +181,18 @@ def identities(outputs: list[SkeletonGroup], truth: Callable[[float], np.ndarray
             assert distance[person] < 0.1, "an output does not lie on a person (or is mirrored)"
             seen.setdefault(person, []).append(skeleton.id)
     return seen
+
+
+@pytest.fixture
+def scenes() -> SimpleNamespace:
+    """The scene helpers of this module."""
+    return SimpleNamespace(
+        T0=T0,
+        camera_ring=camera_ring,
+        identities=identities,
+        pose=pose,
+        render=render,
+        run_tracker=run_tracker,
+        straight=straight,
+        crossing=[straight((-2.0, 0.25), (0.8, 0.0)), straight((2.0, -0.25), (-0.8, 0.0))],
+    )

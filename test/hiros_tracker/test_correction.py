@@ -82,3 +82,22 @@ def test_calibration_replaced_at_runtime():
     assert after.stamp_ns == 100_000_000_000
     correction.set_camera("k09", moved)
     assert correction.apply(_group(frame="k09_depth_camera_link")) is not None
+
+
+def test_same_result_as_apply_to_skeleton():
+    rng = np.random.default_rng(0)
+    calibration = _calibration()
+    calibration.cameras["k02"].rotation = Rotation.random(random_state=1).as_quat()
+    group = _group()
+    skeleton = group.skeletons[0]
+    skeleton.markers[:, 1:] = rng.normal(size=(len(skeleton.markers), 19))
+    skeleton.markers[5, 4:8] = 0.0  # a zero quaternion stays unknown
+    skeleton.update_links()
+    skeleton.bounding_box[:7] = rng.normal(size=7)
+    group.skeletons.append(skeleton.copy())
+    out = CameraCorrection(calibration).apply(group)
+    expected = calibration.cameras["k02"].extrinsics.apply_to_skeleton(skeleton)
+    for moved in out.skeletons:
+        np.testing.assert_allclose(moved.markers, expected.markers, atol=1e-12)
+        np.testing.assert_allclose(moved.links, expected.links, atol=1e-12)
+        np.testing.assert_allclose(moved.bounding_box, expected.bounding_box, atol=1e-12)
