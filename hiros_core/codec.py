@@ -384,14 +384,26 @@ class MarkerArrayData:
 _MARKER_PLANS = PlanCache()
 
 
-def _marker_key(data: MarkerArrayData) -> tuple:
+def _text_bytes(texts: list[str]) -> list[bytes]:
+    """Each text as CDR content (UTF-8, ended at a NUL as rclpy does)."""
+    try:
+        return [text.encode("utf-8").split(b"\x00", 1)[0] for text in texts]
+    except UnicodeEncodeError as exc:
+        msg = f"cannot encode marker text: {exc.reason}"
+        raise CodecError(msg) from None
+
+
+def _marker_key(data: MarkerArrayData, texts: list[bytes]) -> tuple:
+    # Texts change every frame (drivers put confidence levels there): only their lengths fix
+    # the shape; their bytes are slots ``text<length>``.
     return (
         tuple(data.frame_ids),
         tuple(data.namespaces),
-        tuple(data.texts),
+        tuple(map(len, texts)),
         tuple(len(p) for p in data.points),
         tuple(len(c) for c in data.point_colors),
-        tuple(data.attachments),
+        # hashing N dataclasses costs more than the encoding; most messages have none
+        None if all(a is _NO_ATTACHMENTS for a in data.attachments) else tuple(data.attachments),
     )
 
 
@@ -399,13 +411,13 @@ def _marker_key(data: MarkerArrayData) -> tuple:
 class _MarkerShape:
     frame_ids: tuple[str, ...]
     namespaces: tuple[str, ...]
-    texts: tuple[str, ...]
+    text_slots: dict[str, np.ndarray]  # slot kind -> indices of the markers whose text it holds
     point_counts: np.ndarray
     color_counts: np.ndarray
     attachments: tuple[MarkerAttachments, ...]
 
 
-def _build_marker_plan(data: MarkerArrayData) -> Plan:
+def _build_marker_plan(data: MarkerArrayData, texts: list[bytes]) -> Plan:
     builder = PlanBuilder()
     builder.u32(len(data))
     for i in range(len(data)):
@@ -434,7 +446,10 @@ def _build_marker_plan(data: MarkerArrayData) -> Plan:
         builder.u32(len(extra.uv_coordinates))
         builder.align(4)
         builder.buf += np.asarray(extra.uv_coordinates, dtype="<f4").tobytes()
-        builder.string(data.texts[i])
+        builder.u32(len(texts[i]) + 1)
+        if texts[i]:
+            builder.slot(f"text{len(texts[i])}", len(texts[i]), 1)
+        builder.u8(0)
         builder.string(extra.mesh_resource)
         builder.string(extra.mesh_filename)
         builder.blob(extra.mesh_data)
@@ -443,7 +458,7 @@ def _build_marker_plan(data: MarkerArrayData) -> Plan:
         _MarkerShape(
             tuple(map(_c_string, data.frame_ids)),
             tuple(map(_c_string, data.namespaces)),
-            tuple(map(_c_string, data.texts)),
+            _text_slots(texts),
             np.array([len(p) for p in data.points], dtype=np.intp),
             np.array([len(c) for c in data.point_colors], dtype=np.intp),
             tuple(data.attachments),
@@ -451,10 +466,21 @@ def _build_marker_plan(data: MarkerArrayData) -> Plan:
     )
 
 
+def _text_slots(texts: list[bytes]) -> dict[str, np.ndarray]:
+    lengths = np.array([len(t) for t in texts], dtype=np.intp)
+    return {f"text{n}": np.flatnonzero(lengths == n) for n in np.unique(lengths[lengths > 0])}
+
+
 def encode_marker_array(data: MarkerArrayData) -> bytes:
     """CDR bytes of ``visualization_msgs/msg/MarkerArray`` for the columns ``data``."""
-    key = _marker_key(data)
-    plan = _MARKER_PLANS.get(key) or _MARKER_PLANS.put(key, _build_marker_plan(data))
+    texts = _text_bytes(data.texts)
+    key = _marker_key(data, texts)
+    plan = _MARKER_PLANS.get(key) or _MARKER_PLANS.put(key, _build_marker_plan(data, texts))
+    shape: _MarkerShape = plan.meta  # type: ignore[assignment]
+    text_values = {
+        kind: np.frombuffer(b"".join(texts[i] for i in indices), dtype=np.uint8)
+        for kind, indices in shape.text_slots.items()
+    }
     what = "MarkerArray"
     ita = np.empty(len(data), dtype=_ITA)
     ita["id"] = _checked(list(map(int, data.ids)), "<i4", f"{what} marker id")
@@ -473,6 +499,7 @@ def encode_marker_array(data: MarkerArrayData) -> bytes:
             "points": _rows([np.asarray(p, dtype="<f8") for p in data.points], 3),
             "point_colors": _rows([np.asarray(c, dtype="<f4") for c in data.point_colors], 4),
             "embedded": np.asarray(data.mesh_use_embedded_materials, dtype=np.uint8),
+            **text_values,
         }
     )
 
@@ -483,7 +510,8 @@ def decode_marker_array(data: bytes | bytearray | memoryview) -> MarkerArrayData
     plan = _MARKER_PLANS.find(raw)
     if plan is None:
         markers = _parse_marker_array(data)
-        _MARKER_PLANS.put(_marker_key(markers), _build_marker_plan(markers))
+        texts = _text_bytes(markers.texts)
+        _MARKER_PLANS.put(_marker_key(markers, texts), _build_marker_plan(markers, texts))
         return markers
     shape: _MarkerShape = plan.meta  # type: ignore[assignment]
     ita = plan.gather(raw, "ita", _ITA).ravel()
@@ -502,12 +530,34 @@ def decode_marker_array(data: bytes | bytearray | memoryview) -> MarkerArrayData
         colors=plan.gather(raw, "color", "<f4").reshape(-1, 4).copy(),
         lifetimes_ns=_join_ns(plan.gather(raw, "lifetime", _TIME).ravel()),
         frame_locked=plan.gather(raw, "locked", np.uint8).ravel().astype(bool),
-        points=np.split(points, np.cumsum(shape.point_counts)[:-1]) if len(ita) else [],
-        point_colors=np.split(point_colors, np.cumsum(shape.color_counts)[:-1]) if len(ita) else [],
-        texts=list(shape.texts),
+        points=_split_rows(points, shape.point_counts),
+        point_colors=_split_rows(point_colors, shape.color_counts),
+        texts=_gather_texts(plan, raw, shape),
         attachments=list(shape.attachments),
         mesh_use_embedded_materials=plan.gather(raw, "embedded", np.uint8).ravel().astype(bool),
     )
+
+
+def _split_rows(rows: np.ndarray, counts: np.ndarray) -> list[np.ndarray]:
+    """Per-marker arrays; markers without points (most drivers) share one empty array."""
+    if not rows.size:
+        empty = rows[:0]
+        empty.flags.writeable = False
+        return [empty] * len(counts)
+    return np.split(rows, np.cumsum(counts)[:-1])
+
+
+def _gather_texts(plan: Plan, raw: np.ndarray, shape: _MarkerShape) -> list[str]:
+    texts = [""] * len(shape.frame_ids)
+    for kind, indices in shape.text_slots.items():
+        rows = plan.gather(raw, kind, np.uint8)
+        for index, row in zip(indices.tolist(), rows, strict=True):
+            try:
+                texts[index] = row.tobytes().decode("utf-8")
+            except UnicodeDecodeError:
+                msg = f"cannot decode MarkerArray: the text of marker {index} is not UTF-8"
+                raise CodecError(msg) from None
+    return texts
 
 
 def _parse_marker_array(data: bytes | bytearray | memoryview) -> MarkerArrayData:
