@@ -1,4 +1,6 @@
 # hiros: `make demo` and `make test` are the two commands; both set up the venv first.
+SHELL := /bin/bash
+.SHELLFLAGS := -o pipefail -c
 VENV ?= .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.hiros-setup
@@ -13,7 +15,9 @@ setup: $(STAMP)
 
 $(STAMP): $(SETUP_INPUTS)
 	@test -x $(PY) || python3 -m venv $(VENV)
-	$(PY) -m pip install --quiet --disable-pip-version-check -r requirements.txt -c constraints.txt
+	@# (pip's notes about local index folders this machine lacks are filtered out)
+	$(PY) -m pip install --quiet --disable-pip-version-check -r requirements.txt -c constraints.txt \
+		2>&1 | { grep -v "^WARNING: Location" || true; }
 	tools/build_interfaces.sh $(VENV) hiros_skeleton_msgs
 	@$(PY) -c "import tf2_msgs.msg" 2>/dev/null || tools/build_interfaces.sh $(VENV) third_party/tf2_msgs
 	$(PY) -m pip install --quiet --disable-pip-version-check --no-deps --no-build-isolation --config-settings editable_mode=compat -e .

@@ -20,6 +20,7 @@ export _ROS_WHEELS_BOOTSTRAP_COMPLETE=1 AMENT_PREFIX_PATH="$venv" PATH="$venv/bi
 for pkg in "$@"; do
   name=$(basename "$pkg")
   build="$venv/build-interfaces/$name"
+  mkdir -p "$build"
   echo "building $name into $venv"
   cmake -S "$pkg" -B "$build" -DCMAKE_BUILD_TYPE=Release -DBUILD_TESTING=OFF \
     -DCMAKE_PREFIX_PATH="$venv" -DCMAKE_INSTALL_PREFIX="$venv" \
