@@ -1,0 +1,71 @@
+"""Pipeline speed: offline throughput (multiple of real time) and end-to-end DDS latency.
+
+Offline: a simulated recording of 3 cameras x 30 Hz x 4 people through ``hiros run``'s runner
+(reading, bridging, all four stages, writing), as recording seconds per wall-clock second.
+Latency: camera message published -> filter output received, over real DDS, for the composed
+``pipeline`` node and for the four stages as separate nodes (see ``hiros_bench.latency``); the
+processes run in a loopback-only network namespace.
+"""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+from hiros_core.calibration import load_calibration
+from hiros_core.isolation import isolated, isolated_env
+
+TARGET_REAL_TIME = 100.0
+
+
+def offline_throughput(duration: float) -> tuple[float, float, float]:
+    """(recording seconds, wall seconds, real-time factor) of ``run_recording`` on 3 x 30 Hz x 4."""
+    from hiros_pipeline import run_recording
+    from hiros_sim import SimParams, simulate, write_recording
+
+    with tempfile.TemporaryDirectory() as folder:
+        sim = Path(folder) / "sim"
+        write_recording(
+            simulate(SimParams(n_cameras=3, n_people=4, duration=duration, seed=11)), sim
+        )
+        calibration = load_calibration(sim / "calibration.yaml")
+        summary = run_recording(sim / "recording.mcap", calibration, Path(folder) / "out.mcap")
+    return summary.duration, summary.wall_time, summary.real_time_factor
+
+
+def latency(mode: str, seconds: float) -> str:
+    """One line of p50/p95 latency for ``mode`` (composed or nodes), measured in a child."""
+    command = [
+        sys.executable,
+        "-m",
+        "hiros_bench.latency",
+        "--mode",
+        mode,
+        "--seconds",
+        str(seconds),
+    ]
+    result = subprocess.run(
+        isolated(command), env=isolated_env(domain_id=77), capture_output=True, text=True,
+        timeout=300, check=False,
+    )  # fmt: skip
+    lines = [line for line in result.stdout.splitlines() if line.startswith("latency")]
+    if result.returncode != 0 or not lines:
+        return f"latency {mode}: failed ({(result.stderr or result.stdout).strip()[-300:]})"
+    return lines[-1]
+
+
+def run(console, quick: bool = False) -> list[str]:  # noqa: ANN001 - rich Console
+    """Print the offline throughput and both latencies."""
+    duration = 20.0 if quick else 60.0
+    recorded, wall, factor = offline_throughput(duration)
+    lines = [
+        f"offline hiros run, 3 cameras x 30 Hz x 4 people: {recorded:.1f} s of recording in "
+        f"{wall:.2f} s = {factor:.1f}x real time (target {TARGET_REAL_TIME:.0f}x)"
+    ]
+    for mode in ("composed", "nodes"):
+        lines.append(latency(mode, 10.0 if quick else 20.0))
+    for line in lines:
+        console.print(line, highlight=False)
+    return lines
