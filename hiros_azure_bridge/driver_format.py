@@ -195,6 +195,11 @@ class DriverBridge:
         self._lookups: dict[str, tuple[Layout, np.ndarray]] = {}
         self._lookup("")  # an unknown name in joint_names fails here, not per message
 
+    def _count(self, reason: str, amount: int) -> None:
+        """Add to ``drops`` (zero counts leave no entry, so ``drops`` lists what happened)."""
+        if amount:
+            self.drops[reason] += amount
+
     def reset(self) -> None:
         """Forget the last stamp (a new recording or a restarted source)."""
         self.last_stamp_ns = None
@@ -222,9 +227,9 @@ class DriverBridge:
             return None
         add = actions == ADD
         deleteall = actions == DELETEALL
-        self.drops["delete_marker"] += int((actions == DELETE).sum())
-        self.drops["deleteall_marker"] += int(deleteall.sum())
-        self.drops["unknown_action"] += int((~add & ~deleteall & (actions != DELETE)).sum())
+        self._count("delete_marker", int((actions == DELETE).sum()))
+        self._count("deleteall_marker", int(deleteall.sum()))
+        self._count("unknown_action", int((~add & ~deleteall & (actions != DELETE)).sum()))
         rows = np.flatnonzero(add if add.any() else deleteall)
         if len(rows) == 0:
             return None
@@ -268,15 +273,15 @@ class DriverBridge:
         known = (ids >= 0) & (driver_joint < len(table))
         joint = np.where(known, table[np.minimum(driver_joint, len(table) - 1)], -1)
         known &= joint >= 0
-        self.drops["unknown_joint"] += int((~known).sum())
+        self._count("unknown_joint", int((~known).sum()))
         poses = np.asarray(data.poses, dtype=float)[rows]
         positions = poses[:, :3] * self.params.position_scale
         finite = np.isfinite(positions).all(axis=1)
-        self.drops["nan_position"] += int((known & ~finite).sum())
+        self._count("nan_position", int((known & ~finite).sum()))
         keep = np.flatnonzero(known & finite)
         key = body[keep] * layout.n_joints + joint[keep]
         _, first = np.unique(key, return_index=True)
-        self.drops["duplicate_marker"] += len(keep) - len(first)
+        self._count("duplicate_marker", len(keep) - len(first))
         keep = keep[first]
         if len(keep) == 0:
             return []

@@ -52,7 +52,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--delay",
         type=float,
         default=1.0,
-        help="seconds to wait before playing, so that subscribers are discovered (default 1)",
+        help="wait up to this many seconds for every topic's subscribers before playing "
+        "(default 1)",
     )
 
 
@@ -127,6 +128,18 @@ class Player:
         self.clock_msg = Clock()
         self.counts: Counter[str] = Counter()
 
+    def wait_for_subscribers(self, timeout: float) -> None:
+        """Give DDS discovery up to ``timeout`` s, less when every topic has a subscriber.
+
+        Volatile topics deliver nothing to subscribers that have not been discovered yet, so
+        without this pause the first messages of a replay would be lost.
+        """
+        deadline = time.monotonic() + max(timeout, 0.0)
+        while time.monotonic() < deadline and not all(
+            p.get_subscription_count() for p in self.publishers.values()
+        ):
+            time.sleep(0.05)
+
     def publish_clock(self, log_time_ns: int) -> None:
         """/clock at a recording log time."""
         if self.clock is not None:
@@ -179,7 +192,7 @@ def run(args: argparse.Namespace) -> int:
     node = rclpy.create_node("hiros_play")
     player = Player(node, topics, args)
     try:
-        time.sleep(max(args.delay, 0.0))  # DDS discovery runs in the background meanwhile
+        player.wait_for_subscribers(args.delay)
         while True:
             with RecordingReader(args.recording) as reader:
                 played = player.play(reader.messages(player.publishers))

@@ -98,8 +98,7 @@ def iter_groups(
             if group is not None:
                 yield source, group
     finally:
-        drops.update(reader.drops)
-        for bridge in bridges.values():
-            drops.update(bridge.drops)
+        for counter in (reader.drops, *(b.drops for b in bridges.values())):
+            drops.update({reason: n for reason, n in counter.items() if n})
         if reader is not recording:
             reader.close()

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import subprocess
 import sys
-import time
 from pathlib import Path
 
 import numpy as np
@@ -79,7 +78,6 @@ def test_live_replay_keeps_bytes_and_stamps(tmp_path, ros_env):
         text=True,
     )
     assert listener.stdout.readline().strip() == "ready"
-    time.sleep(2.0)  # discovery: the listener must be matched before the first message
     play = subprocess.run(
         [
             sys.executable,
@@ -95,6 +93,8 @@ def test_live_replay_keeps_bytes_and_stamps(tmp_path, ros_env):
             "/k01/skeletons",
             "--remap",
             "/k01/skeletons:=/cam_a/skeletons",
+            "--delay",
+            "30",
         ],
         env=ros_env,
         capture_output=True,
