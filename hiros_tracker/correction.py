@@ -108,40 +108,32 @@ def _moved(skeletons: list[Skeleton], extrinsics: RigidTransform) -> list[Skelet
     if not skeletons:
         return []
     copies = [skeleton.copy() for skeleton in skeletons]
-    rows = np.concatenate([part for s in copies for part in (s.markers, s.links)])
     matrix = extrinsics.rotation.as_matrix()
+    left = _left_product(extrinsics.rotation.as_quat())
+    rows = np.concatenate([part for s in copies for part in (s.markers, s.links)])
     rows[:, 1:4] = rows[:, 1:4] @ matrix.T + extrinsics.translation
-    rows[:, 4:8] = _rotated_quaternions(extrinsics.rotation.as_quat(), rows[:, 4:8])
+    rows[:, 4:8] = _unit(rows[:, 4:8]) @ left.T
     rows[:, 8:20] = (rows[:, 8:20].reshape(-1, 4, 3) @ matrix.T).reshape(-1, 12)
+    boxes = np.stack([s.bounding_box for s in copies])
+    boxes[:, 0:3] = boxes[:, 0:3] @ matrix.T + extrinsics.translation
+    boxes[:, 3:7] = _unit(boxes[:, 3:7]) @ left.T
     start = 0
-    for skeleton in copies:
+    for skeleton, box in zip(copies, boxes, strict=True):
         for part in (skeleton.markers, skeleton.links):
             part[:] = rows[start : start + len(part)]
             start += len(part)
-        box = skeleton.bounding_box
-        box[0:3] = box[0:3] @ matrix.T + extrinsics.translation
-        box[3:7] = _rotated_quaternions(extrinsics.rotation.as_quat(), box[None, 3:7])[0]
+        skeleton.bounding_box = box
     return copies
 
 
-def _rotated_quaternions(rotation: np.ndarray, quaternions: np.ndarray) -> np.ndarray:
-    """Hamilton product ``rotation ⊗ q`` for rows ``(N, 4)`` x, y, z, w of unit-normalised q.
+def _left_product(rotation: np.ndarray) -> np.ndarray:
+    """``(4, 4)`` matrix of the Hamilton product ``rotation ⊗ q`` on quaternions x, y, z, w."""
+    x, y, z, w = rotation
+    return np.array([[w, -z, y, x], [z, w, -x, y], [-y, x, w, z], [-x, -y, -z, w]])
 
-    Rows with NaN or zero norm become NaN, as in ``RigidTransform.rotate_quaternions``.
-    """
-    norm = np.linalg.norm(quaternions, axis=1, keepdims=True)
+
+def _unit(quaternions: np.ndarray) -> np.ndarray:
+    """Rows ``(N, 4)`` scaled to unit norm; NaN or all-zero rows become NaN (unknown)."""
+    norm = np.sqrt(np.einsum("ij,ij->i", quaternions, quaternions))[:, None]
     with np.errstate(invalid="ignore", divide="ignore"):
-        q = quaternions / norm
-    x1, y1, z1, w1 = rotation
-    x2, y2, z2, w2 = q.T
-    out = np.stack(
-        [
-            w1 * x2 + x1 * w2 + y1 * z2 - z1 * y2,
-            w1 * y2 - x1 * z2 + y1 * w2 + z1 * x2,
-            w1 * z2 + x1 * y2 - y1 * x2 + z1 * w2,
-            w1 * w2 - x1 * x2 - y1 * y2 - z1 * z2,
-        ],
-        axis=1,
-    )
-    out[~np.isfinite(out).all(axis=1)] = np.nan
-    return out
+        return quaternions / norm

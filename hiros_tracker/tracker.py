@@ -34,7 +34,7 @@ import heapq
 import itertools
 from collections import Counter, deque
 from dataclasses import dataclass
-from functools import cache
+from functools import cache, cached_property
 
 import numpy as np
 from scipy.optimize import linear_sum_assignment
@@ -118,7 +118,7 @@ class TrackerParams:
     min_confidence: float = 0.1
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class _MirrorParts:
     """A layout's left/right structure.
 
@@ -138,12 +138,18 @@ class _MirrorParts:
         """Number of parts K."""
         return self.onehot.shape[1]
 
+    @cached_property
+    def _table(self) -> np.ndarray:
+        """``(2**K, J)`` the joint order of every combination of flipped parts."""
+        combos = (np.arange(2**self.count)[:, None] >> np.arange(self.count)) & 1
+        sided = self.part >= 0
+        flipped = np.zeros((len(combos), len(self.part)), dtype=bool)
+        flipped[:, sided] = combos[:, self.part[sided]].astype(bool)
+        return np.where(flipped, self.mirror, np.arange(len(self.part)))
+
     def permutation(self, flips: np.ndarray) -> np.ndarray:
         """``(..., J)`` joint order relabelling the parts flagged in ``flips`` ``(..., K)``."""
-        sided = self.part >= 0
-        flipped = np.zeros((*flips.shape[:-1], len(self.part)), dtype=bool)
-        flipped[..., sided] = flips[..., self.part[sided]]
-        return np.where(flipped, self.mirror, np.arange(len(self.part)))
+        return self._table[flips.astype(np.int64) @ (1 << np.arange(self.count))]
 
 
 @cache
@@ -230,14 +236,16 @@ def _pair_costs(
 
 def _velocity_sums(times: float, positions: np.ndarray) -> np.ndarray:
     """``(J, 9)`` one sample's terms of the least-squares slope: n, t, t², p (3), t·p (3)."""
-    valid = np.isfinite(positions).all(axis=1)
-    sums = np.zeros((len(positions), 9))
-    sums[valid, 0] = 1.0
-    sums[valid, 1] = times
-    sums[valid, 2] = times * times
-    sums[valid, 3:6] = positions[valid]
-    sums[valid, 6:9] = times * positions[valid]
-    return sums
+    valid = np.isfinite(positions).all(axis=1)[:, None]
+    filled = np.where(valid, positions, 0.0)
+    ones = valid.astype(float)
+    return np.concatenate(
+        [ones, ones * times, ones * (times * times), filled, filled * times], axis=1
+    )
+
+
+_REBASE_NS = 30_000_000_000
+"""How often (ns) a track's running sums are rebuilt around a new time origin (precision)."""
 
 
 class _Track:
@@ -246,13 +254,15 @@ class _Track:
     ``positions`` ``(J, 3)`` is the smoothed pose at ``time_ns``; ``velocities`` ``(J, 3)`` is
     the least-squares slope of the recent detections with one intercept per camera (so that a
     constant offset between two cameras' calibrations does not read as motion), kept as running
-    sums per camera (``sums[camera]`` ``(J, 9)``) over ``velocity_window``.
+    sums per camera (``sums[camera]`` ``(J, 9)``, times from ``epoch_ns``) over
+    ``velocity_window``; ``records`` holds the detections inside the window.
     """
 
     __slots__ = (
         "born_ns",
         "cameras",
         "confirmed",
+        "epoch_ns",
         "hits",
         "id",
         "last_hit_ns",
@@ -277,33 +287,38 @@ class _Track:
         self.confirmed = False
         self.cameras: dict[int, int] = {}  # camera code -> the camera's last body id for it
         self.records: deque[tuple[int, int, np.ndarray]] = deque()
-        self.sums: dict[int, np.ndarray] = {}
+        self.sums = np.zeros((1, len(positions), 9))  # (cameras, J, 9)
+        self.epoch_ns = time_ns
         self.votes: dict[int, tuple[int, np.ndarray]] = {}
 
     def predict(self, time_ns: int, max_prediction: float) -> np.ndarray:
         """``(J, 3)`` pose extrapolated to ``time_ns`` with the body's mean velocity."""
-        dt = float(np.clip((time_ns - self.time_ns) * _NS, -max_prediction, max_prediction))
+        dt = min(max((time_ns - self.time_ns) * _NS, -max_prediction), max_prediction)
         return self.positions + self.velocity * dt
 
     def add_record(self, time_ns: int, camera: int, positions: np.ndarray, window_ns: int) -> None:
         """Add a detection to the velocity fit and forget those older than the window."""
-        sums = _velocity_sums((time_ns - self.born_ns) * _NS, positions)
-        self.records.append((time_ns, camera, sums))
-        self.sums[camera] = self.sums.get(camera, 0.0) + sums
-        while self.records and self.records[0][0] < time_ns - window_ns:
-            _, old_camera, old = self.records.popleft()
-            self.sums[old_camera] -= old
-            if self.sums[old_camera][:, 0].max() < 0.5:
-                del self.sums[old_camera]
-        stacked = np.stack(list(self.sums.values()))  # (C, J, 9)
-        n = np.maximum(stacked[..., 0], 1.0)
-        sxx = (stacked[..., 2] - stacked[..., 1] ** 2 / n).sum(axis=0)  # (J,)
-        sxy = (stacked[..., 6:9] - stacked[..., 1:2] * stacked[..., 3:6] / n[..., None]).sum(0)
+        if time_ns - self.epoch_ns > _REBASE_NS:
+            self.epoch_ns = time_ns
+            self.sums[:] = 0.0
+            for t, cam, old in self.records:
+                self.sums[cam] += _velocity_sums((t - self.epoch_ns) * _NS, old)
+        if camera >= len(self.sums):
+            grown = np.zeros((camera + 1, *self.sums.shape[1:]))
+            grown[: len(self.sums)] = self.sums
+            self.sums = grown
+        self.records.append((time_ns, camera, positions))
+        self.sums[camera] += _velocity_sums((time_ns - self.epoch_ns) * _NS, positions)
+        while self.records[0][0] < time_ns - window_ns:
+            t, old_camera, old = self.records.popleft()
+            self.sums[old_camera] -= _velocity_sums((t - self.epoch_ns) * _NS, old)
+        sums = self.sums
+        n = np.maximum(sums[..., 0], 1.0)  # (C, J)
+        sxx = (sums[..., 2] - sums[..., 1] ** 2 / n).sum(axis=0)  # (J,)
+        sxy = (sums[..., 6:9] - sums[..., 1:2] * sums[..., 3:6] / n[..., None]).sum(axis=0)
         determined = sxx > 1e-5
         if determined.any():
-            self.velocities = np.where(
-                determined[:, None], sxy / np.where(determined, sxx, 1.0)[:, None], 0.0
-            )
+            self.velocities = sxy / np.where(determined, sxx, np.inf)[:, None]
             self.velocity = sxy[determined].sum(axis=0) / sxx[determined].sum()
 
     def relabel(self, permutation: np.ndarray) -> None:
@@ -311,8 +326,8 @@ class _Track:
         self.positions = self.positions[permutation]
         self.orientations = self.orientations[permutation]
         self.velocities = self.velocities[permutation]
-        self.records = deque((t, cam, sums[permutation]) for t, cam, sums in self.records)
-        self.sums = {cam: sums[permutation] for cam, sums in self.sums.items()}
+        self.records = deque((t, cam, pos[permutation]) for t, cam, pos in self.records)
+        self.sums = self.sums[:, permutation]
 
 
 class Tracker:

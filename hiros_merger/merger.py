@@ -1,0 +1,453 @@
+"""Merger: one skeleton per person, fused from what every camera saw of that track.
+
+Data flow of ``Merger.update`` (one call per tracker output; the node calls exactly this):
+
+1. each tracker skeleton (one camera detection, ``id`` = track id, world frame, reference-clock
+   ``src_time``) replaces the previous one of the same track and camera;
+2. at the output time (each input's newest stamp, or the ticks of ``output_rate``) every track
+   with detections younger than ``window`` is fused: each detection is first brought to the
+   output time with its joints' velocities (the tracker fills them), then joints are averaged
+   with reliability weights and an iteratively reweighted robust mean;
+3. joint orientations are averaged on SO(3) with the same weights (the weighted quaternion mean
+   of Markley et al., "Averaging quaternions", J. Guidance 30(4), 2007 — what
+   ``scipy.spatial.transform.Rotation.mean`` computes, here for all joints at once).
+
+Reliability of joint ``j`` of the detection of camera ``c`` (after Colombel et al., 2021, who
+weight each camera by confidence, distance and view; the product form is ours)::
+
+    w = conf^confidence_power            SDK confidence (occluded joints come as LOW)
+        × (1 + depth_gain · depth)^-2    depth noise grows ~linearly with distance (variance ²)
+        × view(cos θ)                     θ: angle between the body's front and the camera
+        × occlusion                       another person's torso on the camera's ray
+        × agreement(c)                    1 / (1 + (e_c / agreement_scale)²), e_c the camera's
+                                          recent mean distance to the fused skeletons
+        × staleness                       1 / (1 + (Δt / staleness_scale)²)
+
+then the robust mean multiplies by a Cauchy weight ``1 / (1 + (r / outlier_scale)²)`` of each
+joint's distance ``r`` to the current estimate, starting from the weighted median, so that one
+camera's flipped limb or swapped leg does not pull the result.
+
+Output: world frame, ``id`` = track id, ``src_time`` = output time, ``src_frame`` = world frame;
+positions, orientations, confidences (weighted mean) and velocities (weighted mean) per joint.
+Shapes: ``M`` tracks, ``C`` detections per track (padded), ``J`` joints; metres, seconds.
+"""
+
+from __future__ import annotations
+
+from collections import Counter
+from dataclasses import dataclass
+
+import numpy as np
+
+from hiros_core.calibration import Calibration, CameraCalibration
+from hiros_core.layouts import Layout
+from hiros_core.model import Skeleton, SkeletonGroup, camera_from_frame
+
+__all__ = ["Merger", "MergerParams"]
+
+_NS = 1e-9
+
+
+@dataclass
+class MergerParams:
+    """Merger parameters (field names = ROS parameter names of the ``merger`` node).
+
+    Attributes:
+        window: seconds; a camera's detection older than this at the output time is not fused.
+        output_rate: Hz; 0 outputs on each input at its newest stamp.
+        extrapolate: bring each detection to the output time with its joint velocities.
+        max_extrapolation: seconds of extrapolation at most.
+        confidence_power: exponent of the SDK confidence in the weight.
+        confidence_floor: smallest confidence used (a NONE joint still counts a little).
+        depth_gain: per metre; the depth weight is ``(1 + depth_gain · depth)^-2``.
+        view_weight_min: weight of a camera behind the person; facing it gives 1, the weight is
+            ``max(view_weight_min, ((1 + cos θ) / 2)^view_power)``.
+        view_power: exponent of the view weight.
+        occlusion_radius: metres; a joint whose camera ray passes this close to another
+            person's torso, in front of the joint, is occluded (0 turns the check off).
+        occlusion_weight: weight factor of an occluded joint.
+        agreement_scale: metres; scale of the camera agreement weight.
+        agreement_smoothing: weight (0..1] of each new residual in a camera's running agreement.
+        staleness_scale: seconds; scale of the weight of older detections.
+        outlier_scale: metres; Cauchy scale of the robust mean.
+        iterations: reweighting iterations of the robust mean.
+        track_timeout: seconds; a track unseen this long is forgotten.
+
+    """
+
+    window: float = 0.1
+    output_rate: float = 0.0
+    extrapolate: bool = True
+    max_extrapolation: float = 0.1
+    confidence_power: float = 2.0
+    confidence_floor: float = 0.05
+    depth_gain: float = 0.33
+    view_weight_min: float = 0.1
+    view_power: float = 1.0
+    occlusion_radius: float = 0.2
+    occlusion_weight: float = 0.5
+    agreement_scale: float = 0.1
+    agreement_smoothing: float = 0.02
+    staleness_scale: float = 0.05
+    outlier_scale: float = 0.1
+    iterations: int = 3
+    track_timeout: float = 1.0
+
+
+@dataclass(frozen=True)
+class _BodyAxes:
+    """Joints that give a body's facing direction and torso, or -1 where a layout lacks them."""
+
+    root: int
+    neck: int
+    left: np.ndarray  # (2,) hip and shoulder on the left
+    right: np.ndarray  # (2,)
+    torso: np.ndarray  # joints standing for the torso in occlusion tests
+
+    @classmethod
+    def of(cls, layout: Layout) -> _BodyAxes:
+        """Find the joints by name (Azure Kinect and Kinect v2 names)."""
+        names = {name: i for i, name in enumerate(layout.joint_names)}
+        root = layout.parents.index(-1)
+        neck = names.get("Neck", -1)
+        left = np.array([names.get("HipLeft", -1), names.get("ShoulderLeft", -1)])
+        right = np.array([names.get("HipRight", -1), names.get("ShoulderRight", -1)])
+        torso_names = ("SpineNaval", "SpineMid", "SpineChest", "SpineShoulder", "Neck")
+        torso = np.array([root] + [names[n] for n in torso_names if n in names])
+        return cls(root, neck, left, right, torso)
+
+    @property
+    def has_front(self) -> bool:
+        """Whether the layout names what the facing direction needs."""
+        return self.neck >= 0 and (self.left >= 0).all() and (self.right >= 0).all()
+
+
+_AXES: dict[str, _BodyAxes] = {}
+
+
+def _axes(layout: Layout) -> _BodyAxes:
+    axes = _AXES.get(layout.name)
+    if axes is None:
+        axes = _AXES[layout.name] = _BodyAxes.of(layout)
+    return axes
+
+
+def _weighted_median(values: np.ndarray, weights: np.ndarray) -> np.ndarray:
+    """Weighted median along axis 1 of ``values`` ``(M, C, J, 3)`` with ``weights`` ``(M, C, J)``.
+
+    Per coordinate: the smallest value whose cumulative weight reaches half the total; NaN
+    values carry no weight. Entries with all weights 0 give NaN.
+    """
+    weights = np.broadcast_to(weights[..., None], values.shape)
+    weights = np.where(np.isfinite(values), weights, 0.0)
+    order = np.argsort(np.where(weights > 0, values, np.inf), axis=1)
+    sorted_values = np.take_along_axis(values, order, axis=1)
+    cumulative = np.cumsum(np.take_along_axis(weights, order, axis=1), axis=1)
+    total = cumulative[:, -1:]
+    first = np.argmax(cumulative >= 0.5 * total, axis=1)[:, None]
+    median = np.take_along_axis(sorted_values, first, axis=1)[:, 0]
+    return np.where(total[:, 0] > 0, median, np.nan)
+
+
+def _weighted_mean(values: np.ndarray, weights: np.ndarray) -> np.ndarray:
+    """Weighted mean along axis 1 of ``(M, C, J, k)`` with ``(M, C, J)``; NaN where no weight."""
+    finite = np.isfinite(values).all(axis=-1)
+    weights = np.where(finite, weights, 0.0)
+    total = weights.sum(axis=1)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        mean = (np.where(finite[..., None], values, 0.0) * weights[..., None]).sum(axis=1)
+        return mean / total[..., None]
+
+
+def _quaternion_mean(quaternions: np.ndarray, weights: np.ndarray) -> np.ndarray:
+    """Weighted mean rotation along axis 1 of ``(M, C, J, 4)`` (x, y, z, w), batched Markley.
+
+    The mean is the eigenvector of the largest eigenvalue of ``Σ w q qᵀ`` (sign-free, so q and
+    -q count alike); NaN where no orientation has weight.
+    """
+    finite = np.isfinite(quaternions).all(axis=-1)
+    weights = np.where(finite, weights, 0.0)
+    q = np.where(finite[..., None], quaternions, 0.0)
+    q = q / np.maximum(np.linalg.norm(q, axis=-1, keepdims=True), 1e-12)
+    scatter = np.einsum("mcj,mcja,mcjb->mjab", weights, q, q)
+    _, vectors = np.linalg.eigh(scatter)
+    mean = vectors[..., -1]
+    mean = np.where(mean[..., 3:4] < 0, -mean, mean)
+    return np.where((weights.sum(axis=1) > 0)[..., None], mean, np.nan)
+
+
+class Merger:
+    """Fuses each track's camera detections into one skeleton (see the module docstring).
+
+    Attributes:
+        params: the parameters it was built with.
+        drops: reason -> count of input left out.
+        agreement: camera name -> running mean distance (m) of its detections to the fused
+            skeletons.
+
+    """
+
+    def __init__(
+        self, params: MergerParams | None = None, calibration: Calibration | None = None
+    ) -> None:
+        self.params = params or MergerParams()
+        self.drops: Counter[str] = Counter()
+        self.agreement: dict[str, float] = {}
+        self._camera_positions: dict[str, np.ndarray] = {}
+        self._frame_names: dict[str, str] = {}
+        self._latest: dict[int, dict[str, Skeleton]] = {}
+        self._next_tick_ns: int | None = None
+        self._last_out_ns: int | None = None
+        self._world_frame = "world"
+        if calibration is not None:
+            self.set_calibration(calibration)
+
+    # ----------------------------------------------------------------------------- calibration
+    def set_calibration(self, calibration: Calibration) -> None:
+        """Camera positions for the depth, view and occlusion weights (optional)."""
+        self._camera_positions = {}
+        self._frame_names = {}
+        for name, camera in calibration.cameras.items():
+            self.set_camera(name, camera)
+
+    def set_camera(self, name: str, camera: CameraCalibration) -> None:
+        """Replace one camera's pose (a live update from ``calib``)."""
+        self._camera_positions[name] = np.asarray(camera.translation, dtype=float)
+        if camera.frame_id:
+            self._frame_names[camera.frame_id] = name
+
+    def _camera_name(self, frame_id: str) -> str:
+        return self._frame_names.get(frame_id) or camera_from_frame(frame_id)
+
+    # ----------------------------------------------------------------------------------- flow
+    def update(self, group: SkeletonGroup) -> SkeletonGroup:
+        """Take one tracker output; return the fused people (empty when no output is due)."""
+        if group.frame_id:
+            self._world_frame = group.frame_id
+        newest = None
+        for skeleton in group.skeletons:
+            if skeleton.id < 0:
+                self.drops["no track id"] += 1
+                continue
+            if not skeleton.marker_present.any():
+                self.drops["no joint"] += 1
+                continue
+            camera = self._camera_name(skeleton.src_frame)
+            per_camera = self._latest.setdefault(skeleton.id, {})
+            previous = per_camera.get(camera)
+            if previous is not None and previous.src_time_ns > skeleton.src_time_ns:
+                self.drops["older than the camera's last detection"] += 1
+                continue
+            per_camera[camera] = skeleton
+            newest = max(newest or skeleton.src_time_ns, skeleton.src_time_ns)
+        out_ns = self._output_time(newest, group.stamp_ns)
+        if out_ns is None:
+            return SkeletonGroup(group.stamp_ns, self._world_frame, [])
+        self._last_out_ns = out_ns
+        return SkeletonGroup(out_ns, self._world_frame, self.merge(out_ns))
+
+    def _output_time(self, newest_ns: int | None, stamp_ns: int) -> int | None:
+        """When to output: the newest input stamp, a passed tick, or None (nothing new)."""
+        rate = self.params.output_rate
+        if rate <= 0:
+            if newest_ns is None or (
+                self._last_out_ns is not None and newest_ns <= self._last_out_ns
+            ):
+                return None
+            return newest_ns
+        newest_ns = stamp_ns if newest_ns is None else max(newest_ns, stamp_ns)
+        period = round(1e9 / rate)
+        if self._next_tick_ns is None:
+            self._next_tick_ns = newest_ns - newest_ns % period
+        if newest_ns < self._next_tick_ns:
+            return None
+        tick = self._next_tick_ns + (newest_ns - self._next_tick_ns) // period * period
+        self._next_tick_ns = tick + period
+        return tick
+
+    # --------------------------------------------------------------------------------- fusion
+    def merge(self, out_ns: int) -> list[Skeleton]:
+        """Fuse every track seen within ``window`` of ``out_ns``; one skeleton per track."""
+        params = self.params
+        window_ns = round(params.window * 1e9)
+        timeout_ns = round(params.track_timeout * 1e9)
+        entries: list[tuple[int, str, Skeleton]] = []
+        for track_id in list(self._latest):
+            per_camera = self._latest[track_id]
+            for camera in list(per_camera):
+                age = out_ns - per_camera[camera].src_time_ns
+                if age > timeout_ns:
+                    del per_camera[camera]
+                elif abs(age) <= window_ns:
+                    entries.append((track_id, camera, per_camera[camera]))
+            if not per_camera:
+                del self._latest[track_id]
+        if not entries:
+            return []
+        layout = entries[0][2].layout
+        entries = [e for e in entries if e[2].layout.n_joints == layout.n_joints]
+        track_ids = sorted({track_id for track_id, _, _ in entries})
+        return self._fuse(entries, track_ids, layout, out_ns)
+
+    def _fuse(
+        self,
+        entries: list[tuple[int, str, Skeleton]],
+        track_ids: list[int],
+        layout: Layout,
+        out_ns: int,
+    ) -> list[Skeleton]:
+        params = self.params
+        rows = {track_id: m for m, track_id in enumerate(track_ids)}
+        slots = np.zeros(len(entries), dtype=np.int64)
+        counts = dict.fromkeys(track_ids, 0)
+        for n, (track_id, _, _) in enumerate(entries):
+            slots[n] = counts[track_id]
+            counts[track_id] += 1
+        m_index = np.array([rows[track_id] for track_id, _, _ in entries])
+        n_tracks, n_slots, n_joints = len(track_ids), max(counts.values()), layout.n_joints
+
+        markers = np.full((n_tracks, n_slots, n_joints, 20), np.nan)
+        markers[m_index, slots] = np.stack(
+            [np.where(s.marker_present[:, None], s.markers, np.nan) for _, _, s in entries]
+        )
+        positions = markers[..., 1:4]
+        velocities = markers[..., 8:11]
+        stamps = np.zeros((n_tracks, n_slots))
+        stamps[m_index, slots] = [(out_ns - s.src_time_ns) * _NS for _, _, s in entries]
+        if params.extrapolate:
+            dt = np.clip(stamps, -params.max_extrapolation, params.max_extrapolation)
+            step = np.where(np.isfinite(velocities), velocities, 0.0) * dt[..., None, None]
+            positions = positions + step
+
+        # Weights that do not depend on the fused result.
+        confidences = markers[..., 0]
+        conf = np.where(np.isfinite(confidences), confidences, 1.0)
+        weight = np.maximum(conf, params.confidence_floor) ** params.confidence_power
+        weight = np.where(np.isfinite(positions).all(axis=-1), weight, 0.0)
+        weight = weight / (1.0 + (stamps / params.staleness_scale) ** 2)[..., None]
+        cameras = np.full((n_tracks, n_slots, 3), np.nan)
+        agreement = np.ones((n_tracks, n_slots))
+        camera_names: list[list[str]] = [[""] * n_slots for _ in range(n_tracks)]
+        for n, (_, camera, _) in enumerate(entries):
+            m, c = m_index[n], slots[n]
+            camera_names[m][c] = camera
+            position = self._camera_positions.get(camera)
+            if position is not None:
+                cameras[m, c] = position
+            error = self.agreement.get(camera)
+            if error is not None:
+                agreement[m, c] = 1.0 / (1.0 + (error / params.agreement_scale) ** 2)
+        weight = weight * agreement[..., None]
+        known = np.isfinite(cameras).all(axis=-1)  # (M, C)
+        rays = positions - cameras[:, :, None]  # (M, C, J, 3) camera -> joint
+        depth = np.linalg.norm(rays, axis=-1)
+        weight = np.where(known[..., None], weight / (1.0 + params.depth_gain * depth) ** 2, weight)
+
+        fused = _weighted_median(positions, weight)
+        axes = _axes(layout)
+        if axes.has_front and known.any():
+            weight = weight * self._view_weights(fused, cameras, known, axes)[..., None]
+        if params.occlusion_radius > 0 and n_tracks > 1 and known.any():
+            weight = weight * self._occlusion(fused, positions, cameras, known, axes)
+
+        for _ in range(params.iterations):
+            residual = np.linalg.norm(positions - fused[:, None], axis=-1)
+            robust = weight / (1.0 + (residual / params.outlier_scale) ** 2)
+            fused = _weighted_mean(positions, robust)
+        residual = np.linalg.norm(positions - fused[:, None], axis=-1)
+        final = weight / (1.0 + (residual / params.outlier_scale) ** 2)
+        final = np.where(np.isfinite(residual), final, 0.0)
+        self._update_agreement(residual, camera_names)
+
+        fused_confidence = _weighted_mean(np.where(final > 0, conf, np.nan)[..., None], final)
+        fused_velocity = _weighted_mean(velocities, final)
+        orientations = markers[..., 4:8]
+        has_orientation = np.isfinite(orientations).all(axis=-1).any()
+        fused_orientation = _quaternion_mean(orientations, final) if has_orientation else None
+
+        out = []
+        for m, track_id in enumerate(track_ids):
+            skeleton = Skeleton.empty(
+                layout, skeleton_id=track_id, src_time_ns=out_ns, src_frame=self._world_frame
+            )
+            present = np.isfinite(fused[m]).all(axis=-1)
+            skeleton.marker_present[:] = present
+            skeleton.positions[present] = fused[m][present]
+            skeleton.confidences[present] = fused_confidence[m, :, 0][present]
+            skeleton.velocities[present] = fused_velocity[m][present]
+            if fused_orientation is not None:
+                skeleton.orientations[present] = fused_orientation[m][present]
+            skeleton.confidence = (
+                float(np.nanmean(skeleton.confidences)) if present.any() else np.nan
+            )
+            skeleton.update_links()
+            out.append(skeleton)
+        return out
+
+    def _view_weights(
+        self, fused: np.ndarray, cameras: np.ndarray, known: np.ndarray, axes: _BodyAxes
+    ) -> np.ndarray:
+        """``(M, C)`` weight of each camera's view: 1 from the front, down to the back."""
+        params = self.params
+        left = fused[:, axes.left].mean(axis=1) - fused[:, axes.right].mean(axis=1)  # (M, 3)
+        up = fused[:, axes.neck] - fused[:, axes.root]
+        front = np.cross(left, up)
+        front /= np.linalg.norm(front, axis=-1, keepdims=True)
+        to_camera = cameras - fused[:, None, axes.root]
+        to_camera /= np.linalg.norm(to_camera, axis=-1, keepdims=True)
+        cosine = np.einsum("mk,mck->mc", front, to_camera)
+        view = np.maximum(params.view_weight_min, ((1.0 + cosine) / 2.0) ** params.view_power)
+        return np.where(known & np.isfinite(view), view, 1.0)
+
+    def _occlusion(
+        self,
+        fused: np.ndarray,
+        positions: np.ndarray,
+        cameras: np.ndarray,
+        known: np.ndarray,
+        axes: _BodyAxes,
+    ) -> np.ndarray:
+        """``(M, C, J)`` factor for joints whose camera ray passes another person's torso.
+
+        A torso point ``q`` of another track blocks the ray from camera ``o`` to joint ``p``
+        when it lies within ``occlusion_radius`` of the ray and between ``o`` and ``p``.
+        """
+        params = self.params
+        n_tracks = len(fused)
+        points = fused[:, axes.torso].reshape(-1, 3)  # (Q, 3), Q = M × torso joints
+        owner = np.repeat(np.arange(n_tracks), len(axes.torso))
+        ray = positions - cameras[:, :, None]  # (M, C, J, 3)
+        length = np.linalg.norm(ray, axis=-1)
+        direction = ray / length[..., None]
+        rel = points[None, None] - cameras[:, :, None]  # (M, C, Q, 3)
+        along = np.einsum("mcjk,mcqk->mcjq", direction, rel)  # (M, C, J, Q)
+        closest = along[..., None] * direction[:, :, :, None]  # (M, C, J, Q, 3)
+        across = np.linalg.norm(rel[:, :, None] - closest, axis=-1)
+        with np.errstate(invalid="ignore"):
+            blocking = (
+                (across < params.occlusion_radius)
+                & (along > 0)
+                & (along < length[..., None] - params.occlusion_radius)
+                & (owner != np.arange(n_tracks)[:, None, None, None])
+            )
+        occluded = blocking.any(axis=-1) & known[..., None]
+        return np.where(occluded, params.occlusion_weight, 1.0)
+
+    def _update_agreement(self, residual: np.ndarray, camera_names: list[list[str]]) -> None:
+        """Fold each camera's mean joint distance to the fused skeletons into its agreement."""
+        alpha = self.params.agreement_smoothing
+        per_camera: dict[str, list[float]] = {}
+        finite = np.isfinite(residual)
+        mean = np.where(finite, np.minimum(residual, 0.5), 0.0).sum(-1) / np.maximum(
+            finite.sum(-1), 1
+        )
+        for m, names in enumerate(camera_names):
+            for c, name in enumerate(names):
+                if name and finite[m, c].any():
+                    per_camera.setdefault(name, []).append(float(mean[m, c]))
+        for name, errors in per_camera.items():
+            value = float(np.mean(errors))
+            previous = self.agreement.get(name)
+            self.agreement[name] = (
+                value if previous is None else previous + alpha * (value - previous)
+            )
