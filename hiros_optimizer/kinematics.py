@@ -46,6 +46,8 @@ class KinematicTree:
         subtree: ``(J, J)`` float, ``subtree[c, j] = 1`` when ``j`` is ``c`` or below it.
         level_subtrees: ``subtree`` rows of each level, ready for ``einsum``.
         has_parent: ``(J,)`` True for joints that end a link.
+        parent_of: ``(J, J)`` float, ``parent_of[c, p] = 1`` when ``p`` is ``c``'s parent, so
+            ``flags @ parent_of`` moves per-link flags (by child) to the parents.
 
     """
 
@@ -54,6 +56,7 @@ class KinematicTree:
     subtree: np.ndarray
     level_subtrees: tuple[np.ndarray, ...]
     has_parent: np.ndarray
+    parent_of: np.ndarray
 
     @classmethod
     def from_layout(cls, layout: Layout) -> KinematicTree:
@@ -73,12 +76,16 @@ class KinematicTree:
                 subtree[ancestor, joint] = 1.0
                 ancestor = parents[ancestor]
         levels = tuple(np.flatnonzero(depth == d) for d in range(depth.max() + 1))
+        parent_of = np.zeros((n, n))
+        children = np.flatnonzero(parents >= 0)
+        parent_of[children, parents[children]] = 1.0
         return cls(
             parents=parents,
             levels=levels,
             subtree=subtree,
             level_subtrees=tuple(subtree[level] for level in levels),
             has_parent=parents >= 0,
+            parent_of=parent_of,
         )
 
 

@@ -13,10 +13,14 @@ through unchanged.
 
 Once calibrated, each frame's joints are replaced by the positions closest to the measurement,
 weighted by confidence, that keep the calibrated lengths exactly
-(:func:`hiros_optimizer.kinematics.fit_fixed_lengths`, all people of a layout at once). A joint
-far from the motion prediction (last output + velocity × dt) is down-weighted by
-``(outlier_distance / d)^2``, and a small prior towards the prediction (``prior_weight``) keeps
-unmeasured or rejected joints where the motion puts them.
+(:func:`hiros_optimizer.kinematics.fit_fixed_lengths`, all people of a layout at once).
+Outliers are joints that break the body and the motion at once: a joint at either end of a link
+whose measured length is off by more than ``outlier_threshold`` (relative, Hi-ROS's rule) is
+down-weighted by ``(outlier_distance / d)^2`` when it lies ``d > outlier_distance`` from the
+motion prediction (last output + velocity × dt). Requiring both keeps fast but consistent
+motion (a whole arm swinging 25 cm in a frame) at full weight, and tells which end of a broken
+link jumped. A small prior towards the prediction (``prior_weight``) keeps unmeasured or
+rejected joints where the motion puts them.
 
 Person calibrations can be restarted (:meth:`Optimizer.calibrate`), moved to another id
 (:meth:`Optimizer.change_id`) and exported/loaded as plain dicts (YAML on disk, see
@@ -56,8 +60,12 @@ class OptimizerParams:
             constrained; rarer links stay free.
         min_calibrated_fraction: fraction of the layout's links that must be constrained for
             a person calibration to be accepted.
-        outlier_distance: metres from the prediction beyond which a joint is down-weighted.
+        outlier_threshold: relative link-length error that makes both ends of a link suspect.
+        outlier_distance: metres from the prediction beyond which a suspect joint is
+            down-weighted.
         prior_weight: weight of the motion prediction relative to a joint confidence of 1.
+        confidence_floor: least weight of a present joint in the fit: the SDK's "none"
+            confidence (0) still carries a usable estimate, far better than extrapolation.
         sweeps: block-coordinate sweeps of the fit (its starting point).
         refinements: Gauss-Newton steps of the fit.
         track_timeout: seconds unseen after which a track's prediction is forgotten (its
@@ -74,8 +82,10 @@ class OptimizerParams:
     max_calibration_coefficient_of_variation: float = 0.2
     min_link_presence: float = 0.5
     min_calibrated_fraction: float = 0.8
+    outlier_threshold: float = 0.2
     outlier_distance: float = 0.15
-    prior_weight: float = 0.05
+    prior_weight: float = 0.01
+    confidence_floor: float = 0.1
     sweeps: int = 1
     refinements: int = 2
     track_timeout: float = 1.0
@@ -93,8 +103,10 @@ class OptimizerParams:
         if not (0 < self.min_link_presence <= 1 and 0 < self.min_calibrated_fraction <= 1):
             msg = "min_link_presence and min_calibrated_fraction must be in (0, 1]"
             raise ConfigError(msg)
-        if self.outlier_distance <= 0 or self.prior_weight < 0:
-            msg = "outlier_distance must be > 0 and prior_weight >= 0"
+        if min(self.outlier_threshold, self.outlier_distance) <= 0 or (
+            min(self.prior_weight, self.confidence_floor) < 0
+        ):
+            msg = "outlier_threshold, outlier_distance must be > 0; prior_weight, floor >= 0"
             raise ConfigError(msg)
 
 
@@ -382,7 +394,8 @@ class Optimizer:
         tree = self._tree(layout)
         n_people, n_joints = len(items), layout.n_joints
         measured = np.stack([skeleton.positions for _, skeleton, _ in items])
-        weights = np.stack([_weights(skeleton) for _, skeleton, _ in items])
+        floor = self.params.confidence_floor
+        weights = np.stack([_weights(skeleton, floor) for _, skeleton, _ in items])
         lengths = np.stack([track.calibration.lengths for _, _, track in items])
         prior = np.full((n_people, n_joints, 3), np.nan)
         fallback = np.full((n_people, n_joints, 3), np.nan)
@@ -392,11 +405,7 @@ class Optimizer:
                 velocity = 0.0 if track.velocities is None else track.velocities
                 prior[row] = track.positions + velocity * dt
                 fallback[row] = track.vectors
-        # Outliers: far from where the motion predicts them (Cauchy-like weight beyond the gate).
-        with np.errstate(invalid="ignore", divide="ignore"):
-            distance = np.linalg.norm(measured - prior, axis=-1)
-            factor = np.minimum(1.0, (self.params.outlier_distance / distance) ** 2)
-        weights = weights * np.where(np.isfinite(factor), factor, 1.0)
+        weights = weights * self._outlier_factors(tree, measured, lengths, prior)
         positions, vectors = fit_fixed_lengths(
             tree,
             measured,
@@ -414,6 +423,18 @@ class Optimizer:
             skeleton.update_links()
             self._remember(track, skeleton, vectors[row])
 
+    def _outlier_factors(
+        self, tree: KinematicTree, measured: np.ndarray, lengths: np.ndarray, prior: np.ndarray
+    ) -> np.ndarray:
+        """``(P, J)`` weight factors: < 1 for joints off both the body and the motion."""
+        with np.errstate(invalid="ignore", divide="ignore"):
+            error = np.abs(link_lengths(measured, tree.parents) - lengths) / lengths
+            broken = error > self.params.outlier_threshold  # (P, J) by child joint
+            suspect = broken | ((broken.astype(float) @ tree.parent_of) > 0)
+            distance = np.linalg.norm(measured - prior, axis=-1)
+            factor = np.minimum(1.0, (self.params.outlier_distance / distance) ** 2)
+        return np.where(suspect & np.isfinite(factor), factor, 1.0)
+
     def _remember(self, track: _Track, skeleton: Skeleton, vectors: np.ndarray | None) -> None:
         positions = np.where(skeleton.marker_present[:, None], skeleton.positions, np.nan)
         dt = 0.0 if track.time_ns is None else ns_to_sec(skeleton.src_time_ns - track.time_ns)
@@ -430,7 +451,7 @@ class Optimizer:
         track.time_ns = skeleton.src_time_ns
 
 
-def _weights(skeleton: Skeleton) -> np.ndarray:
-    """``(J,)`` fit weights: the confidence (1 when unknown), 0 for absent joints."""
+def _weights(skeleton: Skeleton, floor: float = 0.0) -> np.ndarray:
+    """``(J,)`` weights: the confidence (1 when unknown) but at least ``floor``; 0 if absent."""
     confidence = np.where(np.isfinite(skeleton.confidences), skeleton.confidences, 1.0)
-    return np.where(skeleton.marker_present, np.clip(confidence, 0.0, None), 0.0)
+    return np.where(skeleton.marker_present, np.clip(confidence, floor, None), 0.0)
