@@ -1,132 +1,135 @@
-"""The three per-track estimators of the filter stage, each batched over all joints.
+"""The per-joint estimators of the filter stage, batched over tracks and joints.
 
-- :class:`ButterworthBank`: causal low-pass (scipy ``butter`` + ``sosfilt`` with kept state)
-  on every coordinate of every joint at once, ``(J*3,)`` channels.
-- :class:`ConstantAccelerationKalman`: one Kalman filter per joint with state
-  ``[position, velocity, acceleration]`` per axis under a continuous white-jerk model; all
-  joints and axes share one predict/update in numpy (the model matrices come from filterpy).
-- :func:`slerp`: spherical interpolation of unit quaternions, for smoothing on SO(3).
+State lives in arrays with one row per track slot, so that one frame of every person costs a
+fixed number of numpy calls, whatever the number of people:
 
-Shapes: ``J`` joints; positions ``(J, 3)`` metres; quaternions ``(J, 4)`` x, y, z, w.
+- :class:`ButterworthBank`: causal low-pass (scipy ``butter`` + ``sosfilt`` with kept state) on
+  every coordinate of every joint of every track, ``(S, J*3)`` channels.
+- :class:`KalmanBank`: one constant-acceleration Kalman filter per joint, state
+  ``[position, velocity, acceleration]`` per axis under a continuous white-jerk model (process
+  noise from filterpy's ``Q_continuous_white_noise``); predict and update are ``einsum`` over
+  all slots and joints.
+- :func:`slerp` and :func:`rotation_vectors`: quaternion smoothing and angular velocity on SO(3).
+
+Shapes: ``S`` track slots, ``J`` joints; positions ``(J, 3)`` metres; quaternions x, y, z, w.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from functools import lru_cache
 
 import numpy as np
 from filterpy.common import Q_continuous_white_noise
 from scipy.signal import butter, sosfilt, sosfilt_zi
 
-__all__ = ["ButterworthBank", "ConstantAccelerationKalman", "slerp"]
+__all__ = ["ButterworthBank", "KalmanBank", "rotation_vectors", "slerp"]
 
 
-@dataclass
 class ButterworthBank:
-    """Causal Butterworth low-pass on ``channels`` signals sampled at ``sample_frequency``.
+    """Causal Butterworth low-pass on ``slots × channels`` signals at ``sample_frequency`` Hz.
 
     Attributes:
-        order: filter order.
-        cutoff_frequency: -3 dB frequency in Hz (clamped below Nyquist).
         sample_frequency: Hz the coefficients are designed for.
-        channels: number of parallel signals (``J * 3`` for one skeleton).
+        sos: second-order sections of the design.
+        state: ``(sections, slots, channels, 2)`` filter memory.
 
     """
 
-    order: int
-    cutoff_frequency: float
-    sample_frequency: float
-    channels: int
-    sos: np.ndarray = field(init=False, repr=False)
-    state: np.ndarray = field(init=False, repr=False)
-    _unit_state: np.ndarray = field(init=False, repr=False)
-
-    def __post_init__(self) -> None:
-        nyquist = 0.5 * self.sample_frequency
-        cutoff = min(self.cutoff_frequency, 0.9 * nyquist)
-        self.sos = butter(self.order, cutoff, fs=self.sample_frequency, output="sos")
+    def __init__(
+        self, order: int, cutoff_frequency: float, sample_frequency: float, shape: tuple[int, int]
+    ) -> None:
+        self.sample_frequency = sample_frequency
+        cutoff = min(cutoff_frequency, 0.45 * sample_frequency)  # must stay below Nyquist
+        self.sos = butter(order, cutoff, fs=sample_frequency, output="sos")
         self._unit_state = sosfilt_zi(self.sos)  # steady state for a constant input of 1
-        self.state = np.zeros((self.sos.shape[0], self.channels, 2))
+        self.state = np.zeros((self.sos.shape[0], *shape, 2))
 
-    def reset(self, channels: np.ndarray, values: np.ndarray) -> None:
-        """Put ``channels`` at rest on ``values``: as if they had been constant forever."""
-        self.state[:, channels, :] = self._unit_state[:, None, :] * values[None, :, None]
+    def grow(self, slots: int) -> None:
+        """Make room for ``slots`` rows (new rows at rest on 0)."""
+        extra = slots - self.state.shape[1]
+        if extra > 0:
+            pad = np.zeros((self.state.shape[0], extra, *self.state.shape[2:]))
+            self.state = np.concatenate([self.state, pad], axis=1)
 
-    def step(self, samples: np.ndarray) -> np.ndarray:
-        """Filter ``(channels, n)`` consecutive samples; returns the ``(channels,)`` last output."""
-        filtered, self.state = sosfilt(self.sos, samples, axis=-1, zi=self.state)
-        return filtered[:, -1]
+    def reset(self, slots: np.ndarray, channels: np.ndarray, values: np.ndarray) -> None:
+        """Put (slot, channel) pairs at rest on ``values``: as if constant forever."""
+        self.state[:, slots, channels, :] = self._unit_state[:, None, :] * values[None, :, None]
+
+    def step(self, slots: np.ndarray, samples: np.ndarray) -> np.ndarray:
+        """Filter ``(n, channels, k)`` consecutive samples of ``slots``; the last outputs."""
+        n, channels, k = samples.shape
+        state = self.state[:, slots].reshape(self.state.shape[0], n * channels, 2)
+        filtered, state = sosfilt(self.sos, samples.reshape(n * channels, k), axis=-1, zi=state)
+        self.state[:, slots] = state.reshape(self.state.shape[0], n, channels, 2)
+        return filtered[:, -1].reshape(n, channels)
 
 
-@dataclass
-class ConstantAccelerationKalman:
-    """Kalman filters with state ``[p, v, a]`` per joint and axis, sharing one covariance per joint.
+class KalmanBank:
+    """Constant-acceleration Kalman filters for ``(S, J)`` joints, x/y/z sharing a covariance.
 
-    x and y and z of a joint get the same measurement noise, so their covariances are equal
-    and one ``(3, 3)`` matrix per joint serves all three axes.
+    The three axes of a joint see the same measurement noise and model, so their covariances
+    are equal and one ``(3, 3)`` matrix per joint serves all three (filterpy-style names).
 
     Attributes:
-        jerk_spectral_density: ``q`` of the continuous white-jerk model, m^2/s^5.
-        measurement_noise: standard deviation of a position measurement, metres.
-        state: ``(J, 3, 3)``: joint, [position, velocity, acceleration], axis.
-        covariance: ``(J, 3, 3)`` per joint, over [position, velocity, acceleration].
+        x: ``(S, J, 3, 3)`` slot, joint, [position, velocity, acceleration], axis.
+        P: ``(S, J, 3, 3)`` covariance over [position, velocity, acceleration].
+        q: spectral density of the white jerk, m^2/s^5.
+        r: variance of a position measurement, m^2.
 
     """
 
-    jerk_spectral_density: float
-    measurement_noise: float
-    n_joints: int
-    initial_velocity_sd: float = 1.0
-    initial_acceleration_sd: float = 5.0
-    state: np.ndarray = field(init=False, repr=False)
-    covariance: np.ndarray = field(init=False, repr=False)
+    def __init__(
+        self,
+        shape: tuple[int, int],
+        jerk_spectral_density: float,
+        measurement_noise: float,
+        *,
+        initial_velocity_sd: float = 1.0,
+        initial_acceleration_sd: float = 5.0,
+    ) -> None:
+        self.q = jerk_spectral_density
+        self.r = measurement_noise**2
+        self._initial = np.diag([self.r, initial_velocity_sd**2, initial_acceleration_sd**2])
+        self.x = np.zeros((*shape, 3, 3))
+        self.P = np.zeros((*shape, 3, 3))
 
-    def __post_init__(self) -> None:
-        self.state = np.zeros((self.n_joints, 3, 3))
-        self.covariance = np.zeros((self.n_joints, 3, 3))
+    def grow(self, slots: int) -> None:
+        """Make room for ``slots`` rows."""
+        extra = slots - self.x.shape[0]
+        if extra > 0:
+            self.x = np.concatenate([self.x, np.zeros((extra, *self.x.shape[1:]))])
+            self.P = np.concatenate([self.P, np.zeros((extra, *self.P.shape[1:]))])
 
-    def reset(self, joints: np.ndarray, positions: np.ndarray) -> None:
-        """Start ``joints`` at rest at ``positions`` with a wide velocity/acceleration prior."""
-        self.state[joints] = 0.0
-        self.state[joints, 0] = positions
-        self.covariance[joints] = np.diag(
-            [
-                self.measurement_noise**2,
-                self.initial_velocity_sd**2,
-                self.initial_acceleration_sd**2,
-            ]
-        )
+    def reset(self, slots: np.ndarray, joints: np.ndarray, positions: np.ndarray) -> None:
+        """Start (slot, joint) pairs at rest at ``(n, 3)`` positions, wide velocity prior."""
+        self.x[slots, joints] = 0.0
+        self.x[slots, joints, 0] = positions
+        self.P[slots, joints] = self._initial
 
-    def predict(self, dt: float) -> None:
-        """Advance every joint by ``dt`` seconds (any dt: the model is continuous-time)."""
-        transition = np.array([[1.0, dt, 0.5 * dt * dt], [0.0, 1.0, dt], [0.0, 0.0, 1.0]])
-        noise = Q_continuous_white_noise(dim=3, dt=dt, spectral_density=self.jerk_spectral_density)
-        self.state = np.einsum("ab,jbk->jak", transition, self.state)
-        self.covariance = transition @ self.covariance @ transition.T + noise
+    def predict(self, slots: np.ndarray, dt: np.ndarray) -> None:
+        """Advance each slot by its own ``dt`` seconds (the model is continuous-time)."""
+        F = np.zeros((len(dt), 3, 3))
+        F[:, 0, 0] = F[:, 1, 1] = F[:, 2, 2] = 1.0
+        F[:, 0, 1] = F[:, 1, 2] = dt
+        F[:, 0, 2] = 0.5 * dt * dt
+        Q = np.stack([_process_noise(round(float(step), 6), self.q) for step in dt])
+        self.x[slots] = np.einsum("nab,njbk->njak", F, self.x[slots])
+        self.P[slots] = F[:, None] @ self.P[slots] @ F[:, None].transpose(0, 1, 3, 2)
+        self.P[slots] += Q[:, None]
 
-    def update(self, joints: np.ndarray, positions: np.ndarray) -> None:
-        """Correct ``joints`` with measured ``(n, 3)`` positions (H = [1, 0, 0] per axis)."""
-        covariance = self.covariance[joints]
-        innovation_variance = covariance[:, 0, 0] + self.measurement_noise**2
-        gain = covariance[:, :, 0] / innovation_variance[:, None]  # (n, 3)
-        innovation = positions - self.state[joints, 0]  # (n, 3 axes)
-        self.state[joints] += gain[:, :, None] * innovation[:, None, :]
-        self.covariance[joints] = covariance - gain[:, :, None] * covariance[:, None, 0, :]
+    def update(self, slots: np.ndarray, joints: np.ndarray, positions: np.ndarray) -> None:
+        """Correct (slot, joint) pairs with measured ``(n, 3)`` positions (H = [1, 0, 0])."""
+        P = self.P[slots, joints]
+        gain = P[:, :, 0] / (P[:, 0, 0] + self.r)[:, None]  # (n, 3)
+        innovation = positions - self.x[slots, joints, 0]  # (n, 3 axes)
+        self.x[slots, joints] += gain[:, :, None] * innovation[:, None, :]
+        self.P[slots, joints] = P - gain[:, :, None] * P[:, None, 0, :]
 
-    @property
-    def positions(self) -> np.ndarray:
-        """``(J, 3)`` filtered positions."""
-        return self.state[:, 0]
 
-    @property
-    def velocities(self) -> np.ndarray:
-        """``(J, 3)`` filtered velocities, m/s."""
-        return self.state[:, 1]
-
-    @property
-    def accelerations(self) -> np.ndarray:
-        """``(J, 3)`` filtered accelerations, m/s^2."""
-        return self.state[:, 2]
+@lru_cache(maxsize=256)
+def _process_noise(dt: float, spectral_density: float) -> np.ndarray:
+    """Q of the white-jerk model for one ``dt`` (µs-rounded, cached: frames repeat their dt)."""
+    return Q_continuous_white_noise(dim=3, dt=dt, spectral_density=spectral_density)
 
 
 def slerp(start: np.ndarray, end: np.ndarray, fraction: float | np.ndarray) -> np.ndarray:
@@ -138,8 +141,7 @@ def slerp(start: np.ndarray, end: np.ndarray, fraction: float | np.ndarray) -> n
     fraction = np.asarray(fraction, dtype=float)[..., None]
     dot = np.sum(start * end, axis=-1, keepdims=True)
     end = np.where(dot < 0, -end, end)
-    dot = np.clip(np.abs(dot), -1.0, 1.0)
-    angle = np.arccos(dot)
+    angle = np.arccos(np.clip(np.abs(dot), 0.0, 1.0))
     sin_angle = np.sin(angle)
     small = sin_angle < 1e-6
     safe = np.where(small, 1.0, sin_angle)
@@ -147,3 +149,29 @@ def slerp(start: np.ndarray, end: np.ndarray, fraction: float | np.ndarray) -> n
     weight_end = np.where(small, fraction, np.sin(fraction * angle) / safe)
     result = weight_start * start + weight_end * end
     return result / np.linalg.norm(result, axis=-1, keepdims=True)
+
+
+def rotation_vectors(start: np.ndarray, end: np.ndarray) -> np.ndarray:
+    """``(..., 3)`` rotation vectors (axis × angle, world frame) turning ``start`` into ``end``.
+
+    The relative rotation is ``end ⊗ start⁻¹``; its vector part over ``sin(θ/2)`` is the
+    axis, taken the short way (w >= 0).
+    """
+    x0, y0, z0, w0 = np.moveaxis(start, -1, 0)
+    x1, y1, z1, w1 = np.moveaxis(end, -1, 0)
+    # end ⊗ conj(start)
+    w = w1 * w0 + x1 * x0 + y1 * y0 + z1 * z0
+    vector = np.stack(
+        [
+            x1 * w0 - w1 * x0 - y1 * z0 + z1 * y0,
+            y1 * w0 - w1 * y0 - z1 * x0 + x1 * z0,
+            z1 * w0 - w1 * z0 - x1 * y0 + y1 * x0,
+        ],
+        axis=-1,
+    )
+    sign = np.where(w < 0, -1.0, 1.0)[..., None]
+    vector = vector * sign
+    sine = np.linalg.norm(vector, axis=-1, keepdims=True)
+    angle = 2.0 * np.arctan2(sine, np.abs(w)[..., None])
+    scale = np.where(sine > 1e-12, angle / np.where(sine > 1e-12, sine, 1.0), 2.0)
+    return vector * scale

@@ -1,7 +1,7 @@
 """The filter stage: smooth each person's joints and give them velocities and accelerations.
 
 Per track id and per joint, three causal estimators run side by side
-(:mod:`hiros_filter.estimators`):
+(:mod:`hiros_filter.estimators`), all tracks of a frame in one batch:
 
 - a Butterworth low-pass (``butterworth_order``, ``cutoff_frequency``; Hi-ROS's filter) on every
   coordinate. Its coefficients assume a constant sampling rate, so the rate is
@@ -28,16 +28,17 @@ from collections import Counter, deque
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from hiros_core.errors import ConfigError
-from hiros_core.model import Skeleton, SkeletonGroup, ns_to_sec
-from hiros_filter.estimators import ButterworthBank, ConstantAccelerationKalman, slerp
+from hiros_core.layouts import Layout
+from hiros_core.model import Skeleton, SkeletonGroup
+from hiros_filter.estimators import ButterworthBank, KalmanBank, rotation_vectors, slerp
 
 __all__ = ["Filter", "FilterParams"]
 
 _FILTERS = ("butterworth", "kalman")
 _RATE_WINDOW = 64  # recent frame intervals the sampling rate is estimated from
+_NEVER = np.iinfo(np.int64).min // 2  # "joint never seen" stamp, far in the past
 
 
 @dataclass
@@ -89,19 +90,59 @@ class FilterParams:
             raise ConfigError(msg)
 
 
-@dataclass
-class _Track:
-    """Everything the stage keeps per track id."""
+class _Tracks:
+    """State of every track of one layout, one row (slot) per track id."""
 
-    time_ns: int
-    kalman: ConstantAccelerationKalman
-    joint_time_ns: np.ndarray  # (J,) last stamp each joint was measured; -1 never
-    last_input: np.ndarray  # (J, 3) last low-pass input (measurement or prediction)
-    last_output: np.ndarray  # (J, 3) last low-pass output
-    quaternions: np.ndarray  # (J, 4) smoothed orientations, NaN unknown
-    angular_velocities: np.ndarray  # (J, 3) rad/s
-    angular_accelerations: np.ndarray  # (J, 3) rad/s^2
-    bank: ButterworthBank | None = None
+    def __init__(self, layout: Layout, params: FilterParams) -> None:
+        self.n_joints = layout.n_joints
+        capacity = 4
+        self.slots: dict[int, int] = {}
+        self.free: list[int] = list(range(capacity - 1, -1, -1))
+        self.time_ns = np.zeros(capacity, dtype=np.int64)
+        self.joint_time_ns = np.full((capacity, self.n_joints), _NEVER, dtype=np.int64)
+        self.last_input = np.full((capacity, self.n_joints, 3), np.nan)
+        self.last_output = np.full((capacity, self.n_joints, 3), np.nan)
+        self.quaternions = np.full((capacity, self.n_joints, 4), np.nan)
+        self.angular_velocities = np.full((capacity, self.n_joints, 3), np.nan)
+        self.angular_accelerations = np.full((capacity, self.n_joints, 3), np.nan)
+        self.kalman = KalmanBank(
+            (capacity, self.n_joints), params.jerk_spectral_density, params.measurement_noise
+        )
+        self.low_pass: ButterworthBank | None = None
+        self.designed_for = np.zeros(capacity)  # rate each slot's low-pass state belongs to
+
+    def slot(self, track_id: int) -> int:
+        """The row of ``track_id``, allocating (and growing the arrays) when new."""
+        if track_id in self.slots:
+            return self.slots[track_id]
+        if not self.free:
+            self._grow(2 * len(self.time_ns))
+        row = self.free.pop()
+        self.slots[track_id] = row
+        return row
+
+    def release(self, track_id: int) -> None:
+        self.free.append(self.slots.pop(track_id))
+
+    def _grow(self, capacity: int) -> None:
+        old = len(self.time_ns)
+        self.free.extend(range(capacity - 1, old - 1, -1))
+        for name, fill in (
+            ("time_ns", 0),
+            ("joint_time_ns", _NEVER),
+            ("last_input", np.nan),
+            ("last_output", np.nan),
+            ("quaternions", np.nan),
+            ("angular_velocities", np.nan),
+            ("angular_accelerations", np.nan),
+            ("designed_for", 0.0),
+        ):
+            array = getattr(self, name)
+            pad = np.full((capacity - old, *array.shape[1:]), fill, dtype=array.dtype)
+            setattr(self, name, np.concatenate([array, pad]))
+        self.kalman.grow(capacity)
+        if self.low_pass is not None:
+            self.low_pass.grow(capacity)
 
 
 class Filter:
@@ -116,7 +157,8 @@ class Filter:
     def __init__(self, params: FilterParams | None = None) -> None:
         self.params = params or FilterParams()
         self.drops: Counter[str] = Counter()
-        self._tracks: dict[int, _Track] = {}
+        self._layouts: dict[str, _Tracks] = {}
+        self._layout_of: dict[int, str] = {}
         self._intervals: deque[float] = deque(maxlen=_RATE_WINDOW)
 
     @property
@@ -128,172 +170,228 @@ class Filter:
             return None
         return 1.0 / float(np.median(self._intervals))
 
+    def reset(self) -> None:
+        """Forget every track (e.g. when a recording restarts)."""
+        self._layouts.clear()
+        self._layout_of.clear()
+        self._intervals.clear()
+
     def update(self, group: SkeletonGroup) -> SkeletonGroup:
         """Filter every tracked person of ``group``; returns new skeletons, input untouched."""
         out = SkeletonGroup(group.stamp_ns, group.frame_id, [])
+        batches: dict[str, tuple[list[Skeleton], list[Skeleton]]] = {}
         seen: set[int] = set()
+        max_gap_ns = round(self.params.max_gap * 1e9)
         for skeleton in group.skeletons:
-            if skeleton.markers.shape[0] != skeleton.layout.n_joints:
-                self.drops["marker rows do not match the layout"] += 1
+            if not self._valid(skeleton, seen):
+                if skeleton.id < 0 and skeleton.markers.shape[0] == skeleton.layout.n_joints:
+                    out.skeletons.append(skeleton.copy())
                 continue
-            if not np.isfinite(skeleton.positions[skeleton.marker_present]).all():
-                self.drops["non-finite position of a present joint"] += 1
-                continue
-            if skeleton.id < 0:
-                self.drops["no track id (passed through)"] += 1
-                out.skeletons.append(skeleton.copy())
-                continue
-            if skeleton.id in seen:
-                self.drops["track id repeated within a group"] += 1
-                continue
-            seen.add(skeleton.id)
-            result = self._filter(skeleton)
-            if result is not None:
-                out.skeletons.append(result)
+            tracks = self._tracks_for(skeleton)
+            result = skeleton.copy()
+            starts, steps = batches.setdefault(skeleton.layout.name, ([], []))
+            if skeleton.id not in tracks.slots:
+                starts.append(result)
+            else:
+                elapsed = skeleton.src_time_ns - tracks.time_ns[tracks.slots[skeleton.id]]
+                if elapsed <= 0:
+                    self.drops["stamp not after the track's previous one"] += 1
+                    continue
+                if elapsed > max_gap_ns:
+                    starts.append(result)
+                else:
+                    self._intervals.append(elapsed * 1e-9)
+                    steps.append(result)
+            out.skeletons.append(result)
+        for name, (starts, steps) in batches.items():
+            tracks = self._layouts[name]
+            if starts:
+                self._start(tracks, starts)
+            if steps:
+                self._step(tracks, steps)
         self._forget_old_tracks(group.stamp_ns)
         return out
 
-    def reset(self) -> None:
-        """Forget every track (e.g. when a recording restarts)."""
-        self._tracks.clear()
-        self._intervals.clear()
-
     # ------------------------------------------------------------------------ internals
 
-    def _filter(self, skeleton: Skeleton) -> Skeleton | None:
-        track = self._tracks.get(skeleton.id)
-        if track is not None and len(track.joint_time_ns) != skeleton.layout.n_joints:
-            track = None  # the layout changed under this id: start over
-        if track is not None:
-            dt = ns_to_sec(skeleton.src_time_ns - track.time_ns)
-            if dt <= 0:
-                self.drops["stamp not after the track's previous one"] += 1
-                return None
-            if dt > self.params.max_gap:
-                track = None
-            else:
-                self._intervals.append(dt)
-        result = skeleton.copy()
-        if track is None:
-            self._tracks[skeleton.id] = self._start(result)
-            return result
-        self._step(track, result, dt)
-        return result
+    def _valid(self, skeleton: Skeleton, seen: set[int]) -> bool:
+        if skeleton.markers.shape[0] != skeleton.layout.n_joints:
+            self.drops["marker rows do not match the layout"] += 1
+            return False
+        if not np.isfinite(skeleton.positions[skeleton.marker_present]).all():
+            self.drops["non-finite position of a present joint"] += 1
+            return False
+        if skeleton.id < 0:
+            self.drops["no track id (passed through)"] += 1
+            return False
+        if skeleton.id in seen:
+            self.drops["track id repeated within a group"] += 1
+            return False
+        seen.add(skeleton.id)
+        return True
 
-    def _start(self, skeleton: Skeleton) -> _Track:
-        """A new track: every estimator at rest on the first measurement, output = input."""
-        n_joints = skeleton.layout.n_joints
-        present = skeleton.marker_present
-        kalman = ConstantAccelerationKalman(
-            self.params.jerk_spectral_density, self.params.measurement_noise, n_joints
-        )
-        positions = np.where(present[:, None], skeleton.positions, np.nan)
-        kalman.reset(np.flatnonzero(present), positions[present])
-        track = _Track(
-            time_ns=skeleton.src_time_ns,
-            kalman=kalman,
-            joint_time_ns=np.where(present, skeleton.src_time_ns, -1),
-            last_input=positions.copy(),
-            last_output=positions.copy(),
-            quaternions=np.full((n_joints, 4), np.nan),
-            angular_velocities=np.full((n_joints, 3), np.nan),
-            angular_accelerations=np.full((n_joints, 3), np.nan),
-        )
-        self._smooth_orientations(track, skeleton, dt=None)
-        skeleton.velocities[present] = 0.0
-        skeleton.accelerations[present] = 0.0
-        return track
+    def _tracks_for(self, skeleton: Skeleton) -> _Tracks:
+        name = skeleton.layout.name
+        previous = self._layout_of.get(skeleton.id)
+        if previous is not None and previous != name:  # the layout changed under this id
+            self._layouts[previous].release(skeleton.id)
+        self._layout_of[skeleton.id] = name
+        if name not in self._layouts:
+            self._layouts[name] = _Tracks(skeleton.layout, self.params)
+        return self._layouts[name]
 
-    def _step(self, track: _Track, skeleton: Skeleton, dt: float) -> None:
-        present = skeleton.marker_present
-        measured = skeleton.positions
-        stale_after_ns = round(self.params.max_gap * 1e9)
-        unseen_for = skeleton.src_time_ns - track.joint_time_ns
-        restart = present & ((track.joint_time_ns < 0) | (unseen_for > stale_after_ns))
+    def _start(self, tracks: _Tracks, skeletons: list[Skeleton]) -> None:
+        """New (or restarting) tracks: every estimator at rest on the measurement."""
+        rows = np.array([tracks.slot(s.id) for s in skeletons])
+        present = np.stack([s.marker_present for s in skeletons])
+        positions = np.stack([s.positions for s in skeletons])
+        positions = np.where(present[..., None], positions, np.nan)
+        tracks.time_ns[rows] = [s.src_time_ns for s in skeletons]
+        tracks.joint_time_ns[rows] = np.where(present, tracks.time_ns[rows, None], _NEVER)
+        tracks.last_input[rows] = positions
+        tracks.last_output[rows] = positions
+        tracks.designed_for[rows] = 0.0  # low-pass state restarts from last_output when used
+        slot_index, joints = np.nonzero(present)
+        tracks.kalman.reset(rows[slot_index], joints, positions[slot_index, joints])
+        tracks.quaternions[rows] = np.nan
+        self._smooth_orientations(tracks, rows, skeletons, dt=None)
+        for skeleton in skeletons:
+            skeleton.velocities[skeleton.marker_present] = 0.0
+            skeleton.accelerations[skeleton.marker_present] = 0.0
+
+    def _step(self, tracks: _Tracks, skeletons: list[Skeleton]) -> None:
+        rows = np.array([tracks.slots[s.id] for s in skeletons])
+        stamps = np.array([s.src_time_ns for s in skeletons], dtype=np.int64)
+        dt = (stamps - tracks.time_ns[rows]) * 1e-9
+        present = np.stack([s.marker_present for s in skeletons])
+        measured = np.stack([s.positions for s in skeletons])
+        max_gap_ns = round(self.params.max_gap * 1e9)
+        restart = present & (stamps[:, None] - tracks.joint_time_ns[rows] > max_gap_ns)
         carry = present & ~restart
-        kalman = track.kalman
-        kalman.predict(dt)
-        kalman.update(np.flatnonzero(carry), measured[carry])
-        kalman.reset(np.flatnonzero(restart), measured[restart])
-        track.joint_time_ns[present] = skeleton.src_time_ns
-        # Joints lost for too long are dropped from the low-pass input until they return.
-        lost = (track.joint_time_ns < 0) | (
-            skeleton.src_time_ns - track.joint_time_ns > stale_after_ns
-        )
-        low_pass_input = np.where(present[:, None], measured, kalman.positions)
-        low_pass_input[lost] = np.nan
-
-        smoothed = self._low_pass(track, low_pass_input, restart, dt)
+        kalman = tracks.kalman
+        kalman.predict(rows, dt)
+        index, joints = np.nonzero(carry)
+        kalman.update(rows[index], joints, measured[index, joints])
+        index, joints = np.nonzero(restart)
+        kalman.reset(rows[index], joints, measured[index, joints])
+        tracks.joint_time_ns[rows] = np.where(present, stamps[:, None], tracks.joint_time_ns[rows])
         if self.params.filter == "kalman":
-            smoothed = kalman.positions
-        skeleton.positions[present] = smoothed[present]
-        skeleton.velocities[present] = kalman.velocities[present]
-        skeleton.accelerations[present] = kalman.accelerations[present]
-        self._smooth_orientations(track, skeleton, dt)
-        skeleton.update_links()
-        track.time_ns = skeleton.src_time_ns
+            smoothed = kalman.x[rows, :, 0]
+        else:
+            # Joints lost for too long leave the low-pass input until they return.
+            lost = stamps[:, None] - tracks.joint_time_ns[rows] > max_gap_ns
+            low_pass_input = np.where(present[..., None], measured, kalman.x[rows, :, 0])
+            low_pass_input[lost] = np.nan
+            smoothed = self._low_pass(tracks, rows, low_pass_input, restart, dt)
+        velocities, accelerations = kalman.x[rows, :, 1], kalman.x[rows, :, 2]
+        tracks.time_ns[rows] = stamps
+        self._smooth_orientations(tracks, rows, skeletons, dt)
+        for n, skeleton in enumerate(skeletons):
+            mask = skeleton.marker_present
+            skeleton.positions[mask] = smoothed[n, mask]
+            skeleton.velocities[mask] = velocities[n, mask]
+            skeleton.accelerations[mask] = accelerations[n, mask]
+            skeleton.update_links()
 
     def _low_pass(
-        self, track: _Track, samples: np.ndarray, restart: np.ndarray, dt: float
+        self,
+        tracks: _Tracks,
+        rows: np.ndarray,
+        samples: np.ndarray,
+        restart: np.ndarray,
+        dt: np.ndarray,
     ) -> np.ndarray:
-        """Butterworth output ``(J, 3)`` for this frame (resampled to the design rate)."""
+        """Butterworth output ``(n, J, 3)`` for this frame, resampled to the design rate."""
         rate = self.sample_frequency
-        channels = samples.size
-        if track.bank is None or (
-            abs(track.bank.sample_frequency - rate) > self.params.rate_tolerance * rate
+        n, n_joints = samples.shape[:2]
+        channels = 3 * n_joints
+        if tracks.low_pass is None or (
+            abs(tracks.low_pass.sample_frequency - rate) > self.params.rate_tolerance * rate
         ):
-            track.bank = ButterworthBank(
-                self.params.butterworth_order, self.params.cutoff_frequency, rate, channels
+            tracks.low_pass = ButterworthBank(
+                self.params.butterworth_order,
+                self.params.cutoff_frequency,
+                rate,
+                (len(tracks.time_ns), channels),
             )
-            rest = np.isfinite(track.last_output).ravel()
-            track.bank.reset(np.flatnonzero(rest), track.last_output.ravel()[rest])
-        flat_samples = samples.reshape(-1)
-        previous = track.last_input.reshape(-1)
-        # (Re)starting channels begin at rest on their new value; lost ones hold still.
-        begin = np.repeat(restart, 3) | (~np.isfinite(previous) & np.isfinite(flat_samples))
-        track.bank.reset(np.flatnonzero(begin), flat_samples[begin])
-        previous = np.where(begin, flat_samples, previous)
-        flat_samples = np.where(np.isfinite(flat_samples), flat_samples, previous)
-        flat_samples = np.nan_to_num(flat_samples)
+        flat = samples.reshape(n, channels)
+        previous = tracks.last_input[rows].reshape(n, channels)
+        # Restarting channels (new design, restarted or first-seen joints) begin at rest on
+        # their last output or new value; lost channels hold still.
+        redesigned = tracks.designed_for[rows] != tracks.low_pass.sample_frequency
+        tracks.designed_for[rows] = tracks.low_pass.sample_frequency
+        old = tracks.last_output[rows].reshape(n, channels)
+        settle = redesigned[:, None] & np.isfinite(old)
+        slot, channel = np.nonzero(settle)
+        tracks.low_pass.reset(rows[slot], channel, old[slot, channel])
+        begin = np.repeat(restart, 3, axis=1) | (~np.isfinite(previous) & np.isfinite(flat))
+        slot, channel = np.nonzero(begin)
+        tracks.low_pass.reset(rows[slot], channel, flat[slot, channel])
+        previous = np.where(begin, flat, previous)
+        flat = np.nan_to_num(np.where(np.isfinite(flat), flat, previous))
         previous = np.nan_to_num(previous)
-        steps = int(np.clip(round(dt * rate), 1, max(1, round(self.params.max_gap * rate))))
-        fractions = np.arange(1, steps + 1) / steps
-        resampled = previous[:, None] + (flat_samples - previous)[:, None] * fractions[None, :]
-        output = track.bank.step(resampled).reshape(samples.shape)
+        limit = max(1, round(self.params.max_gap * rate))
+        steps = np.clip(np.round(dt * rate).astype(int), 1, limit)
+        output = np.empty((n, channels))
+        for count in np.unique(steps):  # usually one: every track shares the frame's dt
+            group = np.flatnonzero(steps == count)
+            fractions = np.arange(1, count + 1) / count
+            resampled = previous[group, :, None] + (flat - previous)[group, :, None] * fractions
+            output[group] = tracks.low_pass.step(rows[group], resampled)
+        output = output.reshape(samples.shape)
         known = np.isfinite(samples)
-        track.last_input = np.where(known, samples, track.last_input)
-        track.last_output = np.where(known, output, track.last_output)
+        tracks.last_input[rows] = np.where(known, samples, tracks.last_input[rows])
+        tracks.last_output[rows] = np.where(known, output, tracks.last_output[rows])
         return output
 
-    def _smooth_orientations(self, track: _Track, skeleton: Skeleton, dt: float | None) -> None:
-        quaternions = skeleton.orientations
+    def _smooth_orientations(
+        self,
+        tracks: _Tracks,
+        rows: np.ndarray,
+        skeletons: list[Skeleton],
+        dt: np.ndarray | None,
+    ) -> None:
+        quaternions = np.stack([s.orientations for s in skeletons])
+        present = np.stack([s.marker_present for s in skeletons])
         norms = np.linalg.norm(quaternions, axis=-1)
-        valid = skeleton.marker_present & np.isfinite(quaternions).all(axis=-1) & (norms > 0.5)
+        valid = present & np.isfinite(norms) & (norms > 0.5)
+        unit = quaternions / np.where(valid, norms, 1.0)[..., None]
+        previous = tracks.quaternions[rows]
+        smoothed = previous.copy()
+        angular_velocities = tracks.angular_velocities[rows]
+        angular_accelerations = tracks.angular_accelerations[rows]
         fresh = valid.copy()
         if dt is not None:
-            previous = track.quaternions
             carry = valid & np.isfinite(previous).all(axis=-1)
             fresh &= ~carry
             if carry.any():
-                weight = 1.0 - np.exp(-2.0 * np.pi * self.params.orientation_cutoff_frequency * dt)
-                smoothed = slerp(previous[carry], quaternions[carry] / norms[carry, None], weight)
-                turn = Rotation.from_quat(smoothed) * Rotation.from_quat(previous[carry]).inv()
-                angular_velocity = turn.as_rotvec() / dt
-                last = track.angular_velocities[carry]
-                angular_acceleration = np.where(
-                    np.isfinite(last), (angular_velocity - last) / dt, 0.0
+                cutoff = self.params.orientation_cutoff_frequency
+                track_of = np.nonzero(carry)[0]
+                weight = 1.0 - np.exp(-2.0 * np.pi * cutoff * dt[track_of])
+                smoothed[carry] = slerp(previous[carry], unit[carry], weight)
+                step = dt[track_of, None]
+                velocity = rotation_vectors(previous[carry], smoothed[carry]) / step
+                last = angular_velocities[carry]
+                angular_accelerations[carry] = np.where(
+                    np.isfinite(last), (velocity - last) / step, 0.0
                 )
-                track.quaternions[carry] = smoothed
-                track.angular_velocities[carry] = angular_velocity
-                track.angular_accelerations[carry] = angular_acceleration
-        track.quaternions[fresh] = quaternions[fresh] / norms[fresh, None]
-        track.angular_velocities[fresh] = np.nan
-        track.angular_accelerations[fresh] = np.nan
-        skeleton.orientations[valid] = track.quaternions[valid]
-        skeleton.angular_velocities[valid] = track.angular_velocities[valid]
-        skeleton.angular_accelerations[valid] = track.angular_accelerations[valid]
+                angular_velocities[carry] = velocity
+        smoothed[fresh] = unit[fresh]
+        angular_velocities[fresh] = np.nan
+        angular_accelerations[fresh] = np.nan
+        tracks.quaternions[rows] = smoothed
+        tracks.angular_velocities[rows] = angular_velocities
+        tracks.angular_accelerations[rows] = angular_accelerations
+        for n, skeleton in enumerate(skeletons):
+            mask = valid[n]
+            skeleton.orientations[mask] = smoothed[n, mask]
+            skeleton.angular_velocities[mask] = angular_velocities[n, mask]
+            skeleton.angular_accelerations[mask] = angular_accelerations[n, mask]
 
     def _forget_old_tracks(self, stamp_ns: int) -> None:
         timeout_ns = round(self.params.track_timeout * 1e9)
-        for track_id in [i for i, t in self._tracks.items() if stamp_ns - t.time_ns > timeout_ns]:
-            del self._tracks[track_id]
+        for tracks in self._layouts.values():
+            for track_id, row in list(tracks.slots.items()):
+                if stamp_ns - tracks.time_ns[row] > timeout_ns:
+                    tracks.release(track_id)
+                    self._layout_of.pop(track_id, None)
