@@ -24,8 +24,8 @@ weight each camera by confidence, distance and view; the product form is ours)::
         × staleness                       1 / (1 + (Δt / staleness_scale)²)
 
 then the robust mean multiplies by a Cauchy weight ``1 / (1 + (r / outlier_scale)²)`` of each
-joint's distance ``r`` to the current estimate, starting from the weighted median, so that one
-camera's flipped limb or swapped leg does not pull the result.
+joint's distance ``r`` to the current estimate (0 beyond ``outlier_cutoff``), starting from the
+weighted median, so that one camera's flipped limb or swapped leg does not pull the result.
 
 Output: world frame, ``id`` = track id, ``src_time`` = output time, ``src_frame`` = world frame;
 positions, orientations, confidences (weighted mean) and velocities (weighted mean) per joint.
@@ -70,6 +70,8 @@ class MergerParams:
         agreement_smoothing: weight (0..1] of each new residual in a camera's running agreement.
         staleness_scale: seconds; scale of the weight of older detections.
         outlier_scale: metres; Cauchy scale of the robust mean.
+        outlier_cutoff: metres; a joint farther than this from the estimate gets no weight (as
+            long as another camera's joint is within it): a flipped limb is out, not just less.
         iterations: reweighting iterations of the robust mean.
         track_timeout: seconds; a track unseen this long is forgotten.
 
@@ -82,14 +84,15 @@ class MergerParams:
     confidence_power: float = 2.0
     confidence_floor: float = 0.05
     depth_gain: float = 0.33
-    view_weight_min: float = 0.1
+    view_weight_min: float = 0.3
     view_power: float = 1.0
     occlusion_radius: float = 0.2
     occlusion_weight: float = 0.5
     agreement_scale: float = 0.1
     agreement_smoothing: float = 0.02
     staleness_scale: float = 0.05
-    outlier_scale: float = 0.1
+    outlier_scale: float = 0.25
+    outlier_cutoff: float = 0.4
     iterations: int = 3
     track_timeout: float = 1.0
 
@@ -120,6 +123,28 @@ class _BodyAxes:
     def has_front(self) -> bool:
         """Whether the layout names what the facing direction needs."""
         return self.neck >= 0 and (self.left >= 0).all() and (self.right >= 0).all()
+
+
+@dataclass
+class _Batch:
+    """The detections being fused, padded to ``(M, C, ...)``: M tracks, C cameras at most."""
+
+    markers: np.ndarray  # (M, C, J, 20) rows as received, NaN padding
+    positions: np.ndarray  # (M, C, J, 3) brought to the output time
+    ages: np.ndarray  # (M, C) seconds from detection to output time
+    cameras: np.ndarray  # (M, C, 3) camera positions, NaN when unknown
+    camera_names: list[list[str]]  # (M, C), "" for padding
+
+    @property
+    def known(self) -> np.ndarray:
+        """``(M, C)`` detections whose camera position is known."""
+        return np.isfinite(self.cameras).all(axis=-1)
+
+    @property
+    def confidences(self) -> np.ndarray:
+        """``(M, C, J)`` SDK confidences, 1 where unknown."""
+        confidences = self.markers[..., 0]
+        return np.where(np.isfinite(confidences), confidences, 1.0)
 
 
 _AXES: dict[str, _BodyAxes] = {}
@@ -296,75 +321,35 @@ class Merger:
         layout: Layout,
         out_ns: int,
     ) -> list[Skeleton]:
+        """Fuse the detections of each track: robust weighted mean of positions, SO(3) mean."""
         params = self.params
-        rows = {track_id: m for m, track_id in enumerate(track_ids)}
-        slots = np.zeros(len(entries), dtype=np.int64)
-        counts = dict.fromkeys(track_ids, 0)
-        for n, (track_id, _, _) in enumerate(entries):
-            slots[n] = counts[track_id]
-            counts[track_id] += 1
-        m_index = np.array([rows[track_id] for track_id, _, _ in entries])
-        n_tracks, n_slots, n_joints = len(track_ids), max(counts.values()), layout.n_joints
-
-        markers = np.full((n_tracks, n_slots, n_joints, 20), np.nan)
-        markers[m_index, slots] = np.stack(
-            [np.where(s.marker_present[:, None], s.markers, np.nan) for _, _, s in entries]
-        )
-        positions = markers[..., 1:4]
-        velocities = markers[..., 8:11]
-        stamps = np.zeros((n_tracks, n_slots))
-        stamps[m_index, slots] = [(out_ns - s.src_time_ns) * _NS for _, _, s in entries]
-        if params.extrapolate:
-            dt = np.clip(stamps, -params.max_extrapolation, params.max_extrapolation)
-            step = np.where(np.isfinite(velocities), velocities, 0.0) * dt[..., None, None]
-            positions = positions + step
-
-        # Weights that do not depend on the fused result.
-        confidences = markers[..., 0]
-        conf = np.where(np.isfinite(confidences), confidences, 1.0)
-        weight = np.maximum(conf, params.confidence_floor) ** params.confidence_power
-        weight = np.where(np.isfinite(positions).all(axis=-1), weight, 0.0)
-        weight = weight / (1.0 + (stamps / params.staleness_scale) ** 2)[..., None]
-        cameras = np.full((n_tracks, n_slots, 3), np.nan)
-        agreement = np.ones((n_tracks, n_slots))
-        camera_names: list[list[str]] = [[""] * n_slots for _ in range(n_tracks)]
-        for n, (_, camera, _) in enumerate(entries):
-            m, c = m_index[n], slots[n]
-            camera_names[m][c] = camera
-            position = self._camera_positions.get(camera)
-            if position is not None:
-                cameras[m, c] = position
-            error = self.agreement.get(camera)
-            if error is not None:
-                agreement[m, c] = 1.0 / (1.0 + (error / params.agreement_scale) ** 2)
-        weight = weight * agreement[..., None]
-        known = np.isfinite(cameras).all(axis=-1)  # (M, C)
-        rays = positions - cameras[:, :, None]  # (M, C, J, 3) camera -> joint
-        depth = np.linalg.norm(rays, axis=-1)
-        weight = np.where(known[..., None], weight / (1.0 + params.depth_gain * depth) ** 2, weight)
-
+        batch = self._stack(entries, track_ids, out_ns)
+        weight = self._prior_weights(batch)
+        positions = batch.positions
         fused = _weighted_median(positions, weight)
         axes = _axes(layout)
-        if axes.has_front and known.any():
-            weight = weight * self._view_weights(fused, cameras, known, axes)[..., None]
-        if params.occlusion_radius > 0 and n_tracks > 1 and known.any():
-            weight = weight * self._occlusion(fused, positions, cameras, known, axes)
-
+        if axes.has_front and batch.known.any():
+            weight = weight * self._view_weights(fused, batch.cameras, batch.known, axes)[..., None]
+        if params.occlusion_radius > 0 and len(track_ids) > 1 and batch.known.any():
+            weight = weight * self._occlusion(fused, positions, batch.cameras, batch.known, axes)
         for _ in range(params.iterations):
             residual = np.linalg.norm(positions - fused[:, None], axis=-1)
-            robust = weight / (1.0 + (residual / params.outlier_scale) ** 2)
-            fused = _weighted_mean(positions, robust)
+            fused = _weighted_mean(positions, self._robust(weight, residual))
         residual = np.linalg.norm(positions - fused[:, None], axis=-1)
-        final = weight / (1.0 + (residual / params.outlier_scale) ** 2)
-        final = np.where(np.isfinite(residual), final, 0.0)
-        self._update_agreement(residual, camera_names)
+        final = self._robust(weight, residual)
+        self._update_agreement(residual, batch.camera_names)
 
-        fused_confidence = _weighted_mean(np.where(final > 0, conf, np.nan)[..., None], final)
-        fused_velocity = _weighted_mean(velocities, final)
+        markers = batch.markers
+        confidence = _weighted_mean(
+            np.where(final > 0, batch.confidences, np.nan)[..., None], final
+        )
+        velocity = _weighted_mean(markers[..., 8:11], final)
         orientations = markers[..., 4:8]
-        has_orientation = np.isfinite(orientations).all(axis=-1).any()
-        fused_orientation = _quaternion_mean(orientations, final) if has_orientation else None
-
+        orientation = (
+            _quaternion_mean(orientations, final)
+            if np.isfinite(orientations).all(axis=-1).any()
+            else None
+        )
         out = []
         for m, track_id in enumerate(track_ids):
             skeleton = Skeleton.empty(
@@ -373,16 +358,74 @@ class Merger:
             present = np.isfinite(fused[m]).all(axis=-1)
             skeleton.marker_present[:] = present
             skeleton.positions[present] = fused[m][present]
-            skeleton.confidences[present] = fused_confidence[m, :, 0][present]
-            skeleton.velocities[present] = fused_velocity[m][present]
-            if fused_orientation is not None:
-                skeleton.orientations[present] = fused_orientation[m][present]
-            skeleton.confidence = (
-                float(np.nanmean(skeleton.confidences)) if present.any() else np.nan
-            )
+            skeleton.confidences[present] = confidence[m, :, 0][present]
+            skeleton.velocities[present] = velocity[m][present]
+            if orientation is not None:
+                skeleton.orientations[present] = orientation[m][present]
+            if present.any():
+                skeleton.confidence = float(np.nanmean(skeleton.confidences[present]))
             skeleton.update_links()
             out.append(skeleton)
         return out
+
+    def _robust(self, weight: np.ndarray, residual: np.ndarray) -> np.ndarray:
+        """Cauchy reweighting, and nothing beyond ``outlier_cutoff`` unless nothing is left."""
+        params = self.params
+        robust = weight / (1.0 + (residual / params.outlier_scale) ** 2)
+        robust = np.where(np.isfinite(residual), robust, 0.0)
+        inside = np.where(residual <= params.outlier_cutoff, robust, 0.0)
+        return np.where((inside.sum(axis=1) > 0)[:, None], inside, robust)
+
+    def _stack(
+        self, entries: list[tuple[int, str, Skeleton]], track_ids: list[int], out_ns: int
+    ) -> _Batch:
+        """Pad the detections into ``(M, C, ...)`` arrays, brought to the output time."""
+        params = self.params
+        rows = {track_id: m for m, track_id in enumerate(track_ids)}
+        slots = np.zeros(len(entries), dtype=np.int64)
+        counts = dict.fromkeys(track_ids, 0)
+        for n, (track_id, _, _) in enumerate(entries):
+            slots[n] = counts[track_id]
+            counts[track_id] += 1
+        rows_of = np.array([rows[track_id] for track_id, _, _ in entries])
+        shape = (len(track_ids), max(counts.values()))
+        markers = np.full((*shape, entries[0][2].layout.n_joints, 20), np.nan)
+        markers[rows_of, slots] = np.stack(
+            [np.where(s.marker_present[:, None], s.markers, np.nan) for _, _, s in entries]
+        )
+        ages = np.zeros(shape)
+        ages[rows_of, slots] = [(out_ns - s.src_time_ns) * _NS for _, _, s in entries]
+        positions = markers[..., 1:4]
+        if params.extrapolate:
+            dt = np.clip(ages, -params.max_extrapolation, params.max_extrapolation)
+            velocities = markers[..., 8:11]
+            positions = (
+                positions + np.where(np.isfinite(velocities), velocities, 0.0) * dt[..., None, None]
+            )
+        cameras = np.full((*shape, 3), np.nan)
+        names = [[""] * shape[1] for _ in range(shape[0])]
+        for (_, camera, _), m, c in zip(entries, rows_of, slots, strict=True):
+            names[m][c] = camera
+            if camera in self._camera_positions:
+                cameras[m, c] = self._camera_positions[camera]
+        return _Batch(markers, positions, ages, cameras, names)
+
+    def _prior_weights(self, batch: _Batch) -> np.ndarray:
+        """``(M, C, J)`` weights known before fusing: confidence, staleness, agreement, depth."""
+        params = self.params
+        weight = np.maximum(batch.confidences, params.confidence_floor) ** params.confidence_power
+        weight = np.where(np.isfinite(batch.positions).all(axis=-1), weight, 0.0)
+        weight = weight / (1.0 + (batch.ages / params.staleness_scale) ** 2)[..., None]
+        agreement = np.ones(batch.ages.shape)
+        for m, names in enumerate(batch.camera_names):
+            for c, name in enumerate(names):
+                error = self.agreement.get(name)
+                if error is not None:
+                    agreement[m, c] = 1.0 / (1.0 + (error / params.agreement_scale) ** 2)
+        weight = weight * agreement[..., None]
+        depth = np.linalg.norm(batch.positions - batch.cameras[:, :, None], axis=-1)
+        depth_weight = (1.0 + params.depth_gain * depth) ** -2
+        return np.where(batch.known[..., None], weight * depth_weight, weight)
 
     def _view_weights(
         self, fused: np.ndarray, cameras: np.ndarray, known: np.ndarray, axes: _BodyAxes

@@ -1,0 +1,206 @@
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+from hiros_core.calibration import Calibration, CameraCalibration
+from hiros_core.layouts import AZURE_KINECT
+from hiros_core.model import Skeleton, SkeletonGroup
+from hiros_merger import Merger, MergerParams
+
+J = AZURE_KINECT.n_joints
+T0 = 1_000_000_000_000  # ns
+WRIST = AZURE_KINECT.index("WristLeft")
+
+
+def _person(rng=None) -> np.ndarray:
+    """A fixed upright-ish pose (J, 3) facing +x, left towards +y, z up."""
+    rng = rng or np.random.default_rng(0)
+    pose = np.zeros((J, 3))
+    for joint, parent in enumerate(AZURE_KINECT.parents):
+        if parent >= 0:
+            step = rng.normal(0.0, 0.1, 3)
+            name = AZURE_KINECT.joint_names[joint]
+            step[1] = 0.15 if "Left" in name else -0.15 if "Right" in name else 0.0
+            step[2] = -0.2 if name.startswith(("Hip", "Knee", "Ankle", "Foot")) else 0.15
+            pose[joint] = pose[parent] + step
+    return pose + np.array([0.0, 0.0, 1.0])
+
+
+def _detection(positions, camera, *, track=0, t_ns=T0, confidence=2 / 3, velocity=None):
+    skeleton = Skeleton.from_positions(
+        positions,
+        skeleton_id=track,
+        src_time_ns=t_ns,
+        src_frame=f"{camera}_depth_camera_link",
+        confidences=np.full(J, confidence),
+    )
+    if velocity is not None:
+        skeleton.velocities[:] = velocity
+    return skeleton
+
+
+def _calibration(positions: dict[str, tuple[float, float, float]]) -> Calibration:
+    return Calibration(
+        "k01",
+        "world",
+        {
+            name: CameraCalibration(frame_id=f"{name}_depth_camera_link", translation=np.array(p))
+            for name, p in positions.items()
+        },
+    )
+
+
+def _group(skeletons, t_ns=T0):
+    return SkeletonGroup(t_ns, "world", skeletons)
+
+
+def test_identical_views_fuse_to_the_same_skeleton():
+    pose = _person()
+    merger = Merger()
+    group = _group([_detection(pose, cam) for cam in ("k01", "k02", "k03")])
+    out = merger.update(group)
+    assert [s.id for s in out.skeletons] == [0]
+    merged = out.skeletons[0]
+    np.testing.assert_allclose(merged.positions, pose, atol=1e-9)
+    assert merged.src_time_ns == T0
+    assert merged.src_frame == "world"
+    assert out.frame_id == "world"
+    assert out.stamp_ns == T0
+    np.testing.assert_allclose(merged.confidences, 2 / 3)
+    assert merged.link_present.sum() == J - 1
+
+
+def test_one_camera_outlier_limb_does_not_pull_the_result():
+    pose = _person()
+    rng = np.random.default_rng(1)
+    views = [pose + rng.normal(0.0, 0.01, pose.shape) for _ in range(3)]
+    views[2][WRIST] += [0.0, -0.5, 0.0]  # k03 puts the left wrist on the other side
+    group = _group([_detection(v, f"k0{i + 1}") for i, v in enumerate(views)])
+    merged = Merger().update(group).skeletons[0]
+    plain_mean = np.mean([v[WRIST] for v in views], axis=0)
+    assert np.linalg.norm(plain_mean - pose[WRIST]) > 0.15
+    assert np.linalg.norm(merged.positions[WRIST] - pose[WRIST]) < 0.03
+
+
+def test_detections_at_different_stamps_are_brought_to_the_output_time():
+    pose = _person()
+    velocity = np.array([1.0, 0.0, 0.0])
+    late = T0 + 30_000_000
+    older = _detection(pose, "k01", t_ns=T0, velocity=velocity)
+    newer = _detection(pose + velocity * 0.03, "k02", t_ns=late, velocity=velocity)
+    merger = Merger()
+    merger.update(_group([older], T0))
+    out = merger.update(_group([newer], late))
+    assert out.stamp_ns == late
+    np.testing.assert_allclose(out.skeletons[0].positions, pose + velocity * 0.03, atol=1e-9)
+
+    still = Merger(MergerParams(extrapolate=False))
+    still.update(_group([older], T0))
+    stale = still.update(_group([newer], late)).skeletons[0]
+    assert np.abs(stale.positions[:, 0] - (pose[:, 0] + 0.03)).max() > 0.005
+
+
+def test_confident_camera_outweighs_an_unsure_one():
+    pose = _person()
+    sure = _detection(pose, "k01", confidence=2 / 3)
+    unsure = _detection(pose + np.array([0.0, 0.0, 0.1]), "k02", confidence=1 / 3)
+    merged = Merger(MergerParams(outlier_scale=10.0)).update(_group([sure, unsure]))
+    offset = merged.skeletons[0].positions[:, 2] - pose[:, 2]
+    np.testing.assert_allclose(offset, 0.1 * (1 / 9) / (4 / 9 + 1 / 9), atol=1e-5)
+
+
+def test_camera_facing_the_front_outweighs_one_behind():
+    pose = _person()  # faces +x
+    calibration = _calibration({"k01": (4.0, 0.0, 1.5), "k02": (-4.0, 0.0, 1.5)})
+    params = MergerParams(outlier_scale=10.0, depth_gain=0.0, view_weight_min=0.2)
+    front = _detection(pose, "k01")
+    back = _detection(pose + np.array([0.0, 0.0, 0.1]), "k02")
+    merged = Merger(params, calibration).update(_group([front, back])).skeletons[0]
+    offset = np.median(merged.positions[:, 2] - pose[:, 2])
+    assert 0.0 < offset < 0.03
+    blind = Merger(params).update(_group([front, back])).skeletons[0]
+    np.testing.assert_allclose(blind.positions[:, 2] - pose[:, 2], 0.05, atol=1e-9)
+
+
+def test_occluded_joints_count_less():
+    pose = _person()
+    other = pose + np.array([2.0, 0.0, 0.0])  # a second person between k01 and the first one
+    calibration = _calibration({"k01": (4.0, 0.0, 1.5), "k02": (0.0, 4.0, 1.5)})
+    params = MergerParams(outlier_scale=10.0, depth_gain=0.0, view_weight_min=1.0)
+    through = _detection(pose + np.array([0.0, 0.0, 0.1]), "k01")
+    clear = _detection(pose, "k02")
+    group = _group(
+        [through, clear, _detection(other, "k01", track=1), _detection(other, "k02", track=1)]
+    )
+    merged = Merger(params, calibration).update(group).skeletons[0]
+    torso = AZURE_KINECT.index("SpineChest")
+    assert merged.positions[torso, 2] - pose[torso, 2] < 0.05 - 1e-3
+    free = Merger(
+        MergerParams(outlier_scale=10.0, depth_gain=0.0, view_weight_min=1.0, occlusion_radius=0.0),
+        calibration,
+    )
+    same = free.update(group).skeletons[0]
+    assert same.positions[torso, 2] - pose[torso, 2] == pytest.approx(0.05)
+
+
+def test_orientations_are_the_weighted_mean_on_so3():
+    rng = np.random.default_rng(4)
+    pose = _person()
+    rotations = [Rotation.random(J, random_state=i) for i in range(3)]
+    confidences = [2 / 3, 1 / 3, 2 / 3]
+    skeletons = []
+    for i, (rotation, confidence) in enumerate(zip(rotations, confidences, strict=True)):
+        skeleton = _detection(
+            pose + rng.normal(0, 1e-4, pose.shape), f"k0{i + 1}", confidence=confidence
+        )
+        skeleton.orientations[:] = rotation.as_quat()
+        skeletons.append(skeleton)
+    merged = Merger(MergerParams(outlier_scale=10.0)).update(_group(skeletons)).skeletons[0]
+    weights = np.array(confidences) ** 2
+    for joint in (0, 7, 20):
+        stacked = Rotation.concatenate([r[joint] for r in rotations])
+        expected = stacked.mean(weights=weights)
+        angle = (Rotation.from_quat(merged.orientations[joint]) * expected.inv()).magnitude()
+        assert angle < 1e-3
+
+
+def test_output_rate_gives_one_group_per_tick():
+    pose = _person()
+    merger = Merger(MergerParams(output_rate=10.0))
+    stamps = [T0 + k * 33_333_333 for k in range(31)]
+    outputs = [merger.update(_group([_detection(pose, "k01", t_ns=t)], t)) for t in stamps]
+    ticks = [g.stamp_ns for g in outputs if g.skeletons]
+    assert np.all(np.diff(ticks) == 100_000_000)
+    assert len(ticks) == 10
+    assert all(t % 100_000_000 == 0 for t in ticks)
+
+
+def test_each_input_gives_one_output_and_stale_tracks_leave():
+    pose = _person()
+    merger = Merger(MergerParams(window=0.1))
+    merger.update(_group([_detection(pose, "k01", track=3, t_ns=T0)]))
+    later = T0 + 200_000_000
+    out = merger.update(_group([_detection(pose, "k01", track=4, t_ns=later)], later))
+    assert [s.id for s in out.skeletons] == [4]
+    assert merger.update(_group([], later)).skeletons == []
+
+
+def test_a_camera_that_disagrees_loses_its_agreement():
+    rng = np.random.default_rng(5)
+    pose = _person()
+    merger = Merger()
+    for k in range(30):
+        t = T0 + k * 33_000_000
+        views = [pose + rng.normal(0.0, 0.01, pose.shape) for _ in range(3)]
+        views[1] = views[1] + [0.0, 0.08, 0.0]
+        merger.update(_group([_detection(v, f"k0{i + 1}", t_ns=t) for i, v in enumerate(views)], t))
+    assert merger.agreement["k02"] > 2 * max(merger.agreement["k01"], merger.agreement["k03"])
+
+
+def test_bad_input_is_dropped_with_a_reason():
+    merger = Merger()
+    nobody = _detection(_person(), "k01", track=-1)
+    empty = Skeleton.empty(skeleton_id=2, src_time_ns=T0, src_frame="k01_depth_camera_link")
+    out = merger.update(_group([nobody, empty]))
+    assert out.skeletons == []
+    assert merger.drops == {"no track id": 1, "no joint": 1}
