@@ -204,3 +204,12 @@ def test_bad_input_is_dropped_with_a_reason():
     out = merger.update(_group([nobody, empty]))
     assert out.skeletons == []
     assert merger.drops == {"no track id": 1, "no joint": 1}
+
+
+def test_parameter_file_matches_the_dataclass():
+    from dataclasses import asdict
+
+    from hiros_core.parameters import load_config_defaults
+
+    values = load_config_defaults("merger")
+    assert {k: values[k] for k in asdict(MergerParams())} == asdict(MergerParams())

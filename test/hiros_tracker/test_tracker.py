@@ -243,3 +243,12 @@ def test_leg_swap_from_one_camera_is_relabelled(scenes):
     scene = scenes.render(scenes.crossing, duration=3.0, modify=swap)
     _, outputs = _track(scenes, scene)
     _assert_one_id_each(scenes.identities(outputs, scene.truth), 2)
+
+
+def test_parameter_file_matches_the_dataclass():
+    from dataclasses import asdict
+
+    from hiros_core.parameters import load_config_defaults
+
+    values = load_config_defaults("tracker")
+    assert {k: values[k] for k in asdict(TrackerParams())} == asdict(TrackerParams())
