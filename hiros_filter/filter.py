@@ -45,9 +45,10 @@ _NEVER = np.iinfo(np.int64).min // 2  # "joint never seen" stamp, far in the pas
 class FilterParams:
     """Parameters of the filter node (ROS parameter names and defaults).
 
+    The topics are the node's own parameters (``input_topic``, ``output_topic``), not the
+    algorithm's.
+
     Attributes:
-        input_topic: optimised skeletons in.
-        output_topic: filtered skeletons out.
         filter: which estimate gives the positions: ``kalman`` (default: a few ms of lag) or
             ``butterworth`` (Hi-ROS's choice; a 2nd-order 6 Hz low-pass lags ~37 ms).
         butterworth_order: order of the low-pass.
@@ -62,8 +63,6 @@ class FilterParams:
 
     """
 
-    input_topic: str = "/hiros/optimizer"
-    output_topic: str = "/hiros/filter"
     filter: str = "kalman"
     butterworth_order: int = 2
     cutoff_frequency: float = 6.0

@@ -7,6 +7,14 @@ __all__ = [
     "Optimizer",
     "OptimizerParams",
     "PersonCalibration",
+    "main",
     "read_person_calibrations",
     "write_person_calibrations",
 ]
+
+
+def main(args: list[str] | None = None) -> None:
+    """Run the ``optimizer`` node (rclpy is imported only here, so the class stays ROS-free)."""
+    from hiros_optimizer.node import main as node_main
+
+    node_main(args)

@@ -50,9 +50,10 @@ _MIN_VELOCITY_DT = 1e-3  # s; closer frames (duplicates) would turn noise into h
 class OptimizerParams:
     """Parameters of the optimizer node (ROS parameter names and defaults).
 
+    The topics are the node's own parameters (``input_topic``, ``output_topic``), not the
+    algorithm's.
+
     Attributes:
-        input_topic: merged skeletons in.
-        output_topic: optimised skeletons out.
         number_of_frames_for_calibration: frames per person to learn the limb lengths from.
         max_calibration_coefficient_of_variation: a person calibration is accepted when every
             constrained link's robust CV is below this.
@@ -76,8 +77,6 @@ class OptimizerParams:
 
     """
 
-    input_topic: str = "/hiros/merger"
-    output_topic: str = "/hiros/optimizer"
     number_of_frames_for_calibration: int = 60
     max_calibration_coefficient_of_variation: float = 0.2
     min_link_presence: float = 0.5

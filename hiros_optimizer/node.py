@@ -1,0 +1,83 @@
+"""``ros2 run hiros optimizer``: /hiros/merger -> Optimizer.update -> /hiros/optimizer.
+
+Besides the stage node's data flow it offers the person-calibration services of DESIGN.md,
+``~/calibrate`` (Calibrate: learn these tracks' limb lengths again) and ``~/change_id``
+(ChangeId: track ``from_id`` is person ``to_id`` from now on), and the calibration file:
+``load_calibration`` reads ``calibration_file`` at start, ``export_calibration`` rewrites it
+whenever a person calibration is accepted or moved.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+from hiros_core.errors import ConfigError
+from hiros_optimizer.calibration_file import read_person_calibrations, write_person_calibrations
+from hiros_optimizer.optimizer import Optimizer, OptimizerParams
+from hiros_ros import StageNode, run_node
+from hiros_skeleton_msgs.srv import Calibrate, ChangeId
+
+__all__ = ["OptimizerNode", "main"]
+
+
+class OptimizerNode(StageNode):
+    """The optimizer stage node with its services and calibration file."""
+
+    def __init__(self) -> None:
+        super().__init__(
+            "optimizer",
+            OptimizerParams,
+            Optimizer,
+            input_topic="/hiros/merger",
+            output_topic="/hiros/optimizer",
+        )
+        if self.params.load_calibration:
+            self._load()
+        self.create_service(Calibrate, "~/calibrate", self.on_calibrate)
+        self.create_service(ChangeId, "~/change_id", self.on_change_id)
+
+    def on_group(self, data: bytes) -> None:
+        """Run the stage, then export when a person calibration was just accepted."""
+        super().on_group(data)
+        if self.stage.new_calibrations:
+            ids = ", ".join(str(i) for i in self.stage.new_calibrations)
+            self.get_logger().info(f"limb lengths calibrated for track(s) {ids}")
+            self._export()
+
+    def on_calibrate(self, request: Any, response: Any) -> Any:
+        """``~/calibrate``: forget and re-learn the given tracks' limb lengths."""
+        response.ok = self.stage.calibrate(list(request.track_ids))
+        self.get_logger().info(f"calibrate {list(request.track_ids)}: ok={response.ok}")
+        return response
+
+    def on_change_id(self, request: Any, response: Any) -> Any:
+        """``~/change_id``: track ``from_id`` becomes person ``to_id`` (with its calibration)."""
+        response.ok = self.stage.change_id(request.from_id, request.to_id)
+        self.get_logger().info(f"change_id {request.from_id} -> {request.to_id}: ok={response.ok}")
+        if response.ok:
+            self._export()
+        return response
+
+    def _load(self) -> None:
+        path = self.params.calibration_file
+        try:
+            ids = self.stage.load_calibrations(read_person_calibrations(path))
+        except ConfigError as exc:
+            self.get_logger().error(f"person calibrations not loaded: {exc}")
+            return
+        self.get_logger().info(f"loaded limb lengths of person(s) {ids} from {path}")
+
+    def _export(self) -> None:
+        if not self.params.export_calibration:
+            return
+        try:
+            write_person_calibrations(
+                self.params.calibration_file, self.stage.export_calibrations()
+            )
+        except ConfigError as exc:
+            self.drop("calibration file not written", str(exc))
+
+
+def main(args: list[str] | None = None) -> None:
+    """Entry point of ``ros2 run hiros optimizer``."""
+    run_node(OptimizerNode, args)
