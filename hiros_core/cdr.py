@@ -94,7 +94,8 @@ class CdrReader:
         if self.data[start + n - 1] != 0:
             self.fail("string not NUL-terminated")
         try:
-            return bytes(self.data[start : start + n - 1]).decode("utf-8")
+            # a C string ends at its first NUL, as rclpy reads it
+            return bytes(self.data[start : start + n - 1]).split(b"\x00", 1)[0].decode("utf-8")
         except UnicodeDecodeError:
             self.fail("string is not valid UTF-8")
         raise AssertionError  # unreachable: fail() raises
@@ -146,34 +147,48 @@ class Plan:
                 out[offsets[:, None] + np.arange(self.widths[kind])] = raw
         return out.tobytes()
 
+    @property
+    def size(self) -> int:
+        """Bytes of the message (or block) this plan writes."""
+        return self.template.size
+
     def matches(self, data: np.ndarray) -> bool:
         """True when ``data`` (uint8) has exactly this shape."""
-        return data.size == self.template.size and np.array_equal(
-            data[self.constant], self.template[self.constant]
+        return data.size == self.template.size and self.matches_at(data, 0)
+
+    def matches_at(self, data: np.ndarray, start: int) -> bool:
+        """True when ``data[start:]`` begins with a block of exactly this shape."""
+        return start + self.template.size <= data.size and np.array_equal(
+            data[start + self.constant], self.template[self.constant]
         )
 
-    def gather(self, data: np.ndarray, kind: str, dtype: np.dtype | str) -> np.ndarray:
+    def gather(
+        self, data: np.ndarray, kind: str, dtype: np.dtype | str, start: int = 0
+    ) -> np.ndarray:
         """The values of one slot kind as ``(k, width / itemsize)`` of ``dtype``."""
         offsets = self.slots.get(kind)
         if offsets is None or not offsets.size:
             dtype = np.dtype(dtype)
             return np.zeros((0, self.widths.get(kind, dtype.itemsize)), dtype=np.uint8).view(dtype)
-        raw = data[offsets[:, None] + np.arange(self.widths[kind])]
+        raw = data[start + offsets[:, None] + np.arange(self.widths[kind])]
         return raw.view(dtype)
 
 
 class PlanBuilder:
     """Writes a message shape: constants are written, slots are reserved and recorded."""
 
-    def __init__(self) -> None:
-        self.buf = bytearray(ENCAPSULATION)
+    def __init__(self, payload_offset: int | None = None) -> None:
+        """A whole message (with the CDR header), or a block starting at ``payload_offset``."""
+        self.buf = bytearray(ENCAPSULATION if payload_offset is None else b"")
+        # payload position of buf[0]: alignment is relative to the payload start
+        self.origin = -HEADER_SIZE if payload_offset is None else payload_offset
         self.padding: list[int] = []
         self.slots: dict[str, list[int]] = {}
         self.widths: dict[str, int] = {}
 
     def align(self, size: int) -> None:
         """Pad to a multiple of ``size`` relative to the payload."""
-        pad = (-(len(self.buf) - HEADER_SIZE)) % size
+        pad = (-(self.origin + len(self.buf))) % size
         self.padding.extend(range(len(self.buf), len(self.buf) + pad))
         self.buf += b"\x00" * pad
 
@@ -223,6 +238,45 @@ class PlanBuilder:
             if offsets.size:
                 variable[(offsets[:, None] + np.arange(self.widths[kind])).ravel()] = True
         return Plan(template, slots, dict(self.widths), np.flatnonzero(~variable), meta)
+
+
+class BlockPlans:
+    """Plans of message blocks (one skeleton, say), by shape and by alignment phase.
+
+    A block's bytes depend on where it starts modulo 8, so plans are kept per phase; decoding
+    tries the most recently used plans of the block's phase before parsing field by field.
+    """
+
+    def __init__(self, capacity: int = 512, candidates: int = 24) -> None:
+        self.capacity = capacity
+        self.candidates = candidates
+        self.by_key: dict[object, Plan] = {}
+        self.by_phase: dict[int, list[Plan]] = {}
+
+    def get(self, key: object) -> Plan | None:
+        """The plan of a known block shape (the key includes the phase), if cached."""
+        return self.by_key.get(key)
+
+    def put(self, key: object, plan: Plan, phase: int) -> Plan:
+        """Remember a plan."""
+        if len(self.by_key) >= self.capacity:
+            self.by_key.clear()
+            self.by_phase.clear()
+        self.by_key[key] = plan
+        recent = self.by_phase.setdefault(phase, [])
+        recent.insert(0, plan)
+        del recent[self.candidates :]
+        return plan
+
+    def find_at(self, data: np.ndarray, start: int, phase: int) -> Plan | None:
+        """A plan whose block matches ``data`` at ``start``; moved to the front when found."""
+        recent = self.by_phase.get(phase, [])
+        for index, plan in enumerate(recent):
+            if plan.matches_at(data, start):
+                if index:
+                    recent.insert(0, recent.pop(index))
+                return plan
+        return None
 
 
 class PlanCache:

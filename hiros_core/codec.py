@@ -2,9 +2,11 @@
 
 The bytes are those of ``rclpy.serialization.serialize_message`` for the same message (Fast-CDR,
 little endian), except alignment padding, which Fast-CDR leaves uninitialised and we write as
-zeros. Speed comes from plans (``hiros_core.cdr``): a message shape (frames, which marker ids,
-names) is laid out once; after that encoding is a template copy plus one numpy scatter per kind
-of value, and decoding one comparison plus one gather, whatever the number of joints.
+zeros. Speed comes from plans (``hiros_core.cdr``): a shape (a skeleton's frame, marker ids and
+names; a marker array's strings) is laid out once; after that encoding is a template copy plus
+one numpy scatter per kind of value, and decoding one comparison plus one gather, whatever the
+number of joints. SkeletonGroups are planned per skeleton, so groups mixing people and cameras
+reuse the plans of their skeletons.
 
 Conventions kept from DESIGN.md: markers and links are sparse and found by id; a link's id is its
 child marker's id. Messages breaking that (duplicate or negative ids, a link whose id is not its
@@ -17,7 +19,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from hiros_core.cdr import CdrReader, Plan, PlanBuilder, PlanCache
+from hiros_core.cdr import HEADER_SIZE, BlockPlans, CdrReader, Plan, PlanBuilder, PlanCache
 from hiros_core.errors import CodecError, LayoutError
 from hiros_core.layouts import AZURE_KINECT, KINECT_V2, Layout
 from hiros_core.model import BOX_WIDTH, STATE_WIDTH, Skeleton, SkeletonGroup
@@ -25,6 +27,7 @@ from hiros_core.model import BOX_WIDTH, STATE_WIDTH, Skeleton, SkeletonGroup
 __all__ = [
     "MarkerArrayData",
     "MarkerAttachments",
+    "clear_plan_caches",
     "decode_group",
     "decode_marker_array",
     "encode_group",
@@ -39,6 +42,7 @@ _MAXES = np.dtype([("max_markers", "<u4"), ("max_links", "<u4")])
 _ITA = np.dtype([("id", "<i4"), ("type", "<i4"), ("action", "<i4")])
 _ROW_BYTES = STATE_WIDTH * 8
 _BOX_FLOATS = 1 + BOX_WIDTH  # skeleton confidence + bounding box
+_MIN_SKELETON_BYTES = 4 + 8 + 5 + 8 + 8 * _BOX_FLOATS + 8  # id, time, "", maxes, box, 2 counts
 
 
 def _split_ns(stamps_ns: np.ndarray, what: str) -> np.ndarray:
@@ -75,7 +79,7 @@ def _checked(values: list[int], dtype: str, what: str) -> np.ndarray:
 
 @dataclass(frozen=True)
 class _SkeletonShape:
-    """What a plan fixes about one skeleton: frame, layout and which ids it carries."""
+    """What a block plan fixes about one skeleton: frame, layout and which ids it carries."""
 
     src_frame: str
     layout: Layout
@@ -83,138 +87,157 @@ class _SkeletonShape:
     link_ids: np.ndarray
 
 
-@dataclass(frozen=True)
-class _GroupShape:
-    frame_id: str
-    skeletons: tuple[_SkeletonShape, ...]
+# Each skeleton is its own block (plans reused whatever the other people in the group), so a
+# tracker output mixing cameras and people costs no more plans than the cameras' own frames.
+_SKELETON_PLANS = BlockPlans()
+_GROUP_HEADER = PlanCache(capacity=64)
 
 
-_GROUP_PLANS = PlanCache()
+def clear_plan_caches() -> None:
+    """Forget every cached plan (they are rebuilt on demand; for tests and memory)."""
+    for cache in (_SKELETON_PLANS, _GROUP_HEADER, _MARKER_PLANS):
+        cache.by_key.clear()
+    _SKELETON_PLANS.by_phase.clear()
+    _GROUP_HEADER.by_size.clear()
+    _MARKER_PLANS.by_size.clear()
 
 
-def _group_key(group: SkeletonGroup) -> tuple:
+def _skeleton_key(skeleton: Skeleton, phase: int) -> tuple:
     return (
-        group.frame_id,
-        *(
-            (s.src_frame, s.layout, s.marker_present.tobytes(), s.link_present.tobytes())
-            for s in group.skeletons
-        ),
+        skeleton.src_frame,
+        skeleton.layout,
+        skeleton.marker_present.tobytes(),
+        skeleton.link_present.tobytes(),
+        phase,
     )
 
 
-def _build_group_plan(group: SkeletonGroup) -> Plan:
-    builder = PlanBuilder()
-    builder.slot("stamp", 8, 4)
-    builder.string(group.frame_id)
-    builder.u32(len(group.skeletons))
-    shapes = []
-    for skeleton in group.skeletons:
-        layout = skeleton.layout
-        marker_ids = np.flatnonzero(skeleton.marker_present)
-        link_ids = np.flatnonzero(skeleton.link_present)
-        builder.slot("head", 12, 4)
-        builder.string(skeleton.src_frame)
-        builder.slot("maxes", 8, 4)
-        builder.slot("box", _BOX_FLOATS * 8, 8)
-        builder.u32(marker_ids.size)
-        for marker_id in marker_ids:
-            builder.i32(int(marker_id))
-            builder.string(layout.joint_names[marker_id])
-            builder.slot("markers", _ROW_BYTES, 8)
-        builder.u32(link_ids.size)
-        for link_id in link_ids:
-            builder.i32(int(link_id))
-            builder.string(layout.link_names[link_id])
-            builder.i32(layout.parents[link_id])
-            builder.i32(int(link_id))
-            builder.slot("links", _ROW_BYTES, 8)
-        shapes.append(_SkeletonShape(_c_string(skeleton.src_frame), layout, marker_ids, link_ids))
-    return builder.build(_GroupShape(_c_string(group.frame_id), tuple(shapes)))
+def _build_skeleton_plan(skeleton: Skeleton, payload_offset: int) -> Plan:
+    builder = PlanBuilder(payload_offset)
+    layout = skeleton.layout
+    marker_ids = np.flatnonzero(skeleton.marker_present)
+    link_ids = np.flatnonzero(skeleton.link_present)
+    builder.slot("head", 12, 4)
+    builder.string(skeleton.src_frame)
+    builder.slot("maxes", 8, 4)
+    builder.slot("box", _BOX_FLOATS * 8, 8)
+    builder.u32(marker_ids.size)
+    for marker_id in marker_ids:
+        builder.i32(int(marker_id))
+        builder.string(layout.joint_names[marker_id])
+        builder.slot("markers", _ROW_BYTES, 8)
+    builder.u32(link_ids.size)
+    for link_id in link_ids:
+        builder.i32(int(link_id))
+        builder.string(layout.link_names[link_id])
+        builder.i32(layout.parents[link_id])
+        builder.i32(int(link_id))
+        builder.slot("links", _ROW_BYTES, 8)
+    return builder.build(
+        _SkeletonShape(_c_string(skeleton.src_frame), layout, marker_ids, link_ids)
+    )
 
 
 def _rows(arrays: list[np.ndarray], width: int) -> np.ndarray:
     return np.concatenate(arrays) if arrays else np.empty((0, width))
 
 
-def encode_group(group: SkeletonGroup) -> bytes:
-    """CDR bytes of ``hiros_skeleton_msgs/msg/SkeletonGroup`` for the model ``group``."""
-    key = _group_key(group)
-    plan = _GROUP_PLANS.get(key) or _GROUP_PLANS.put(key, _build_group_plan(group))
-    skeletons = group.skeletons
-    what = "SkeletonGroup"
-    head = np.empty(len(skeletons), dtype=_HEAD)
-    head["id"] = _checked([s.id for s in skeletons], "<i4", f"{what} skeleton id")
-    times = _split_ns(np.array([s.src_time_ns for s in skeletons], dtype=np.int64), what)
-    head["sec"], head["nanosec"] = times["sec"], times["nanosec"]
-    maxes = np.empty(len(skeletons), dtype=_MAXES)
-    maxes["max_markers"] = _checked(
-        [s.max_markers for s in skeletons], "<u4", f"{what} max_markers"
+def _group_header(group: SkeletonGroup) -> Plan:
+    key = (group.frame_id, len(group.skeletons))
+    plan = _GROUP_HEADER.get(key)
+    if plan is None:
+        builder = PlanBuilder()
+        builder.slot("stamp", 8, 4)
+        builder.string(group.frame_id)
+        builder.u32(len(group.skeletons))
+        plan = _GROUP_HEADER.put(key, builder.build())
+    return plan
+
+
+def _encode_skeleton(skeleton: Skeleton, payload_offset: int) -> bytes:
+    phase = payload_offset % 8
+    key = _skeleton_key(skeleton, phase)
+    plan = _SKELETON_PLANS.get(key) or _SKELETON_PLANS.put(
+        key, _build_skeleton_plan(skeleton, phase), phase
     )
-    maxes["max_links"] = _checked([s.max_links for s in skeletons], "<u4", f"{what} max_links")
-    box = np.empty((len(skeletons), _BOX_FLOATS))
-    box[:, 0] = [s.confidence for s in skeletons]
-    if skeletons:
-        box[:, 1:] = np.stack([s.bounding_box for s in skeletons])
+    head = np.empty(1, dtype=_HEAD)
+    head["id"] = _checked([skeleton.id], "<i4", "SkeletonGroup skeleton id")
+    time = _split_ns(np.array([skeleton.src_time_ns]), "SkeletonGroup")
+    head["sec"], head["nanosec"] = time["sec"], time["nanosec"]
+    maxes = np.empty(1, dtype=_MAXES)
+    maxes["max_markers"] = _checked([skeleton.max_markers], "<u4", "SkeletonGroup max_markers")
+    maxes["max_links"] = _checked([skeleton.max_links], "<u4", "SkeletonGroup max_links")
+    box = np.empty(_BOX_FLOATS)
+    box[0], box[1:] = skeleton.confidence, skeleton.bounding_box
     return plan.encode(
         {
-            "stamp": _split_ns(np.array([group.stamp_ns]), what),
             "head": head,
             "maxes": maxes,
             "box": box,
-            "markers": _rows([s.markers[s.marker_present] for s in skeletons], STATE_WIDTH),
-            "links": _rows([s.links[s.link_present] for s in skeletons], STATE_WIDTH),
+            "markers": skeleton.markers[skeleton.marker_present],
+            "links": skeleton.links[skeleton.link_present],
         }
     )
 
 
+def encode_group(group: SkeletonGroup) -> bytes:
+    """CDR bytes of ``hiros_skeleton_msgs/msg/SkeletonGroup`` for the model ``group``."""
+    header = _group_header(group)
+    parts = [header.encode({"stamp": _split_ns(np.array([group.stamp_ns]), "SkeletonGroup")})]
+    offset = len(parts[0]) - HEADER_SIZE
+    for skeleton in group.skeletons:
+        block = _encode_skeleton(skeleton, offset)
+        parts.append(block)
+        offset += len(block)
+    return b"".join(parts)
+
+
 def decode_group(data: bytes | bytearray | memoryview) -> SkeletonGroup:
     """The model of a ``SkeletonGroup`` from CDR bytes; raises CodecError on bad bytes."""
-    raw = np.frombuffer(data, dtype=np.uint8)
-    plan = _GROUP_PLANS.find(raw)
-    if plan is None:
-        group = _parse_group(data)
-        _GROUP_PLANS.put(_group_key(group), _build_group_plan(group))
-        return group
-    return _decode_group_with(plan, raw)
-
-
-def _decode_group_with(plan: Plan, raw: np.ndarray) -> SkeletonGroup:
-    shape: _GroupShape = plan.meta  # type: ignore[assignment]
-    stamp = _join_ns(plan.gather(raw, "stamp", _TIME).ravel())[0]
-    head = plan.gather(raw, "head", _HEAD).ravel()
-    maxes = plan.gather(raw, "maxes", _MAXES).ravel()
-    box = plan.gather(raw, "box", "<f8").reshape(-1, _BOX_FLOATS)
-    markers = plan.gather(raw, "markers", "<f8").reshape(-1, STATE_WIDTH)
-    links = plan.gather(raw, "links", "<f8").reshape(-1, STATE_WIDTH)
-    src_times = _join_ns(head)
-    skeletons = []
-    marker_start = link_start = 0
-    for index, sk in enumerate(shape.skeletons):
-        skeleton = Skeleton.empty(sk.layout, skeleton_id=int(head["id"][index]))
-        skeleton.src_time_ns = int(src_times[index])
-        skeleton.src_frame = sk.src_frame
-        skeleton.max_markers = int(maxes["max_markers"][index])
-        skeleton.max_links = int(maxes["max_links"][index])
-        skeleton.confidence = float(box[index, 0])
-        skeleton.bounding_box = box[index, 1:].copy()
-        marker_end, link_end = marker_start + sk.marker_ids.size, link_start + sk.link_ids.size
-        skeleton.markers[sk.marker_ids] = markers[marker_start:marker_end]
-        skeleton.links[sk.link_ids] = links[link_start:link_end]
-        skeleton.marker_present[sk.marker_ids] = True
-        skeleton.link_present[sk.link_ids] = True
-        marker_start, link_start = marker_end, link_end
-        skeletons.append(skeleton)
-    return SkeletonGroup(int(stamp), shape.frame_id, skeletons)
-
-
-def _parse_group(data: bytes | bytearray | memoryview) -> SkeletonGroup:
-    """Field-by-field decoding: any order of ids, any names; builds no plan by itself."""
     reader = CdrReader(data, "hiros_skeleton_msgs/SkeletonGroup")
+    raw = np.frombuffer(data, dtype=np.uint8)
     stamp_sec, stamp_nanosec = reader.i32(), reader.u32()
     frame_id = reader.string()
-    skeletons = [_parse_skeleton(reader) for _ in range(reader.count(4 * 12 + 8 * _BOX_FLOATS))]
+    count = reader.count(_MIN_SKELETON_BYTES)
+    skeletons = []
+    for _ in range(count):
+        reader.align(4)
+        phase = (reader.pos - HEADER_SIZE) % 8
+        plan = _SKELETON_PLANS.find_at(raw, reader.pos, phase)
+        if plan is None:
+            skeleton = _parse_skeleton(reader)
+            _SKELETON_PLANS.put(
+                _skeleton_key(skeleton, phase), _build_skeleton_plan(skeleton, phase), phase
+            )
+        else:
+            skeleton = _skeleton_from_block(plan, raw, reader.pos)
+            reader.pos += plan.size
+        skeletons.append(skeleton)
     reader.done()
     return SkeletonGroup(stamp_sec * _NS + stamp_nanosec, frame_id, skeletons)
+
+
+def _skeleton_from_block(plan: Plan, raw: np.ndarray, start: int) -> Skeleton:
+    shape: _SkeletonShape = plan.meta  # type: ignore[assignment]
+    head = plan.gather(raw, "head", _HEAD, start).ravel()
+    maxes = plan.gather(raw, "maxes", _MAXES, start).ravel()
+    box = plan.gather(raw, "box", "<f8", start).ravel()
+    skeleton = Skeleton.empty(shape.layout, skeleton_id=int(head["id"][0]))
+    skeleton.src_time_ns = int(_join_ns(head)[0])
+    skeleton.src_frame = shape.src_frame
+    skeleton.max_markers = int(maxes["max_markers"][0])
+    skeleton.max_links = int(maxes["max_links"][0])
+    skeleton.confidence = float(box[0])
+    skeleton.bounding_box = box[1:].copy()
+    skeleton.markers[shape.marker_ids] = plan.gather(raw, "markers", "<f8", start).reshape(
+        -1, STATE_WIDTH
+    )
+    skeleton.links[shape.link_ids] = plan.gather(raw, "links", "<f8", start).reshape(
+        -1, STATE_WIDTH
+    )
+    skeleton.marker_present[shape.marker_ids] = True
+    skeleton.link_present[shape.link_ids] = True
+    return skeleton
 
 
 def _parse_skeleton(reader: CdrReader) -> Skeleton:

@@ -248,11 +248,19 @@ class Skeleton:
             self.id == other.id
             and self.src_time_ns == other.src_time_ns
             and self.src_frame == other.src_frame
-            and self.layout.joint_names == other.layout.joint_names
+            # an empty skeleton carries no layout in a message: compare layouts when it matters
+            and (
+                self.layout.joint_names == other.layout.joint_names
+                or not (self.marker_present.any() or self.link_present.any())
+            )
             and self.max_markers == other.max_markers
             and self.max_links == other.max_links
-            and np.array_equal(self.marker_present, other.marker_present)
-            and np.array_equal(self.link_present, other.link_present)
+            and np.array_equal(
+                np.flatnonzero(self.marker_present), np.flatnonzero(other.marker_present)
+            )
+            and np.array_equal(
+                np.flatnonzero(self.link_present), np.flatnonzero(other.link_present)
+            )
             and _same_floats(self.markers[self.marker_present], other.markers[other.marker_present])
             and _same_floats(self.links[self.link_present], other.links[other.link_present])
             and _same_floats(np.array([self.confidence]), np.array([other.confidence]))
