@@ -409,6 +409,8 @@ _MARKER_PLANS = PlanCache()
 
 def _text_bytes(texts: list[str]) -> list[bytes]:
     """Each text as CDR content (UTF-8, ended at a NUL as rclpy does)."""
+    if not any(texts):
+        return [b""] * len(texts)
     try:
         return [text.encode("utf-8").split(b"\x00", 1)[0] for text in texts]
     except UnicodeEncodeError as exc:
@@ -423,8 +425,8 @@ def _marker_key(data: MarkerArrayData, texts: list[bytes]) -> tuple:
         tuple(data.frame_ids),
         tuple(data.namespaces),
         tuple(map(len, texts)),
-        tuple(len(p) for p in data.points),
-        tuple(len(c) for c in data.point_colors),
+        tuple(map(len, data.points)),
+        tuple(map(len, data.point_colors)),
         # hashing N dataclasses costs more than the encoding; most messages have none
         None if all(a is _NO_ATTACHMENTS for a in data.attachments) else tuple(data.attachments),
     )
