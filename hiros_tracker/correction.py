@@ -99,31 +99,47 @@ class CameraCorrection:
 
 
 def _moved(skeletons: list[Skeleton], extrinsics: RigidTransform) -> list[Skeleton]:
-    """Copies of the skeletons moved by ``extrinsics``, all rows of a frame in one product.
+    """New skeletons moved by ``extrinsics``, all rows of a frame in one product.
 
     The result equals ``extrinsics.apply_to_skeleton`` on each skeleton (a test checks it);
     doing a whole frame at once keeps the per-frame cost flat in the number of people, which
-    is what the tracker's time budget needs.
+    is what the tracker's time budget needs. The new skeletons' rows are views into one array
+    owned by them alone.
     """
     if not skeletons:
         return []
-    copies = [skeleton.copy() for skeleton in skeletons]
     matrix = extrinsics.rotation.as_matrix()
     left = _left_product(extrinsics.rotation.as_quat())
-    rows = np.concatenate([part for s in copies for part in (s.markers, s.links)])
+    rows = np.concatenate([part for s in skeletons for part in (s.markers, s.links)])
     rows[:, 1:4] = rows[:, 1:4] @ matrix.T + extrinsics.translation
     rows[:, 4:8] = _unit(rows[:, 4:8]) @ left.T
     rows[:, 8:20] = (rows[:, 8:20].reshape(-1, 4, 3) @ matrix.T).reshape(-1, 12)
-    boxes = np.stack([s.bounding_box for s in copies])
+    boxes = np.stack([s.bounding_box for s in skeletons])
     boxes[:, 0:3] = boxes[:, 0:3] @ matrix.T + extrinsics.translation
     boxes[:, 3:7] = _unit(boxes[:, 3:7]) @ left.T
+    moved = []
     start = 0
-    for skeleton, box in zip(copies, boxes, strict=True):
-        for part in (skeleton.markers, skeleton.links):
-            part[:] = rows[start : start + len(part)]
-            start += len(part)
-        skeleton.bounding_box = box
-    return copies
+    for skeleton, box in zip(skeletons, boxes, strict=True):
+        middle = start + len(skeleton.markers)
+        end = middle + len(skeleton.links)
+        moved.append(
+            Skeleton(
+                id=skeleton.id,
+                src_time_ns=skeleton.src_time_ns,
+                src_frame=skeleton.src_frame,
+                layout=skeleton.layout,
+                markers=rows[start:middle],
+                links=rows[middle:end],
+                marker_present=skeleton.marker_present.copy(),
+                link_present=skeleton.link_present.copy(),
+                confidence=skeleton.confidence,
+                bounding_box=box,
+                max_markers=skeleton.max_markers,
+                max_links=skeleton.max_links,
+            )
+        )
+        start = end
+    return moved
 
 
 def _left_product(rotation: np.ndarray) -> np.ndarray:

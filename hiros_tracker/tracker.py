@@ -234,14 +234,37 @@ def _pair_costs(
     return cost, flips
 
 
-def _velocity_sums(times: float, positions: np.ndarray) -> np.ndarray:
-    """``(J, 9)`` one sample's terms of the least-squares slope: n, t, t², p (3), t·p (3)."""
-    valid = np.isfinite(positions).all(axis=1)[:, None]
+def _velocity_sums(times: np.ndarray, positions: np.ndarray) -> np.ndarray:
+    """``(U, J, 9)`` each sample's terms of the least-squares slope: n, t, t², p (3), t·p (3).
+
+    Args:
+        times: ``(U,)`` seconds from each track's time origin.
+        positions: ``(U, J, 3)``, NaN for joints not seen.
+
+    """
+    valid = np.isfinite(positions).all(axis=2)[..., None]
     filled = np.where(valid, positions, 0.0)
     ones = valid.astype(float)
-    return np.concatenate(
-        [ones, ones * times, ones * (times * times), filled, filled * times], axis=1
-    )
+    t = times[:, None, None]
+    return np.concatenate([ones, ones * t, ones * (t * t), filled, filled * t], axis=2)
+
+
+def _solve_velocities(sums: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Slopes from per-camera sums ``(U, C, J, 9)``: one intercept per camera (fixed effects).
+
+    Returns:
+        ``(U, J, 3)`` joint velocities (0 where undetermined), ``(U, 3)`` body velocities
+        (pooled over joints) and ``(U,)`` whether anything was determined.
+
+    """
+    n = np.maximum(sums[..., 0], 1.0)  # (U, C, J)
+    sxx = (sums[..., 2] - sums[..., 1] ** 2 / n).sum(axis=1)  # (U, J)
+    sxy = (sums[..., 6:9] - sums[..., 1:2] * sums[..., 3:6] / n[..., None]).sum(axis=1)
+    determined = sxx > 1e-5
+    velocities = sxy / np.where(determined, sxx, np.inf)[..., None]
+    pooled = np.where(determined, sxx, 0.0).sum(axis=1)
+    body = (sxy * determined[..., None]).sum(axis=1) / np.maximum(pooled, 1e-12)[:, None]
+    return velocities, body, determined.any(axis=1)
 
 
 _REBASE_NS = 30_000_000_000
@@ -286,7 +309,7 @@ class _Track:
         self.hits = 0
         self.confirmed = False
         self.cameras: dict[int, int] = {}  # camera code -> the camera's last body id for it
-        self.records: deque[tuple[int, int, np.ndarray]] = deque()
+        self.records: deque[tuple[int, int, np.ndarray, np.ndarray]] = deque()
         self.sums = np.zeros((1, len(positions), 9))  # (cameras, J, 9)
         self.epoch_ns = time_ns
         self.votes: dict[int, tuple[int, np.ndarray]] = {}
@@ -296,37 +319,41 @@ class _Track:
         dt = min(max((time_ns - self.time_ns) * _NS, -max_prediction), max_prediction)
         return self.positions + self.velocity * dt
 
-    def add_record(self, time_ns: int, camera: int, positions: np.ndarray, window_ns: int) -> None:
-        """Add a detection to the velocity fit and forget those older than the window."""
-        if time_ns - self.epoch_ns > _REBASE_NS:
-            self.epoch_ns = time_ns
-            self.sums[:] = 0.0
-            for t, cam, old in self.records:
-                self.sums[cam] += _velocity_sums((t - self.epoch_ns) * _NS, old)
+    def add_record(
+        self, time_ns: int, camera: int, positions: np.ndarray, sums: np.ndarray, window_ns: int
+    ) -> None:
+        """Add a detection's terms (``sums`` ``(J, 9)``, see ``_velocity_sums``) to the fit.
+
+        Detections older than the window leave it. Every ``_REBASE_NS`` the time origin moves
+        to the newest detection and the sums are rebuilt, so that ``t²`` stays small.
+        """
         if camera >= len(self.sums):
             grown = np.zeros((camera + 1, *self.sums.shape[1:]))
             grown[: len(self.sums)] = self.sums
             self.sums = grown
-        self.records.append((time_ns, camera, positions))
-        self.sums[camera] += _velocity_sums((time_ns - self.epoch_ns) * _NS, positions)
+        self.records.append((time_ns, camera, positions, sums))
+        self.sums[camera] += sums
         while self.records[0][0] < time_ns - window_ns:
-            t, old_camera, old = self.records.popleft()
-            self.sums[old_camera] -= _velocity_sums((t - self.epoch_ns) * _NS, old)
-        sums = self.sums
-        n = np.maximum(sums[..., 0], 1.0)  # (C, J)
-        sxx = (sums[..., 2] - sums[..., 1] ** 2 / n).sum(axis=0)  # (J,)
-        sxy = (sums[..., 6:9] - sums[..., 1:2] * sums[..., 3:6] / n[..., None]).sum(axis=0)
-        determined = sxx > 1e-5
-        if determined.any():
-            self.velocities = sxy / np.where(determined, sxx, np.inf)[:, None]
-            self.velocity = sxy[determined].sum(axis=0) / sxx[determined].sum()
+            _, old_camera, _, old = self.records.popleft()
+            self.sums[old_camera] -= old
+        if time_ns - self.epoch_ns > _REBASE_NS:
+            self.epoch_ns = time_ns
+            self.sums[:] = 0.0
+            rebuilt = deque()
+            for t, cam, pos, _ in self.records:
+                terms = _velocity_sums(np.array([(t - time_ns) * _NS]), pos[None])[0]
+                self.sums[cam] += terms
+                rebuilt.append((t, cam, pos, terms))
+            self.records = rebuilt
 
     def relabel(self, permutation: np.ndarray) -> None:
         """Reorder the track's joints (swap the sides of some parts)."""
         self.positions = self.positions[permutation]
         self.orientations = self.orientations[permutation]
         self.velocities = self.velocities[permutation]
-        self.records = deque((t, cam, pos[permutation]) for t, cam, pos in self.records)
+        self.records = deque(
+            (t, cam, pos[permutation], terms[permutation]) for t, cam, pos, terms in self.records
+        )
         self.sums = self.sums[:, permutation]
 
 
@@ -444,22 +471,28 @@ class Tracker:
                     assigned[det] = (track, flips)
                 free = [d for d in free if d not in assigned]
 
-        outputs: list[Skeleton] = []
-        for det, detection in enumerate(detections):
+        pairs: list[tuple[int, _Track, np.ndarray]] = []
+        for det in range(len(detections)):
             if det in assigned:
-                track, flips = assigned[det]
+                pairs.append((det, *assigned[det]))
             elif np.isfinite(positions[det]).all(axis=1).sum() >= params.min_joints:
-                track, flips = self._new_track(positions[det], stamp), no_flip
+                pairs.append((det, self._new_track(positions[det], stamp), no_flip))
             else:
                 self.drops["too few joints"] += 1
-                continue
-            canonical = positions[det][parts.permutation(flips)]
-            flips = flips ^ self._hit(
-                track, canonical, detection, parts, time_ns=stamp, camera=code, flips=flips
-            )
-            if track.confirmed:
-                outputs.append(self._labelled(detection, track, parts.permutation(flips)))
-        return outputs
+        if not pairs:
+            return []
+        flips = np.stack([f for _, _, f in pairs])  # (U, K)
+        rows = np.array([det for det, _, _ in pairs])
+        canonical = positions[rows[:, None], parts.permutation(flips)]  # (U, J, 3)
+        tracks = [track for _, track, _ in pairs]
+        chosen = [detections[det] for det in rows]
+        flips = flips ^ self._hit(tracks, canonical, chosen, parts, stamp, code, flips)
+        orders = parts.permutation(flips)
+        return [
+            self._labelled(detection, track, order)
+            for detection, track, order in zip(chosen, tracks, orders, strict=True)
+            if track.confirmed
+        ]
 
     def _valid_detections(self, skeletons: list[Skeleton]) -> list[Skeleton]:
         """Skeletons with a finite joint and the layout of the first one (and of the tracks)."""
@@ -549,47 +582,76 @@ class Tracker:
         self._tracks.append(track)
         return track
 
-    def _hit(
+    def _hit(  # noqa: PLR0917 - one frame's matched pairs, all positional for brevity
         self,
-        track: _Track,
+        tracks: list[_Track],
         canonical: np.ndarray,
-        detection: Skeleton,
+        detections: list[Skeleton],
         parts: _MirrorParts,
-        *,
         time_ns: int,
         camera: int,
         flips: np.ndarray,
     ) -> np.ndarray:
-        """Fold one detection (already in the track's labelling) into the track.
+        """Fold one frame's detections (already in their tracks' labelling) into the tracks.
 
-        Returns ``(K,)`` the parts whose sides the track itself swapped (mirror vote), which
-        the caller swaps in this detection's output too.
+        Args:
+            tracks: the U tracks hit (distinct).
+            canonical: ``(U, J, 3)`` their detections, relabelled to the tracks' sides.
+            detections: the U detections as received (ids, orientations).
+            parts: the layout's mirror parts.
+            time_ns: the frame's corrected stamp.
+            camera: the frame's camera code.
+            flips: ``(U, K)`` parts relabelled per detection.
+
+        Returns:
+            ``(U, K)`` the parts whose sides a track itself swapped (mirror vote), which the
+            caller swaps in that detection's output too.
+
         """
         params = self.params
-        now = max(time_ns, track.time_ns)
-        predicted = track.predict(now, params.max_prediction)
-        measured = np.isfinite(canonical).all(axis=1)
-        alpha = params.position_smoothing if track.hits else 1.0
+        previous = np.array([t.time_ns for t in tracks])
+        now = np.maximum(previous, time_ns)
+        dt = np.clip((now - previous) * _NS, -params.max_prediction, params.max_prediction)
+        positions = np.stack([t.positions for t in tracks])
+        predicted = positions + np.stack([t.velocity for t in tracks])[:, None] * dt[:, None, None]
+        alpha = np.array([params.position_smoothing if t.hits else 1.0 for t in tracks])
+        measured = np.isfinite(canonical).all(axis=2)[..., None]
         updated = np.where(
-            measured[:, None], predicted + alpha * (canonical - predicted), predicted
+            measured, predicted + alpha[:, None, None] * (canonical - predicted), predicted
         )
-        unknown = ~np.isfinite(updated).all(axis=1)
-        updated[unknown] = canonical[unknown]
-        track.positions = updated
-        track.time_ns = now
-        track.last_hit_ns = max(track.last_hit_ns, time_ns)
-        track.hits += 1
-        track.cameras[camera] = detection.id
-        orientations = detection.orientations
-        if params.orientation_weight > 0 and np.isfinite(orientations).any():
-            track.orientations = orientations[parts.permutation(flips)]
-        track.add_record(time_ns, camera, canonical, round(params.velocity_window * 1e9))
+        updated = np.where(np.isfinite(updated), updated, canonical)
+        epochs = np.array([t.epoch_ns for t in tracks])
+        terms = _velocity_sums((time_ns - epochs) * _NS, canonical)
+        window_ns = round(params.velocity_window * 1e9)
+        for u, track in enumerate(tracks):
+            track.positions = updated[u]
+            track.time_ns = int(now[u])
+            track.last_hit_ns = max(track.last_hit_ns, time_ns)
+            track.hits += 1
+            track.cameras[camera] = detections[u].id
+            track.add_record(time_ns, camera, canonical[u], terms[u], window_ns)
+        if params.orientation_weight > 0:
+            for track, detection, order in zip(
+                tracks, detections, parts.permutation(flips), strict=True
+            ):
+                if np.isfinite(detection.orientations).any():
+                    track.orientations = detection.orientations[order]
+        cameras = max(len(t.sums) for t in tracks)
+        sums = np.zeros((len(tracks), cameras, *tracks[0].sums.shape[1:]))
+        for u, track in enumerate(tracks):
+            sums[u, : len(track.sums)] = track.sums
+        velocities, body, determined = _solve_velocities(sums)
 
-        if not track.confirmed and track.hits >= params.min_hits:
-            self._confirm(track, detection.layout, time_ns)
-        if params.mirror_check and params.mirror_vote and track.confirmed:
-            return self._vote(track, parts, camera, time_ns, flips)
-        return np.zeros_like(flips)
+        swaps = np.zeros_like(flips)
+        for u, track in enumerate(tracks):
+            if determined[u]:
+                track.velocities = velocities[u]
+                track.velocity = body[u]
+            if not track.confirmed and track.hits >= params.min_hits:
+                self._confirm(track, detections[u].layout, time_ns)
+            if params.mirror_check and params.mirror_vote and track.confirmed:
+                swaps[u] = self._vote(track, parts, camera, time_ns, flips[u])
+        return swaps
 
     def _vote(
         self, track: _Track, parts: _MirrorParts, camera: int, time_ns: int, flips: np.ndarray
