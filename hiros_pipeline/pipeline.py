@@ -56,13 +56,14 @@ class Pipeline:
     ) -> None:
         self.params = params or PipelineParams()
         self.tracker = Tracker(self.params.tracker, calibration)
-        self.merger = Merger(self.params.merger)
+        self.merger = Merger(self.params.merger, calibration)
         self.optimizer = Optimizer(self.params.optimizer)
         self.filter = Filter(self.params.filter)
 
     def set_calibration(self, calibration: Calibration) -> None:
         """Apply a new calibration from the next camera frame on."""
         self.tracker.set_calibration(calibration)
+        self.merger.set_calibration(calibration)
 
     def update(self, camera_group: SkeletonGroup) -> StageOutputs:
         """One camera frame (camera frame and clock) through all four stages."""
