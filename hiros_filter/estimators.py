@@ -75,6 +75,8 @@ class KalmanBank:
         P: ``(S, J, 3, 3)`` covariance over [position, velocity, acceleration].
         q: spectral density of the white jerk, m^2/s^5.
         r: variance of a position measurement, m^2.
+        scale: ``(S, J)`` adaptive factor on ``q``: the smoothed normalised innovation squared
+            ``|ν|² / (3 S)`` (about 1 when the model fits), clipped to ``[1, max_noise_scale]``.
 
     """
 
@@ -86,8 +88,13 @@ class KalmanBank:
         *,
         initial_velocity_sd: float = 1.0,
         initial_acceleration_sd: float = 5.0,
+        max_noise_scale: float = 1.0,
+        adaptation_rate: float = 0.5,
     ) -> None:
         self.q = jerk_spectral_density
+        self.max_noise_scale = max_noise_scale
+        self.adaptation_rate = adaptation_rate
+        self.scale = np.ones(shape)
         self.r = measurement_noise**2
         self._initial = np.diag([self.r, initial_velocity_sd**2, initial_acceleration_sd**2])
         self.x = np.zeros((*shape, 3, 3))
@@ -99,12 +106,14 @@ class KalmanBank:
         if extra > 0:
             self.x = np.concatenate([self.x, np.zeros((extra, *self.x.shape[1:]))])
             self.P = np.concatenate([self.P, np.zeros((extra, *self.P.shape[1:]))])
+            self.scale = np.concatenate([self.scale, np.ones((extra, *self.scale.shape[1:]))])
 
     def reset(self, slots: np.ndarray, joints: np.ndarray, positions: np.ndarray) -> None:
         """Start (slot, joint) pairs at rest at ``(n, 3)`` positions, wide velocity prior."""
         self.x[slots, joints] = 0.0
         self.x[slots, joints, 0] = positions
         self.P[slots, joints] = self._initial
+        self.scale[slots, joints] = 1.0
 
     def predict(self, slots: np.ndarray, dt: np.ndarray) -> None:
         """Advance each slot by its own ``dt`` seconds (the model is continuous-time)."""
@@ -115,13 +124,19 @@ class KalmanBank:
         Q = np.stack([_process_noise(round(float(step), 6), self.q) for step in dt])
         self.x[slots] = np.einsum("nab,njbk->njak", F, self.x[slots])
         self.P[slots] = F[:, None] @ self.P[slots] @ F[:, None].transpose(0, 1, 3, 2)
-        self.P[slots] += Q[:, None]
+        self.P[slots] += Q[:, None] * self.scale[slots][..., None, None]
 
     def update(self, slots: np.ndarray, joints: np.ndarray, positions: np.ndarray) -> None:
         """Correct (slot, joint) pairs with measured ``(n, 3)`` positions (H = [1, 0, 0])."""
         P = self.P[slots, joints]
         gain = P[:, :, 0] / (P[:, 0, 0] + self.r)[:, None]  # (n, 3)
         innovation = positions - self.x[slots, joints, 0]  # (n, 3 axes)
+        if self.max_noise_scale > 1.0:
+            surprise = np.sum(innovation**2, axis=-1) / (3.0 * (P[:, 0, 0] + self.r))
+            smoothed = self.scale[slots, joints] + self.adaptation_rate * (
+                surprise - self.scale[slots, joints]
+            )
+            self.scale[slots, joints] = np.clip(smoothed, 1.0, self.max_noise_scale)
         self.x[slots, joints] += gain[:, :, None] * innovation[:, None, :]
         self.P[slots, joints] = P - gain[:, :, None] * P[:, None, 0, :]
 

@@ -11,7 +11,9 @@ Per track id and per joint, three causal estimators run side by side
   is resampled: the k - 1 missing samples are interpolated linearly before it, so the filter
   keeps its time base;
 - a constant-acceleration Kalman filter (continuous white jerk, any dt) that gives the
-  velocities and accelerations, and the positions when ``filter`` is ``kalman``;
+  velocities and accelerations, and the positions when ``filter`` is ``kalman``. Its process
+  noise adapts per joint to the normalised innovation (Bar-Shalom's continuous noise-level
+  adjustment): still joints are smoothed hard, a joint that starts moving is followed closely;
 - exponential smoothing of the orientations on SO(3) by slerp, with the weight of the new
   sample ``1 - exp(-2π f_c dt)`` (the discrete first-order low-pass at
   ``orientation_cutoff_frequency``), and the angular velocity from consecutive outputs.
@@ -56,6 +58,9 @@ class FilterParams:
         sample_frequency: Hz of the input; <= 0 estimates it from the stamps.
         rate_tolerance: relative change of the estimated rate that re-designs the low-pass.
         jerk_spectral_density: Kalman process noise, m^2/s^5 (higher: follows faster, smooths less).
+        max_noise_scale: adaptive process noise: a joint whose innovations are larger than the
+            filter expects (a movement starting) gets its process noise scaled up by their
+            normalised size, smoothed, up to this factor (1 = fixed noise).
         measurement_noise: Kalman position noise, metres (standard deviation).
         orientation_cutoff_frequency: Hz of the orientation smoothing.
         max_gap: seconds a track or joint may be unseen before it restarts.
@@ -68,7 +73,8 @@ class FilterParams:
     cutoff_frequency: float = 6.0
     sample_frequency: float = -1.0
     rate_tolerance: float = 0.15
-    jerk_spectral_density: float = 500.0
+    jerk_spectral_density: float = 300.0
+    max_noise_scale: float = 10.0
     measurement_noise: float = 0.01
     orientation_cutoff_frequency: float = 6.0
     max_gap: float = 0.5
@@ -81,8 +87,10 @@ class FilterParams:
         if self.butterworth_order < 1 or self.cutoff_frequency <= 0:
             msg = "butterworth_order must be >= 1 and cutoff_frequency > 0 Hz"
             raise ConfigError(msg)
-        if self.jerk_spectral_density <= 0 or self.measurement_noise <= 0:
-            msg = "jerk_spectral_density and measurement_noise must be > 0"
+        if min(self.jerk_spectral_density, self.measurement_noise) <= 0 or (
+            self.max_noise_scale < 1
+        ):
+            msg = "jerk_spectral_density, measurement_noise must be > 0, max_noise_scale >= 1"
             raise ConfigError(msg)
         if self.orientation_cutoff_frequency <= 0 or self.max_gap <= 0:
             msg = "orientation_cutoff_frequency and max_gap must be > 0"
@@ -105,7 +113,10 @@ class _Tracks:
         self.angular_velocities = np.full((capacity, self.n_joints, 3), np.nan)
         self.angular_accelerations = np.full((capacity, self.n_joints, 3), np.nan)
         self.kalman = KalmanBank(
-            (capacity, self.n_joints), params.jerk_spectral_density, params.measurement_noise
+            (capacity, self.n_joints),
+            params.jerk_spectral_density,
+            params.measurement_noise,
+            max_noise_scale=params.max_noise_scale,
         )
         self.low_pass: ButterworthBank | None = None
         self.designed_for = np.zeros(capacity)  # rate each slot's low-pass state belongs to

@@ -2,14 +2,15 @@
 
 Per track id the stage first learns the limb (link) lengths over the person's first frames:
 per link the median of the measured lengths over the last ``number_of_frames_for_calibration``
-frames. A link is constrained when it was measured in at least ``min_link_presence`` of those
-frames and its robust coefficient of variation (``1.4826 MAD / median``) is below
-``max_calibration_coefficient_of_variation`` (Hi-ROS's acceptance rule, with robust statistics
-so a few bad frames do not spoil it); other links stay free (follow the measurement). The person
-calibration is accepted once at least ``min_calibrated_fraction`` of the layout's links are
-constrained — a steady view of the body — so that chronically noisy short links (hand tips,
-thumbs) cannot block a person forever. Until then the window slides and the person passes
-through unchanged.
+frames. A link is steady when its robust coefficient of variation (``1.4826 MAD / median``) is
+below ``max_calibration_coefficient_of_variation`` (Hi-ROS's acceptance rule, with robust
+statistics so a few bad frames do not spoil it). The person calibration is accepted once at
+least ``min_calibrated_fraction`` of the layout's links are steady — a steady view of the body —
+so that chronically noisy short links (hand tips, thumbs, the 7 cm pelvis-hip links) cannot
+block a person forever. Then every link measured in at least ``min_link_presence`` of the
+window is constrained to its median: a noisy link's median is still a good length (its
+standard error shrinks with the window), only rarely seen links stay free (follow the
+measurement). Until acceptance the window slides and the person passes through unchanged.
 
 Once calibrated, each frame's joints are replaced by the positions closest to the measurement,
 weighted by confidence, that keep the calibrated lengths exactly
@@ -59,8 +60,8 @@ class OptimizerParams:
             constrained link's robust CV is below this.
         min_link_presence: fraction of the calibration frames a link must be measured in to be
             constrained; rarer links stay free.
-        min_calibrated_fraction: fraction of the layout's links that must be constrained for
-            a person calibration to be accepted.
+        min_calibrated_fraction: fraction of the layout's links whose CV must be below the
+            maximum for a person calibration to be accepted.
         outlier_threshold: relative link-length error that makes both ends of a link suspect.
         outlier_distance: metres from the prediction beyond which a suspect joint is
             down-weighted.
@@ -380,9 +381,8 @@ class Optimizer:
         # s the per-axis noise of d, of which the radial part shows as the spread s of the
         # lengths; the two perpendicular axes add 2 s^2, which is removed here.
         spread = variation * median
-        lengths = np.where(
-            steady, np.sqrt(np.maximum(median**2 - 2 * spread**2, 0.25 * median**2)), np.nan
-        )
+        unbiased = np.sqrt(np.maximum(median**2 - 2 * spread**2, 0.25 * median**2))
+        lengths = np.where(seen & (median > 0), unbiased, np.nan)
         track.calibration = PersonCalibration(skeleton.layout, lengths, variation, window.shape[0])
         self.calibrations[track_id] = track.calibration
         self.new_calibrations.append(track_id)

@@ -164,3 +164,15 @@ def test_params_are_checked():
         FilterParams(filter="median")
     with pytest.raises(ConfigError):
         FilterParams(cutoff_frequency=0.0)
+
+
+def test_adaptive_noise_follows_a_movement_start_sooner():
+    times = np.arange(60) / RATE
+    start = np.clip(times - 1.0, 0.0, None)  # still for 1 s, then a 3 m/s swing
+    trajectory = base_pose(8)[None] + start[:, None, None] * np.array([3.0, 0.0, 0.0])
+    errors = {}
+    for scale in (1.0, 10.0):
+        out = feed(Filter(FilterParams(max_noise_scale=scale)), trajectory, times)
+        got = np.stack([s.positions for s in out[33:40]])  # after the first surprise
+        errors[scale] = np.abs(got - trajectory[33:40]).max()
+    assert errors[10.0] < 0.8 * errors[1.0]
