@@ -1,0 +1,96 @@
+"""``tracker`` node: each camera's SkeletonGroups in, tracked world-frame detections out.
+
+    /<cam>/skeletons (raw CDR, camera frame and clock)  ->  Tracker.update  ->  /hiros/tracker
+
+The calibration comes from ``calibration_file`` at start and then, live, from the ``calib``
+node's parameters (``cameras.<cam>.time_offset``, ``.translation``, ...) through
+``/parameter_events``. A camera without calibration is reported once; its frames are dropped
+and counted on ``/diagnostics``.
+"""
+
+from __future__ import annotations
+
+from collections import Counter
+from dataclasses import dataclass, field
+
+from hiros_core.calibration import Calibration, load_calibration
+from hiros_core.codec import decode_group, encode_group
+from hiros_core.errors import CalibrationError
+from hiros_ros import HirosNode, run_node
+from hiros_ros.calibration_follower import CalibrationFollower
+from hiros_ros.node import camera_qos, pipeline_qos
+from hiros_skeleton_msgs.msg import SkeletonGroup as SkeletonGroupMsg
+from hiros_tracker.tracker import Tracker, TrackerParams
+
+__all__ = ["TrackerNode", "TrackerNodeParams", "main"]
+
+
+@dataclass
+class TrackerNodeParams(TrackerParams):
+    """The tracker's parameters plus its topics and where the calibration comes from."""
+
+    cameras: list[str] = field(default_factory=lambda: ["k01", "k02", "k03"])
+    camera_topic: str = "/{camera}/skeletons"
+    camera_qos: str = "sensor_data"
+    output_topic: str = "/hiros/tracker"
+    calibration_file: str = ""
+    calib_node: str = "/calib"
+
+
+class TrackerNode(HirosNode):
+    """Camera topics -> ``Tracker.update`` -> ``output_topic``."""
+
+    def __init__(self) -> None:
+        super().__init__("tracker")
+        self.params = self.declare_params(TrackerNodeParams)
+        calibration = self._initial_calibration()
+        self.tracker = Tracker(self.params, calibration)
+        self.follower = CalibrationFollower(
+            self, calibration, self._on_calibration, self.params.calib_node
+        )
+        self.publisher = self.create_raw_publisher(
+            SkeletonGroupMsg, self.params.output_topic, pipeline_qos()
+        )
+        qos = camera_qos(self.params.camera_qos)
+        topics = [self.params.camera_topic.format(camera=c) for c in self.params.cameras]
+        for topic in topics:
+            self.create_raw_subscription(SkeletonGroupMsg, topic, self.on_group, qos)
+        self._seen_drops: Counter[str] = Counter()
+        self._reported: set[str] = set()
+        self.get_logger().info(f"{topics} -> Tracker -> {self.params.output_topic}")
+
+    def _initial_calibration(self) -> Calibration:
+        path = self.params.calibration_file
+        if not path:
+            self.get_logger().info(f"no calibration_file: waiting for {self.params.calib_node}")
+            return Calibration(reference="")
+        try:
+            return load_calibration(path)
+        except CalibrationError as exc:
+            self.get_logger().fatal(str(exc))
+            raise SystemExit(1) from None
+
+    def _on_calibration(self, calibration: Calibration) -> None:
+        known = set(self.tracker.correction.cameras)
+        self.tracker.set_calibration(calibration)
+        self._reported -= set(calibration.cameras)
+        if set(calibration.cameras) != known:
+            self.get_logger().info(f"calibration: cameras {sorted(calibration.cameras)}")
+
+    def on_group(self, data: bytes) -> None:
+        """Decode one camera frame, track, publish what the tracker released."""
+        result = self.tracker.update(decode_group(data))
+        for camera in self.tracker.uncalibrated - self._reported:
+            self._reported.add(camera)
+            self.get_logger().warning(
+                f"camera {camera!r} has no calibration: its frames are dropped until "
+                f"{self.params.calib_node} or the calibration file provides one"
+            )
+        self.absorb_drops(self.tracker.drops, self._seen_drops)
+        if result.skeletons:
+            self.publish_raw(self.publisher, encode_group(result))
+
+
+def main(args: list[str] | None = None) -> None:
+    """``ros2 run hiros tracker``."""
+    run_node(TrackerNode, args)
