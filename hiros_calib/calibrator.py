@@ -13,6 +13,8 @@ from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
+import numpy as np
+
 from hiros_calib.extrinsics import (
     CameraPose,
     Correspondences,
@@ -23,7 +25,12 @@ from hiros_calib.extrinsics import (
     pair_correspondences,
     solve_poses,
 )
-from hiros_calib.sync import CameraClock, PairOffset, SyncParams, synchronise
+from hiros_calib.sync import (
+    CameraClock,
+    PairOffset,
+    SyncParams,
+    synchronise,
+)
 from hiros_calib.tracks import BodyTrack, extract_tracks
 from hiros_core.calibration import Calibration, CameraCalibration
 from hiros_core.errors import CalibrationError
@@ -83,21 +90,35 @@ class Calibrator:
         self.drops: Counter[str] = Counter()
         self.result: CalibrationResult | None = None
         self._groups: dict[str, list[SkeletonGroup]] = defaultdict(list)
+        self._arrivals: dict[str, list[int]] = defaultdict(list)
 
-    def update(self, group: SkeletonGroup) -> SkeletonGroup:
-        """Keep a camera frame for the next :meth:`calibrate`; returns it unchanged."""
+    def update(self, group: SkeletonGroup, arrival_ns: int | None = None) -> SkeletonGroup:
+        """Keep a camera frame for the next :meth:`calibrate`; returns it unchanged.
+
+        ``arrival_ns`` is when the frame reached the receiver (recording log time or the
+        node's clock); with it the clock search is narrowed (see ``prior_window``).
+        """
         if not group.frame_id:
             self.drops["no_frame_id"] += 1
             return group
         self._groups[group.camera].append(group)
+        if arrival_ns is not None:
+            self._arrivals[group.camera].append(arrival_ns - group.stamp_ns)
         return group
 
     def calibrate(
         self,
         camera_groups: Mapping[str, Sequence[SkeletonGroup]] | None = None,
         progress: Progress | None = None,
+        arrival_ns: Mapping[str, Sequence[int]] | None = None,
     ) -> Calibration:
         """The calibration of every camera; also kept with all details in ``self.result``.
+
+        Args:
+            camera_groups: per camera its frames; default: those given to :meth:`update`.
+            progress: optional progress callback.
+            arrival_ns: per camera, when each of its frames (same order) reached the
+                receiver; default: those given to :meth:`update`, if any.
 
         Raises:
             CalibrationError: fewer than two cameras, or (with ``require_all``) a camera
@@ -105,6 +126,15 @@ class Calibrator:
 
         """
         groups = dict(camera_groups) if camera_groups is not None else dict(self._groups)
+        if camera_groups is None:
+            delays = {c: d for c, d in self._arrivals.items() if d}
+        else:
+            delays = {
+                c: [int(a) - g.stamp_ns for a, g in zip(arrival_ns[c], groups[c], strict=False)]
+                for c in groups
+                if arrival_ns and c in arrival_ns
+            }
+        arrival_offsets = {c: float(np.median(d)) * 1e-9 for c, d in delays.items() if d}
         report = progress or (lambda _stage, _done: None)
         params = self.params
         if len(groups) < 2:
@@ -128,7 +158,7 @@ class Calibrator:
             for camera in cameras
         }
         report("clock offsets", 0.1)
-        clocks, sync_pairs = synchronise(tracks, reference, params)
+        clocks, sync_pairs = synchronise(tracks, reference, params, arrival_offsets)
         refused = {c: clock.reason for c, clock in clocks.items() if not clock.ok}
         self._check(refused, "clock")
         report("camera poses", 0.6)
@@ -175,6 +205,7 @@ class Calibrator:
                 joined = Correspondences.concatenate(usable) if usable else None
                 pose = estimate_pair_pose(joined, params, camera_a=a, camera_b=b)
                 pose.quality["bodies_associated"] = len(matches)
+                pose.body_pairs = [(i, j) for i, j, _ in matches]
                 pairs.append(pose)
         return pairs
 
@@ -207,13 +238,15 @@ def _to_calibration(
 
 
 def _sync_quality(camera: str, pairs: list[PairOffset]) -> dict[str, Any]:
-    """Best correlation figures among the camera's usable pairs."""
+    """Correlation figures of the camera's usable pairs (the best pair's, and the counts)."""
     mine = [p for p in pairs if p.ok and camera in (p.camera_a, p.camera_b)]
     if not mine:
         return {}
-    best = max(mine, key=lambda p: p.quality["peak"])
-    return {
-        "time_peak": best.quality["peak"],
-        "time_sharpness": best.quality["sharpness"],
-        "time_pairs_used": sum(p.quality["pairs_used"] for p in mine),
+    best = max(mine, key=lambda p: p.quality.get("refined_correlation", 0.0))
+    out = {
+        f"time_{key}": best.quality[key]
+        for key in ("peak", "sharpness", "refined_correlation")
+        if key in best.quality
     }
+    out["time_pairs_used"] = sum(p.quality.get("pairs_used", 0) for p in mine)
+    return out

@@ -58,19 +58,35 @@ class ExtrinsicsParams:
     """Parameters of the pose estimation (same names as the ``calib`` node's)."""
 
     joints: list[str] = field(default_factory=lambda: list(DEFAULT_JOINTS))
-    """Joints used as correspondences (names missing from a layout are skipped)."""
+    """Joints whose distances identify a person across cameras (see signature.py)."""
     max_signature_mismatch: float = 0.1
     """Largest median signature difference (m) for two tracks to be the same person."""
+    min_common_time: float = 2.0
+    """Two tracks must be seen together this long (s) to be paired (short ghosts are not)."""
+    pose_joints: list[str] = field(default_factory=list)
+    """Joints used as correspondences; empty = every joint of the layout (more joints
+    average out more of the SDK's fixed per-joint errors)."""
     max_interpolation_gap: float = 0.1
     """Camera b's frames around an instant must be closer than this (s) to interpolate."""
-    inlier_threshold: float = 0.1
-    """Distance (m) under which a joint correspondence counts as an inlier."""
+    inlier_threshold: float = 0.25
+    """Largest distance (m) for a joint correspondence to count as an inlier; the working
+    threshold adapts to the data's spread (``inlier_sigmas`` times the robust scale)."""
+    inlier_sigmas: float = 3.0
+    """Inliers lie within this many robust residual scales (median residual / 1.54)."""
+    frame_outlier_ratio: float = 2.5
+    """Frames whose median residual exceeds this times the typical one are left out (an
+    SDK that took the back for the front moves every limb)."""
     ransac_iterations: int = 400
     """Minimal samples tried per camera pair."""
     loss: str = "soft_l1"
     """Robust loss of the refinement (``soft_l1``, ``huber``, ``cauchy`` or ``linear``)."""
-    loss_scale: float = 0.03
-    """Residual (m) where the robust loss starts to flatten."""
+    loss_scale: float = 0.0
+    """Residual (m) where the robust loss starts to flatten; 0 = the data's robust scale."""
+    joint_offset_rounds: int = 3
+    """Rounds of estimating the fixed per-person, per-joint disagreement between two
+    cameras' SDKs alternately with the poses (0: assume the SDKs agree on average)."""
+    offset_shrinkage: float = 30.0
+    """Samples' worth of pull towards 0 on each joint offset, so short tracks stay sane."""
     max_correspondences: int = 6000
     """Joint correspondences per camera pair kept for the refinements (evenly subsampled)."""
     min_correspondences: int = 30
@@ -138,6 +154,11 @@ class Correspondences:
     joint_names: tuple[str, ...]
     groups: np.ndarray
     times: np.ndarray
+    bodies: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
+
+    def __post_init__(self) -> None:
+        if len(self.bodies) != len(self.points_a):
+            self.bodies = np.zeros(len(self.points_a), dtype=np.int64)
 
     @property
     def n_frames(self) -> int:
@@ -156,6 +177,7 @@ class Correspondences:
             first.joint_names,
             first.groups,
             np.concatenate([c.times for c in items]),
+            np.concatenate([np.full(c.n_frames, k, dtype=np.int64) for k, c in enumerate(items)]),
         )
 
 
@@ -168,6 +190,7 @@ def _body_part(name: str) -> int:
 
 
 def _joint_tables(layout: Layout, names: list[str]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Selected joints, their mirror permutation (local indices) and body parts."""
     joints = select_joints(layout, names)
     local = {int(j): k for k, j in enumerate(joints)}
     mirror = np.array([local[int(layout.mirror[j])] for j in joints])
@@ -197,10 +220,10 @@ def pair_correspondences(
     params: ExtrinsicsParams,
 ) -> Correspondences | None:
     """Same-instant joint pairs of two tracks of the same person, None when they never meet."""
-    joints, mirror, groups = _joint_tables(track_a.layout, params.joints)
+    joints, mirror, groups = _joint_tables(track_a.layout, params.pose_joints)
     t_b = clock_b.from_reference(clock_a.to_reference(track_a.times))
     positions_b, weights_b = _interpolate(track_b, np.asarray(t_b), params.max_interpolation_gap)
-    weights = np.minimum(track_a.weights[:, joints], weights_b[:, joints])
+    weights = np.minimum(track_a.weights[:, joints], weights_b[:, joints]) ** 2
     frames = weights.sum(axis=1) > 0
     if frames.sum() < 3:
         return None
@@ -238,7 +261,7 @@ def associate(
         for j, tb in enumerate(tracks_b):
             t_b = np.asarray(clock_b.from_reference(clock_a.to_reference(ta.times)))
             common = (t_b >= tb.start) & (t_b <= tb.end)
-            if common.sum() < 10:
+            if common.sum() < 10 or np.ptp(t_b[common]) < params.min_common_time:
                 continue
             part_b = BodyTrack(tb.camera, tb.body_id, tb.layout, *_at(tb, t_b[common], params))
             sig_b = pose_signature(part_b, joints)
@@ -290,6 +313,7 @@ class PairPose:
         transform: b -> a (``p_a = R p_b + t``).
         correspondences: the joint pairs, with the chosen per-frame mirror applied to b.
         quality: inlier ratio, residual (m), mirrored fraction, correspondences used.
+        body_pairs: ``(track_a, track_b)`` indices of the associated same-person tracks.
 
     """
 
@@ -300,6 +324,7 @@ class PairPose:
     transform: RigidTransform = field(default_factory=RigidTransform.identity)
     correspondences: Correspondences | None = None
     quality: dict[str, Any] = field(default_factory=dict)
+    body_pairs: list[tuple[int, int]] = field(default_factory=list)
 
     @property
     def ok(self) -> bool:
@@ -364,15 +389,32 @@ def _ransac(
     return pose, inliers
 
 
-def _choose_mirror(c: Correspondences, pose: RigidTransform) -> tuple[np.ndarray, np.ndarray]:
-    """Per frame, the straight or swapped b joints, whichever fits; (points_b, weights, swap)."""
-    straight = np.linalg.norm(pose.apply(c.points_b) - c.points_a, axis=2)
-    swapped = np.linalg.norm(pose.apply(c.points_b[:, c.mirror]) - c.points_a, axis=2)
-    w_straight, w_swapped = c.weights, np.minimum(c.weights, c.weights[:, c.mirror])
-    cost_straight = _weighted_median_rows(straight, w_straight)
-    cost_swapped = _weighted_median_rows(swapped, w_swapped)
-    swap = cost_swapped < cost_straight
-    return swap, np.where(swap[:, None], w_swapped, w_straight)
+def _choose_view(
+    c: Correspondences, pose: RigidTransform
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Per frame, the reading of both skeletons that fits best.
+
+    Hypotheses: as reported, or b's left and right swapped (an SDK seeing the person from
+    behind). Returns the chosen ``points_a``, ``points_b`` (F, K, 3), weights (F, K) and
+    the choice (F,): 0 as reported, 1 swapped.
+    """
+    swapped_w = np.minimum(c.weights, c.weights[:, c.mirror])
+    candidates = [
+        (c.points_a, c.points_b, c.weights),
+        (c.points_a, c.points_b[:, c.mirror], swapped_w),
+    ]
+    costs = np.stack(
+        [
+            _weighted_median_rows(np.linalg.norm(pose.apply(pb) - pa, axis=2), w)
+            for pa, pb, w in candidates
+        ]
+    )
+    choice = np.argmin(costs, axis=0)
+    pick = np.arange(c.n_frames)
+    points_a = np.stack([pa for pa, _, _ in candidates])[choice, pick]
+    points_b = np.stack([pb for _, pb, _ in candidates])[choice, pick]
+    weights = np.stack([w for _, _, w in candidates])[choice, pick]
+    return points_a, points_b, weights, choice
 
 
 def _weighted_median_rows(values: np.ndarray, weights: np.ndarray) -> np.ndarray:
@@ -383,12 +425,14 @@ def _weighted_median_rows(values: np.ndarray, weights: np.ndarray) -> np.ndarray
     return np.where(np.isfinite(out), out, np.inf)
 
 
-def _flatten(c: Correspondences, swap: np.ndarray, weights: np.ndarray) -> tuple[np.ndarray, ...]:
-    """(points_a (N,3), points_b (N,3), weights (N,), joint (N,)) with the mirror applied."""
-    points_b = np.where(swap[:, None, None], c.points_b[:, c.mirror], c.points_b)
-    joint = np.broadcast_to(np.arange(len(c.mirror))[None], weights.shape)
+def _flatten(
+    points_a: np.ndarray, points_b: np.ndarray, weights: np.ndarray
+) -> tuple[np.ndarray, ...]:
+    """(points_a, points_b, weights, joint, frame) rows of the pairs with positive weight."""
+    joint = np.broadcast_to(np.arange(weights.shape[1])[None], weights.shape)
+    frame = np.broadcast_to(np.arange(weights.shape[0])[:, None], weights.shape)
     valid = weights > 0
-    return c.points_a[valid], points_b[valid], weights[valid], joint[valid]
+    return points_a[valid], points_b[valid], weights[valid], joint[valid], frame[valid]
 
 
 def _subsample(count: int, limit: int) -> np.ndarray:
@@ -402,9 +446,11 @@ def _refine_pair(
     points_b: np.ndarray,
     weights: np.ndarray,
     pose: RigidTransform,
+    *,
+    scale: float,
     params: ExtrinsicsParams,
 ) -> RigidTransform:
-    """Robust least-squares refinement of one b -> a pose."""
+    """Robust least-squares refinement of one b -> a pose (loss flattening at ``scale`` m)."""
     root = np.sqrt(weights)[:, None]
 
     def residuals(x: np.ndarray) -> np.ndarray:
@@ -412,7 +458,7 @@ def _refine_pair(
         return ((moved - points_a) * root).ravel()
 
     x0 = np.concatenate([pose.rotation.as_rotvec(), pose.translation])
-    result = least_squares(residuals, x0, loss=params.loss, f_scale=params.loss_scale)
+    result = least_squares(residuals, x0, loss=params.loss, f_scale=scale)
     return RigidTransform(Rotation.from_rotvec(result.x[:3]), result.x[3:])
 
 
@@ -443,33 +489,88 @@ def estimate_pair_pose(
             reason=f"no consistent pose: only {int(inliers.sum())} of {len(inv_a)} joint pairs "
             f"agree within {params.inlier_threshold * 100:.0f} cm",
         )
-    swap, weights = _choose_mirror(c, pose)
-    points_a, points_b, w, _ = _flatten(c, swap, weights)
+    for _ in range(2):
+        chosen_a, chosen_b, weights, _ = _choose_view(c, pose)
+        points_a, points_b, w, joint, frame = _flatten(chosen_a, chosen_b, weights)
+        keep, scale = _trusted(
+            pose, points_a, points_b, joint=joint, frame=frame, n_frames=c.n_frames, params=params
+        )
+        pose = kabsch(points_a[keep], points_b[keep], w[keep])
+    sub = _subsample(len(points_a), params.max_correspondences)
+    sub = sub[keep[sub]]
+    pose = _refine_pair(
+        points_a[sub],
+        points_b[sub],
+        w[sub],
+        pose,
+        scale=params.loss_scale or scale,
+        params=params,
+    )
+    chosen_a, chosen_b, weights, choice = _choose_view(c, pose)
+    points_a, points_b, w, joint, frame = _flatten(chosen_a, chosen_b, weights)
+    keep, scale = _trusted(
+        pose, points_a, points_b, joint=joint, frame=frame, n_frames=c.n_frames, params=params
+    )
+    good_frames = np.zeros(c.n_frames, dtype=bool)
+    good_frames[frame[keep]] = True
+    # inverse-variance weights per joint: the SDK places some joints far less well
     residual = np.linalg.norm(pose.apply(points_b) - points_a, axis=1)
-    inliers = residual < params.inlier_threshold
-    pose = kabsch(points_a[inliers], points_b[inliers], w[inliers])
-    keep = _subsample(len(points_a), params.max_correspondences)
-    pose = _refine_pair(points_a[keep], points_b[keep], w[keep], pose, params)
-    swap, weights = _choose_mirror(c, pose)
+    table = np.full((c.n_frames, len(c.mirror)), np.nan)
+    table[frame[keep], joint[keep]] = residual[keep]
+    with np.errstate(all="ignore"):
+        joint_scale = np.nanmedian(table, axis=0) / 1.54
+    joint_factor = np.where(
+        np.isfinite(joint_scale), (scale / np.maximum(joint_scale, 1e-4)) ** 2, 0.0
+    )
     chosen = Correspondences(
-        c.points_a,
-        np.where(swap[:, None, None], c.points_b[:, c.mirror], c.points_b),
-        weights,
+        chosen_a,
+        chosen_b,
+        np.where(good_frames[:, None], weights * joint_factor, 0.0),
         c.mirror,
         c.joint_names,
         c.groups,
         c.times,
+        c.bodies,
     )
-    points_a, points_b, w, _ = _flatten(chosen, np.zeros(c.n_frames, dtype=bool), weights)
     residual = np.linalg.norm(pose.apply(points_b) - points_a, axis=1)
-    inliers = residual < params.inlier_threshold
     quality = {
-        "inlier_ratio": round(float(inliers.mean()), 4),
-        "residual_m": round(float(np.sqrt(np.mean(residual[inliers] ** 2))), 4),
-        "mirrored_fraction": round(float(swap.mean()), 3),
+        "inlier_ratio": round(float(keep.mean()), 4),
+        "residual_m": round(float(np.sqrt(np.mean(residual[keep] ** 2))), 4),
+        "scale_m": round(scale, 4),
+        "mirrored_fraction": round(float((choice == 1).mean()), 3),
+        "frames_left_out": round(float(1.0 - good_frames.mean()), 3),
         "correspondences": len(points_a),
     }
     return PairPose(camera_a, camera_b, "ok", "", pose, chosen, quality)
+
+
+def _trusted(
+    pose: RigidTransform,
+    points_a: np.ndarray,
+    points_b: np.ndarray,
+    *,
+    joint: np.ndarray,
+    frame: np.ndarray,
+    n_frames: int,
+    params: ExtrinsicsParams,
+) -> tuple[np.ndarray, float]:
+    """Inlier mask of the correspondences and the robust residual scale (m).
+
+    The scale is the median residual over 1.54 (the median length of a 3D Gaussian vector
+    of unit sigma per axis); frames whose median residual is ``frame_outlier_ratio`` times
+    the median of all frames are left out whole.
+    """
+    residual = np.linalg.norm(pose.apply(points_b) - points_a, axis=1)
+    table = np.full((n_frames, int(joint.max()) + 1 if joint.size else 1), np.nan)
+    table[frame, joint] = residual
+    with np.errstate(all="ignore"):
+        per_frame = np.nanmedian(table, axis=1) if residual.size else np.full(n_frames, np.nan)
+    typical = float(np.nanmedian(per_frame))
+    good_frame = per_frame <= params.frame_outlier_ratio * typical
+    in_good = good_frame[frame]
+    scale = float(np.median(residual[in_good])) / 1.54 if in_good.any() else typical
+    threshold = min(params.inlier_threshold, params.inlier_sigmas * scale)
+    return in_good & (residual < threshold), scale
 
 
 # --------------------------------------------------------------------------- N cameras
@@ -512,6 +613,49 @@ def _spanning_tree(reference: str, pairs: list[PairPose]) -> dict[str, RigidTran
         poses[best[1]] = best[2]
 
 
+@dataclass
+class _Block:
+    """One camera pair's correspondences in the joint solve.
+
+    ``label`` numbers the (body pair, joint) each row belongs to; ``offsets (L, 3)`` are the
+    fixed disagreements (world frame, m) the two SDKs have about that joint of that person.
+    """
+
+    pair: PairPose
+    points_a: np.ndarray
+    points_b: np.ndarray
+    weights: np.ndarray
+    joint: np.ndarray
+    label: np.ndarray
+    offsets: np.ndarray
+
+    def difference(self, x: np.ndarray, pose_of: Any) -> np.ndarray:
+        """``(N, 3)`` T_a p_a - T_b p_b - offset, world frame."""
+        rot_a, t_a = pose_of(x, self.pair.camera_a)
+        rot_b, t_b = pose_of(x, self.pair.camera_b)
+        moved = rot_a.apply(self.points_a) + t_a - rot_b.apply(self.points_b) - t_b
+        return moved - self.offsets[self.label]
+
+    def update_offsets(self, x: np.ndarray, pose_of: Any, scale: float, shrink: float) -> None:
+        """Robust per-label mean residual, shrunk towards 0 and centred (weighted mean 0).
+
+        Centring keeps the offsets from absorbing the translation: only how the SDKs
+        disagree from joint to joint and person to person is modelled, not their average.
+        """
+        self.offsets[:] = 0.0
+        residual = self.difference(x, pose_of)
+        norm2 = (residual**2).sum(axis=1) / scale**2
+        weight = self.weights / np.sqrt(1.0 + norm2)  # soft_l1 influence
+        count = np.bincount(self.label, weight, len(self.offsets))
+        sums = np.stack(
+            [np.bincount(self.label, weight * residual[:, k], len(self.offsets)) for k in range(3)],
+            axis=1,
+        )
+        offsets = sums / (count + shrink * float(np.median(self.weights)))[:, None]
+        mean = (weight[:, None] * offsets[self.label]).sum(axis=0) / max(weight.sum(), 1e-12)
+        self.offsets[:] = offsets - mean
+
+
 def solve_poses(
     cameras: list[str],
     reference: str,
@@ -520,10 +664,13 @@ def solve_poses(
 ) -> dict[str, CameraPose]:
     """All camera poses at once from every pair's joint correspondences.
 
-    Minimises ``sum rho(|T_a p_a - T_b p_b|^2)`` over every camera pair's correspondences
+    Minimises ``sum rho(|T_a p_a - T_b p_b - d|^2)`` over every camera pair's correspondences
     (weights applied, reference camera fixed at the identity), starting from the poses
-    chained along the most reliable pairs. Cameras no usable pair links to the reference
-    are refused with the pairs' reasons.
+    chained along the most reliable pairs. ``d`` are per (person, joint) offsets, estimated
+    alternately with the poses (``joint_offset_rounds``): SDKs place a given person's joint a
+    few centimetres differently in each camera for the whole recording, and left unmodelled
+    those fixed disagreements tilt the solution. Cameras no usable pair links to the
+    reference are refused with the pairs' reasons.
     """
     initial = _spanning_tree(reference, pairs)
     out = {c: CameraPose(c) for c in cameras}
@@ -538,20 +685,11 @@ def solve_poses(
                 "; ".join(reasons) if reasons else "no camera pair includes it"
             )
     unknown = [c for c in cameras if c in initial and c != reference]
-    usable = [
-        p
+    blocks = [
+        _block(p, params)
         for p in pairs
         if p.ok and p.correspondences and p.camera_a in initial and p.camera_b in initial
     ]
-    blocks = []
-    for p in usable:
-        points_a, points_b, w, joint = _flatten(
-            p.correspondences,
-            np.zeros(p.correspondences.n_frames, dtype=bool),
-            p.correspondences.weights,
-        )
-        keep = _subsample(len(points_a), params.max_correspondences)
-        blocks.append((p, points_a[keep], points_b[keep], np.sqrt(w[keep])[:, None], joint[keep]))
     index = {c: k for k, c in enumerate(unknown)}
 
     def pose_of(x: np.ndarray, camera: str) -> tuple[Rotation, np.ndarray]:
@@ -561,20 +699,21 @@ def solve_poses(
         return Rotation.from_rotvec(x[k : k + 3]), x[k + 3 : k + 6]
 
     def residuals(x: np.ndarray) -> np.ndarray:
-        out_rows = []
-        for p, points_a, points_b, root, _ in blocks:
-            rot_a, t_a = pose_of(x, p.camera_a)
-            rot_b, t_b = pose_of(x, p.camera_b)
-            out_rows.append((rot_a.apply(points_a) + t_a - rot_b.apply(points_b) - t_b) * root)
-        return np.concatenate(out_rows).ravel()
+        rows = [b.difference(x, pose_of) * np.sqrt(b.weights)[:, None] for b in blocks]
+        return np.concatenate(rows).ravel()
 
-    x0 = np.concatenate(
+    x = np.concatenate(
         [np.r_[initial[c].rotation.as_rotvec(), initial[c].translation] for c in unknown]
     ) if unknown else np.zeros(0)  # fmt: skip
+    scale = params.loss_scale or float(
+        np.median([b.pair.quality["scale_m"] for b in blocks]) if blocks else 0.05
+    )
     if unknown:
-        x = least_squares(residuals, x0, loss=params.loss, f_scale=params.loss_scale).x
-    else:
-        x = x0
+        for round_index in range(params.joint_offset_rounds + 1):
+            if round_index:
+                for block in blocks:
+                    block.update_offsets(x, pose_of, scale, params.offset_shrinkage)
+            x = least_squares(residuals, x, loss=params.loss, f_scale=scale).x
     for camera in [c for c in cameras if c in initial]:
         rotation, translation = pose_of(x, camera)
         pose = out[camera]
@@ -583,33 +722,48 @@ def solve_poses(
     return out
 
 
+def _block(pair: PairPose, params: ExtrinsicsParams) -> _Block:
+    c = pair.correspondences
+    assert c is not None
+    points_a, points_b, w, joint, frame = _flatten(c.points_a, c.points_b, c.weights)
+    keep = _subsample(len(points_a), params.max_correspondences)
+    n_joints = len(c.mirror)
+    label = c.bodies[frame[keep]] * n_joints + joint[keep]
+    n_labels = (int(c.bodies.max()) + 1) * n_joints if c.n_frames else 1
+    return _Block(
+        pair,
+        points_a[keep],
+        points_b[keep],
+        w[keep],
+        joint[keep],
+        label,
+        np.zeros((n_labels, 3)),
+    )
+
+
 def _pose_quality(
     camera: str,
-    blocks: list[tuple[PairPose, np.ndarray, np.ndarray, np.ndarray, np.ndarray]],
+    blocks: list[_Block],
     x: np.ndarray,
     pose_of: Any,
     params: ExtrinsicsParams,
 ) -> dict[str, Any]:
     """Residual figures of one camera over the pairs it belongs to, per joint too."""
-    residual_parts, joint_parts, names = [], [], ()
-    for p, points_a, points_b, _, joint in blocks:
-        if camera not in (p.camera_a, p.camera_b):
-            continue
-        rot_a, t_a = pose_of(x, p.camera_a)
-        rot_b, t_b = pose_of(x, p.camera_b)
-        diff = rot_a.apply(points_a) + t_a - rot_b.apply(points_b) - t_b
-        residual_parts.append(np.linalg.norm(diff, axis=1))
-        joint_parts.append(joint)
-        names = p.correspondences.joint_names if p.correspondences else ()
-    if not residual_parts:
+    mine = [b for b in blocks if camera in (b.pair.camera_a, b.pair.camera_b)]
+    if not mine:
         return {}
-    residual, joint = np.concatenate(residual_parts), np.concatenate(joint_parts)
-    inliers = residual < params.inlier_threshold
+    names = mine[0].pair.correspondences.joint_names if mine[0].pair.correspondences else ()
+    residual = np.concatenate([np.linalg.norm(b.difference(x, pose_of), axis=1) for b in mine])
+    joint = np.concatenate([b.joint for b in mine])
+    offsets = np.concatenate([np.linalg.norm(b.offsets, axis=1) for b in mine])
+    scale = float(np.median(residual)) / 1.54
+    inliers = residual < min(params.inlier_threshold, params.inlier_sigmas * scale)
     rms = np.sqrt(np.bincount(joint[inliers], residual[inliers] ** 2, len(names))
                   / np.maximum(np.bincount(joint[inliers], None, len(names)), 1))  # fmt: skip
     return {
         "inlier_ratio": round(float(inliers.mean()), 4),
         "residual_m": round(float(np.sqrt(np.mean(residual[inliers] ** 2))), 4),
+        "joint_offset_rms_m": round(float(np.sqrt(np.mean(offsets**2))), 4),
         "correspondences": len(residual),
         "joint_residual_m": {n: round(float(r), 4) for n, r in zip(names, rms, strict=True)},
     }

@@ -3,8 +3,8 @@
 Method (Eichler et al., Sensors 2022, section 3.2, extended):
 
 1. Every body track gets a camera-independent :mod:`~hiros_calib.signature`, resampled on a
-   common grid of camera-clock multiples of ``grid_step``; its time derivative is used, which
-   whitens the slow posture changes and sharpens the correlation peak.
+   common grid of camera-clock multiples of ``grid_step``; for the coarse search its time
+   derivative is used, which whitens the slow posture changes and sharpens the peak.
 2. For a camera pair, every pair of body tracks (one per camera) gives a normalised
    cross-correlation curve over all lags at once (FFT; channels pooled: the sum of
    per-channel covariances over the square root of the summed variances).
@@ -13,7 +13,8 @@ Method (Eichler et al., Sensors 2022, section 3.2, extended):
    ``best_fraction`` choose the winning lag and every good curve near it joins.
 4. Sub-frame refinement: a parabola through the pooled curve's peak, then the lag that
    maximises the pooled correlation of the cubic-spline interpolated signatures, searched as
-   a continuous variable, so 30 Hz streams give millisecond offsets.
+   a continuous variable, so 30 Hz streams give millisecond offsets. Both signatures are
+   evaluated on one fine grid, so neither stream's sample instants are favoured.
 5. Drift: the same continuous refinement in sliding windows gives the lag over time.
 6. N cameras: :func:`solve_clocks` fits one offset (and drift) per camera to all pairwise
    window measurements by robust least squares, reference camera fixed, so the offsets are
@@ -27,6 +28,7 @@ camera b shifted by ``tau`` matches camera a; with the DESIGN.md clock model
 
 from __future__ import annotations
 
+import itertools
 import math
 from dataclasses import dataclass, field
 from typing import Any
@@ -43,6 +45,7 @@ __all__ = [
     "CameraClock",
     "PairOffset",
     "SyncParams",
+    "clock_epochs",
     "estimate_pair_offset",
     "solve_clocks",
     "synchronise",
@@ -62,20 +65,27 @@ class SyncParams:
     refine_step: float = 0.01
     """Grid (s) on which the continuous refinement compares interpolated signatures."""
     max_offset: float = 0.0
-    """Largest |offset| searched (s); 0 searches every lag the data allow."""
+    """Largest |offset| searched (s) without arrival times; 0 searches every lag."""
+    prior_window: float = 1.0
+    """With arrival times, lags are searched this far (s) around the arrival-time lag.
+
+    Lag aliases of periodic motion (a looped walk) correlate as well as the true lag; the
+    times the messages arrived at one receiver pin the lag to within network latency.
+    """
     min_overlap: float = 5.0
     """Seconds two tracks must overlap at a lag for that lag to count."""
     min_motion: float = 0.02
     """A track whose smoothed signature moves less than this (m) is a still body: skipped."""
-    min_peak: float = 0.3
-    """Lowest peak correlation of a usable body pair."""
+    min_peak: float = 0.1
+    """Lowest peak correlation of a usable body pair (noisy SDK joints correlate weakly;
+    the sharpness is the stronger test)."""
     min_sharpness: float = 4.0
     """Lowest robust z-score of a usable peak over its correlation curve."""
     best_fraction: float = 0.1
     """Fraction of the sharpest body pairs that choose the consensus lag (Eichler: 10 %)."""
     consensus_tolerance: float = 0.05
     """Body pairs whose peak lies within this (s) of the consensus join it."""
-    window: float = 20.0
+    window: float = 10.0
     """Window length (s) of the offset-over-time measurements that give the drift."""
     estimate_drift: bool = True
     """Fit a clock drift per camera (needs ``min_drift_span`` of common motion)."""
@@ -83,6 +93,9 @@ class SyncParams:
     """Shortest span (s) of window measurements for a drift estimate."""
     max_drift: float = 1e-3
     """Largest drift (s/s) the window search allows for."""
+    drift_prior: float = 1e-4
+    """Typical clock drift (s/s, a standard deviation): short recordings whose windows
+    cannot tell a drift apart from noise get a drift shrunk towards 0 (ridge prior)."""
 
 
 @dataclass
@@ -249,29 +262,40 @@ class _Candidate:
         return self.peak * self.sharpness
 
 
-def _peak(curve: _Curve, params: SyncParams) -> tuple[int, float, float, float, float] | None:
-    """(lag index, peak, sharpness, ambiguity, overlap s) of a curve, None when nothing valid."""
+def _peak(
+    curve: _Curve, params: SyncParams, search: tuple[float, float] | None
+) -> tuple[int, float, float, float, float] | None:
+    """(lag index, peak, sharpness, ambiguity, overlap s) of a curve, None when nothing valid.
+
+    The peak is the lag of greatest significance, Fisher's z of the correlation times the
+    square root of the overlap: a high correlation over a few seconds of overlap at the edge
+    of the lag range is more often chance than one slightly lower over the whole recording.
+    """
     step = params.grid_step
     r = curve.correlation()
     lags = (curve.first + np.arange(len(r))) * step
-    valid = (curve.count * step >= params.min_overlap) & np.isfinite(r)
-    if params.max_offset > 0:
-        valid &= np.abs(lags) <= params.max_offset
+    overlap = curve.count * step
+    valid = (overlap >= params.min_overlap) & np.isfinite(r)
+    if search is not None:
+        valid &= (lags >= search[0]) & (lags <= search[1])
     if valid.sum() < 5:
         return None
-    rv = np.where(valid, r, -np.inf)
-    best = int(np.argmax(rv))
+    with np.errstate(invalid="ignore", divide="ignore"):
+        significance = np.arctanh(np.clip(r, -0.999, 0.999)) * np.sqrt(overlap)
+    significance = np.where(valid, significance, -np.inf)
+    best = int(np.argmax(significance))
     peak = float(r[best])
     spread = r[valid]
     median = float(np.median(spread))
     mad = 1.4826 * float(np.median(np.abs(spread - median)))
     sharpness = (peak - median) / max(mad, 1e-6)
-    # second best peak away from the main lobe, as a fraction of the best
+    # second most significant lag away from the main lobe, relative to the best
     exclusion = max(3, round(0.25 / step))
     far = np.abs(np.arange(len(r)) - best) > exclusion
-    others = rv[far]
-    ambiguity = float(others.max() / peak) if np.isfinite(others).any() and peak > 0 else 0.0
-    return curve.first + best, peak, sharpness, max(ambiguity, 0.0), float(curve.count[best] * step)
+    others = significance[far]
+    top = float(significance[best])
+    ambiguity = float(others.max() / top) if np.isfinite(others).any() and top > 0 else 0.0
+    return curve.first + best, peak, sharpness, max(ambiguity, 0.0), float(overlap[best])
 
 
 # --------------------------------------------------------------------------- refinement
@@ -279,7 +303,7 @@ def _peak(curve: _Curve, params: SyncParams) -> tuple[int, float, float, float, 
 
 @dataclass
 class _Spline:
-    """A track's mean-free signature derivative as a cubic spline, with weights on a grid.
+    """A track's mean-free signature as a cubic spline, with weights on a grid.
 
     ``values`` is evaluated at arbitrary (shifted) times; ``weights`` are tabulated every
     ``step`` from ``start`` and looked up by nearest sample, which is plenty for weights and
@@ -299,7 +323,7 @@ class _Spline:
         with np.errstate(invalid="ignore", divide="ignore"):
             mean = np.where(total > 0, np.nansum(signature.values * weights, axis=0) / total, 0.0)
         centred = np.where(weights > 0, signature.values - mean, 0.0)
-        spline = make_interp_spline(times, centred, k=3).derivative()
+        spline = make_interp_spline(times, centred, k=3)
         grid = np.arange(times[0], times[-1], step)
         return cls(float(times[0]), float(times[-1]), step, spline, _resample(times, weights, grid))
 
@@ -315,7 +339,7 @@ class _RefinePair:
     a: _Spline
     b: _Spline
     times: np.ndarray  # (N,) a's grid
-    values: np.ndarray  # (N, C) a's signature derivative there
+    values: np.ndarray  # (N, C) a's signature there
     weights: np.ndarray  # (N, C)
 
     @classmethod
@@ -324,7 +348,11 @@ class _RefinePair:
         return cls(a, b, times, a.values(times), a.weights)
 
     def sums(self, tau: float, span: tuple[float, float]) -> tuple[float, float, float]:
-        """Sums of a·b, a², b² over the common part with b shifted by ``tau``."""
+        """Weighted covariance and variances (summed over channels) with b shifted by ``tau``.
+
+        Means are taken over the common part only, per channel, so tracks covering different
+        stretches of a walk do not bias the lag.
+        """
         lo = max(self.b.start + tau, span[0])
         hi = min(self.b.end + tau, span[1])
         i0, i1 = np.searchsorted(self.times, [lo, hi])
@@ -332,9 +360,12 @@ class _RefinePair:
             return 0.0, 0.0, 0.0
         t = self.times[i0:i1]
         w = self.weights[i0:i1] * self.b.weights_at(t - tau)
-        va = self.values[i0:i1] * w
-        vb = self.b.values(t - tau) * w
-        return float((va * vb).sum()), float((va * va).sum()), float((vb * vb).sum())
+        va, vb = self.values[i0:i1], self.b.values(t - tau)
+        total = np.maximum(w.sum(axis=0), 1e-12)
+        mean_a = (w * va).sum(axis=0) / total
+        mean_b = (w * vb).sum(axis=0) / total
+        da, db = va - mean_a, vb - mean_b
+        return float((w * da * db).sum()), float((w * da * da).sum()), float((w * db * db).sum())
 
     def overlap(self, tau: float, span: tuple[float, float]) -> float:
         """Seconds of common data with b shifted by ``tau`` inside ``span``."""
@@ -344,7 +375,7 @@ class _RefinePair:
 
 
 def _pooled_correlation(tau: float, pairs: list[_RefinePair], span: tuple[float, float]) -> float:
-    """Correlation of all body pairs' signature derivatives with b shifted by ``tau``.
+    """Correlation of all body pairs' signatures with b shifted by ``tau``.
 
     Both signatures are cubic-spline interpolants evaluated on one grid of a's clock (b at
     ``t - tau``); ``span`` limits the grid for windowed estimates.
@@ -385,9 +416,23 @@ def estimate_pair_offset(
     *,
     camera_a: str = "a",
     camera_b: str = "b",
+    prior: float | None = None,
 ) -> PairOffset:
-    """The clock lag ``tau = t_a - t_b`` between two cameras from their body tracks."""
+    """The clock lag ``tau = t_a - t_b`` between two cameras from their body tracks.
+
+    ``prior`` is the lag the message arrival times suggest (s); the search is then limited to
+    ``prior ± prior_window``, else to ``± max_offset`` (everything when that is 0).
+    """
     step = params.grid_step
+    if prior is not None:
+        search: tuple[float, float] | None = (
+            prior - params.prior_window,
+            prior + params.prior_window,
+        )
+    elif params.max_offset > 0:
+        search = (-params.max_offset, params.max_offset)
+    else:
+        search = None
     sig_a, sig_b = (_signatures(tracks, params) for tracks in (tracks_a, tracks_b))
     if not sig_a or not sig_b:
         return _refused(camera_a, camera_b, "a camera saw no body track")
@@ -423,14 +468,15 @@ def estimate_pair_offset(
     for i, ga in grid_a.items():
         for j, gb in grid_b.items():
             curve = _correlate(ga, gb, nfft, cache)
-            found = _peak(curve, params)
+            found = _peak(curve, params, search)
             if found is not None:
                 candidates.append(_Candidate(i, j, curve, *found))
     if not candidates:
         return _refused(
             camera_a,
             camera_b,
-            f"no body is seen by both cameras for {params.min_overlap:.1f} s at any lag",
+            f"no body is seen by both cameras for {params.min_overlap:.1f} s at any lag"
+            + (f" in {search[0]:+.2f}..{search[1]:+.2f} s" if search else ""),
         )
     good = [
         c for c in candidates if c.peak >= params.min_peak and c.sharpness >= params.min_sharpness
@@ -563,12 +609,9 @@ def _windows(tau: float, pairs: list[_RefinePair], params: SyncParams) -> np.nda
     start = min(max(p.a.start, p.b.start + tau) for p in pairs)
     end = max(min(p.a.end, p.b.end + tau) for p in pairs)
     span = end - start
-    if span < 1.5 * params.window:
-        edges = [(start, end)]
-    else:
-        count = max(2, math.floor(2 * span / params.window) - 1)
-        starts = np.linspace(start, end - params.window, count)
-        edges = [(s, s + params.window) for s in starts]
+    count = max(1, round(span / params.window))
+    bounds = np.linspace(start, end, count + 1)
+    edges = list(itertools.pairwise(bounds))
     half_width = 2 * params.grid_step + params.max_drift * span
     rows = []
     for lo, hi in edges:
@@ -637,8 +680,18 @@ def solve_clocks(
             rows.append(row)
             rhs.append(-tau)
             weights.append(weight)
+    for camera in with_drift:
+        row = np.zeros(len(column))
+        row[column["d", camera]] = 1.0
+        rows.append(row)
+        rhs.append(0.0)
+        weights.append(0.0)
+    prior = np.zeros(len(rows), dtype=bool)
+    prior[len(rows) - len(with_drift) :] = True
     design, target, weight = np.array(rows), np.array(rhs), np.array(weights)
-    solution, residual = _robust_lstsq(design, target, weight)
+    solution, residual = _robust_lstsq(
+        design, target, weight, prior, prior_sigma=params.drift_prior
+    )
     for camera in unknown:
         clock = clocks[camera]
         clock.status = "ok"
@@ -680,35 +733,72 @@ def _drift_spans(pairs: list[PairOffset]) -> dict[str, float]:
 
 
 def _robust_lstsq(
-    design: np.ndarray, target: np.ndarray, weight: np.ndarray, iterations: int = 5
+    design: np.ndarray,
+    target: np.ndarray,
+    weight: np.ndarray,
+    prior: np.ndarray,
+    *,
+    prior_sigma: float,
+    iterations: int = 6,
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Weighted least squares reweighted with Huber weights (threshold 1.5 robust sigma)."""
+    """Weighted least squares, Huber-reweighted, with ridge rows for the drift prior.
+
+    Measurement weights are relative, so their scale (the variance per unit weight) is
+    estimated from the residuals at each pass; a prior row ``d = 0`` then gets the weight
+    that makes its standard deviation ``prior_sigma``. Returns the solution and the
+    measurement rows' residuals.
+    """
     robust = np.ones_like(weight)
+    measured = ~prior
+    variance = 1e-6  # (1 ms)^2 per unit weight until the residuals say otherwise
     solution = np.zeros(design.shape[1])
     for _ in range(iterations):
-        root = np.sqrt(weight * robust)[:, None]
+        w = weight * robust
+        w[prior] = variance / prior_sigma**2
+        root = np.sqrt(w)[:, None]
         solution = np.linalg.lstsq(design * root, target * root[:, 0], rcond=None)[0]
-        residual = design @ solution - target
-        sigma = max(1.4826 * float(np.median(np.abs(residual))), 2e-4)
-        ratio = np.abs(residual) / (1.5 * sigma)
-        robust = np.where(ratio <= 1, 1.0, 1.0 / np.maximum(ratio, 1e-12))
-    return solution, design @ solution - target
+        residual = (design @ solution - target)[measured]
+        scaled = residual * np.sqrt(weight[measured])
+        sigma = max(1.4826 * float(np.median(np.abs(scaled))), 1e-9)
+        ratio = np.abs(scaled) / (1.5 * sigma)
+        robust[measured] = np.where(ratio <= 1, 1.0, 1.0 / np.maximum(ratio, 1e-12))
+        dof = max(1, int(measured.sum()) - design.shape[1])
+        variance = max(float((robust[measured] * scaled**2).sum()) / dof, 1e-12)
+    return solution, (design @ solution - target)[measured]
 
 
 def synchronise(
     tracks: dict[str, list[BodyTrack]],
     reference: str,
     params: SyncParams,
+    arrival_offsets: dict[str, float] | None = None,
 ) -> tuple[dict[str, CameraClock], list[PairOffset]]:
-    """Clocks of every camera from their body tracks: all pairs, then the global solve."""
+    """Clocks of every camera from their body tracks: all pairs, then the global solve.
+
+    ``arrival_offsets`` gives per camera the typical ``arrival time - stamp`` (s) of its
+    messages at one receiver; an event stamped ``t_a`` and ``t_b`` arrives at about the same
+    time, so ``tau = t_a - t_b`` is about ``arrival_b - arrival_a`` (the search prior).
+    """
     cameras = list(tracks)
-    pairs = [
-        estimate_pair_offset(tracks[a], tracks[b], params, camera_a=a, camera_b=b)
-        for k, a in enumerate(cameras)
-        for b in cameras[k + 1 :]
-    ]
-    epochs = {
+    arrival = arrival_offsets or {}
+    pairs = []
+    for k, a in enumerate(cameras):
+        for b in cameras[k + 1 :]:
+            prior = arrival[b] - arrival[a] if a in arrival and b in arrival else None
+            pairs.append(
+                estimate_pair_offset(
+                    tracks[a], tracks[b], params, camera_a=a, camera_b=b, prior=prior
+                )
+            )
+    return solve_clocks(cameras, reference, pairs, clock_epochs(tracks), params), pairs
+
+
+def clock_epochs(tracks: dict[str, list[BodyTrack]]) -> dict[str, float]:
+    """Per camera the middle of its tracks (camera clock), used as the drift epoch.
+
+    There an offset and a drift estimated from the same data are least correlated.
+    """
+    return {
         c: 0.5 * (min(t.start for t in ts) + max(t.end for t in ts)) if ts else 0.0
         for c, ts in tracks.items()
     }
-    return solve_clocks(cameras, reference, pairs, epochs, params), pairs
