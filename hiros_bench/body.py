@@ -164,12 +164,13 @@ def tune_one_euro(
 
 
 def run(console, quick: bool = False) -> list[str]:  # noqa: ANN001 - rich Console
-    """Print the tables and return their lines (last line: the summary)."""
+    """Print the tables and return their lines (the last four: the summary)."""
     duration = 12.0 if quick else 30.0
     motion = make_motion(4, duration, seed=0)
     warmup = OptimizerParams().number_of_frames_for_calibration + 10
     lines = [
-        "time per frame (ms)      people  optimizer  Hi-ROS C++    filter  Hi-ROS C++",
+        f"{'time per frame, ms':20s} {'people':>6s} {'optimizer':>10s} {'Hi-ROS':>7s} "
+        f"{'filter':>7s} {'Hi-ROS':>7s}"
     ]
     timings = {}
     for people in (1, 2, 3, 4):
@@ -180,9 +181,9 @@ def run(console, quick: bool = False) -> list[str]:  # noqa: ANN001 - rich Conso
         hiros_opt = HIROS_OPTIMIZER_MS.get(people)
         hiros_filter = HIROS_FILTER_MS.get(people)
         lines.append(
-            f"{'':24s} {people:6d} {optimizer_ms:10.2f} "
-            f"{'' if hiros_opt is None else f'{hiros_opt:.2f}':>11s} {filter_ms:9.2f} "
-            f"{'' if hiros_filter is None else f'{hiros_filter:.2f}':>11s}"
+            f"{'':20s} {people:6d} {optimizer_ms:10.2f} "
+            f"{'' if hiros_opt is None else f'{hiros_opt:.2f}':>7s} {filter_ms:7.2f} "
+            f"{'' if hiros_filter is None else f'{hiros_filter:.2f}':>7s}"
         )
 
     # Accuracy on one person, after the optimizer's calibration window.
@@ -198,15 +199,15 @@ def run(console, quick: bool = False) -> list[str]:  # noqa: ANN001 - rich Conso
     target = jitter(kalman, truth)
     mincutoff, beta, euro = tune_one_euro(optimized, times, truth, target, 6 if quick else 10)
     rows = [
-        ("tracker output (input)", raw),
+        ("input (tracker-like)", raw),
         ("optimizer", optimized),
-        ("optimizer + filter (kalman)", kalman),
-        ("optimizer + filter (butterworth 6 Hz)", butterworth),
-        (f"optimizer + One-Euro ({mincutoff:.2f} Hz, b={beta:g})", euro),
+        ("+ filter (kalman)", kalman),
+        ("+ filter (butter 6 Hz)", butterworth),
+        (f"+ One-Euro {mincutoff:.1f} Hz b={beta:g}", euro),
     ]
     lines.append(
-        f"{'accuracy, 1 person':42s} {'MPJPE mm':>9s} {'angle deg':>9s} {'limb CV %':>9s} "
-        f"{'lag ms':>7s} {'jitter mm/f2':>12s}"
+        f"{'1 person':26s} {'MPJPE mm':>8s} {'angle °':>8s} {'limb CV%':>8s} {'lag ms':>7s} "
+        f"{'jitter':>7s}"
     )
     figures = {}
     for name, estimate in rows:
@@ -217,20 +218,22 @@ def run(console, quick: bool = False) -> list[str]:  # noqa: ANN001 - rich Conso
         shake = jitter(estimate, truth)
         figures[name] = (error, angle, cv, delay, shake)
         lines.append(
-            f"{name:42s} {error * 1e3:9.1f} {angle:9.2f} {cv * 100:9.2f} {delay * 1e3:7.1f} "
-            f"{shake * 1e3:12.2f}"
+            f"{name:26s} {error * 1e3:8.1f} {angle:8.2f} {cv * 100:8.2f} {delay * 1e3:7.1f} "
+            f"{shake * 1e3:7.2f}"
         )
-    raw_figures = figures["tracker output (input)"]
-    chain = figures["optimizer + filter (kalman)"]
-    euro_figures = figures[rows[-1][0]]
-    lines.append(
-        f"summary: limb CV {raw_figures[2] * 100:.1f} % -> {figures['optimizer'][2] * 100:.2f} % "
-        f"(target < 1 %); joint-angle RMSE -{(1 - chain[1] / raw_figures[1]) * 100:.0f} % "
-        f"vs input; filter lag {chain[3] * 1e3:.1f} ms vs One-Euro {euro_figures[3] * 1e3:.1f} ms "
-        f"at equal jitter; 4 people: optimizer {timings[4][0]:.2f} ms "
-        f"({timings[4][0] / HIROS_OPTIMIZER_MS[4]:.2f}x Hi-ROS), filter {timings[4][1]:.2f} ms "
-        f"({timings[4][1] / HIROS_FILTER_MS[4]:.1f}x Hi-ROS)"
-    )
+    lines.append("(angle: joint-angle RMSE; jitter: RMS 2nd difference of the error, mm/frame²)")
+    source, optimizer_figures = figures[rows[0][0]], figures["optimizer"]
+    chain, euro_figures = figures["+ filter (kalman)"], figures[rows[-1][0]]
+    lines += [
+        f"limb CV {source[2] * 100:.1f} % -> {optimizer_figures[2] * 100:.2f} % after the "
+        f"optimizer (target < 1 %)",
+        f"joint-angle RMSE {source[1]:.2f} -> {chain[1]:.2f} deg "
+        f"(-{(1 - chain[1] / source[1]) * 100:.0f} % by optimizer + filter)",
+        f"filter lag {chain[3] * 1e3:.1f} ms vs One-Euro {euro_figures[3] * 1e3:.1f} ms "
+        f"at the same jitter ({chain[4] * 1e3:.1f} mm/frame²)",
+        f"4 people: optimizer {timings[4][0]:.2f} ms = {timings[4][0] / HIROS_OPTIMIZER_MS[4]:.2f}"
+        f"x Hi-ROS, filter {timings[4][1]:.2f} ms = {timings[4][1] / HIROS_FILTER_MS[4]:.1f}x",
+    ]
     for line in lines:
         console.print(line, highlight=False)
     return lines
