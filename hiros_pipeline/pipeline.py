@@ -11,11 +11,10 @@ from collections import Counter
 from dataclasses import dataclass, field
 from typing import NamedTuple
 
-from hiros_merger import Merger, MergerParams
-
 from hiros_core.calibration import Calibration
 from hiros_core.model import SkeletonGroup
 from hiros_filter import Filter, FilterParams
+from hiros_merger import Merger, MergerParams
 from hiros_optimizer import Optimizer, OptimizerParams
 from hiros_tracker import Tracker, TrackerParams
 
