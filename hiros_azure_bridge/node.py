@@ -23,6 +23,7 @@ import dataclasses
 from collections import Counter
 from dataclasses import dataclass, field
 
+from hiros_skeleton_msgs.msg import SkeletonGroup as SkeletonGroupMsg
 from rclpy.parameter import Parameter
 from visualization_msgs.msg import MarkerArray
 
@@ -30,7 +31,6 @@ from hiros_azure_bridge.driver_format import DriverBridge, DriverBridgeParams, l
 from hiros_core.codec import decode_marker_array, encode_group
 from hiros_ros import HirosNode, run_node
 from hiros_ros.node import camera_qos, pipeline_qos
-from hiros_skeleton_msgs.msg import SkeletonGroup as SkeletonGroupMsg
 
 __all__ = ["BridgeNode", "BridgeNodeParams", "generic_main", "main"]
 

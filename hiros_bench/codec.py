@@ -142,10 +142,9 @@ def _rclpy_markers_to_numpy(msg) -> tuple[np.ndarray, np.ndarray]:  # noqa: ANN0
 
 def measure() -> list[tuple[str, float, float]]:
     """(operation, rclpy seconds, hiros seconds) for the four codec operations."""
+    from hiros_skeleton_msgs.msg import SkeletonGroup as GroupMsg
     from rclpy.serialization import deserialize_message, serialize_message
     from visualization_msgs.msg import MarkerArray
-
-    from hiros_skeleton_msgs.msg import SkeletonGroup as GroupMsg
 
     group = sample_group()
     markers = sample_markers(group)

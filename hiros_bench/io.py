@@ -70,10 +70,9 @@ def _frames(count: int, people: int = 2) -> list[SkeletonGroup]:
 
 def _rclpy_bridge(raw: bytes) -> bytes:
     """The baseline bridge: rclpy objects in, rclpy objects out."""
+    from hiros_skeleton_msgs.msg import Marker, Skeleton, SkeletonGroup
     from rclpy.serialization import deserialize_message, serialize_message
     from visualization_msgs.msg import MarkerArray
-
-    from hiros_skeleton_msgs.msg import Marker, Skeleton, SkeletonGroup
 
     markers = deserialize_message(raw, MarkerArray).markers
     out = SkeletonGroup()

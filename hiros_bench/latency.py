@@ -79,9 +79,8 @@ class _Probe:
 
     def __init__(self) -> None:
         import rclpy
-        from rclpy.qos import QoSProfile, qos_profile_sensor_data
-
         from hiros_skeleton_msgs.msg import SkeletonGroup as SkeletonGroupMsg
+        from rclpy.qos import QoSProfile, qos_profile_sensor_data
 
         rclpy.init()
         self.rclpy = rclpy

@@ -11,11 +11,12 @@ from __future__ import annotations
 
 from typing import Any
 
+from hiros_skeleton_msgs.srv import Calibrate, ChangeId
+
 from hiros_core.errors import ConfigError
 from hiros_optimizer.calibration_file import read_person_calibrations, write_person_calibrations
 from hiros_optimizer.optimizer import Optimizer, OptimizerParams
 from hiros_ros import StageNode, run_node
-from hiros_skeleton_msgs.srv import Calibrate, ChangeId
 
 __all__ = ["OptimizerNode", "main"]
 

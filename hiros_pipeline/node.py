@@ -10,6 +10,7 @@ from __future__ import annotations
 from collections import Counter
 from dataclasses import dataclass, field
 
+from hiros_skeleton_msgs.msg import SkeletonGroup as SkeletonGroupMsg
 from visualization_msgs.msg import MarkerArray
 
 from hiros_core.calibration import Calibration, load_calibration
@@ -19,7 +20,6 @@ from hiros_pipeline.pipeline import STAGES, Pipeline, PipelineParams
 from hiros_ros import HirosNode, declare_params, run_node
 from hiros_ros.calibration_follower import CalibrationFollower
 from hiros_ros.node import camera_qos, pipeline_qos
-from hiros_skeleton_msgs.msg import SkeletonGroup as SkeletonGroupMsg
 
 
 @dataclass

@@ -6,10 +6,11 @@ from collections import Counter
 from collections.abc import Callable
 from typing import Any
 
+from hiros_skeleton_msgs.msg import SkeletonGroup as SkeletonGroupMsg
+
 from hiros_core.codec import decode_group, encode_group
 from hiros_core.model import SkeletonGroup
 from hiros_ros.node import HirosNode, camera_qos, pipeline_qos, run_node
-from hiros_skeleton_msgs.msg import SkeletonGroup as SkeletonGroupMsg
 
 __all__ = ["StageNode", "stage_main"]
 

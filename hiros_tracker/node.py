@@ -13,13 +13,14 @@ from __future__ import annotations
 from collections import Counter
 from dataclasses import dataclass, field
 
+from hiros_skeleton_msgs.msg import SkeletonGroup as SkeletonGroupMsg
+
 from hiros_core.calibration import Calibration, load_calibration
 from hiros_core.codec import decode_group, encode_group
 from hiros_core.errors import CalibrationError
 from hiros_ros import HirosNode, run_node
 from hiros_ros.calibration_follower import CalibrationFollower
 from hiros_ros.node import camera_qos, pipeline_qos
-from hiros_skeleton_msgs.msg import SkeletonGroup as SkeletonGroupMsg
 from hiros_tracker.tracker import Tracker, TrackerParams
 
 __all__ = ["TrackerNode", "TrackerNodeParams", "main"]

@@ -4,12 +4,12 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
+from hiros_skeleton_msgs.msg import SkeletonGroup as SkeletonGroupMsg
 from visualization_msgs.msg import MarkerArray
 
 from hiros_core.codec import decode_group, encode_marker_array
 from hiros_ros import HirosNode, run_node
 from hiros_ros.node import pipeline_qos
-from hiros_skeleton_msgs.msg import SkeletonGroup as SkeletonGroupMsg
 from hiros_visualizer.markers import VisualizerParams, skeleton_markers
 
 

@@ -8,6 +8,7 @@ import time
 
 import numpy as np
 import rclpy
+from hiros_skeleton_msgs.msg import SkeletonGroup as SkeletonGroupMsg
 from rclpy.qos import QoSProfile
 from visualization_msgs.msg import MarkerArray
 
@@ -15,7 +16,6 @@ from hiros_azure_bridge import group_to_driver_markers
 from hiros_core.codec import MarkerArrayData, encode_marker_array
 from hiros_core.layouts import AZURE_KINECT
 from hiros_core.model import Skeleton, SkeletonGroup
-from hiros_skeleton_msgs.msg import SkeletonGroup as SkeletonGroupMsg
 
 CAMERAS = ("k01", "k02")
 FRAMES = 12

@@ -7,10 +7,9 @@ import sys
 import time
 
 import rclpy
+from hiros_skeleton_msgs.msg import SkeletonGroup
 from rclpy.qos import QoSProfile
 from rosgraph_msgs.msg import Clock
-
-from hiros_skeleton_msgs.msg import SkeletonGroup
 
 
 def main() -> int:

@@ -11,12 +11,12 @@ import time
 
 import numpy as np
 import rclpy
+from hiros_skeleton_msgs.msg import SkeletonGroup as SkeletonGroupMsg
+from hiros_skeleton_msgs.srv import Calibrate, ChangeId
 from rclpy.qos import QoSProfile
 
 from hiros_core.codec import decode_group, encode_group
 from hiros_core.model import Skeleton, SkeletonGroup, sec_to_ns
-from hiros_skeleton_msgs.msg import SkeletonGroup as SkeletonGroupMsg
-from hiros_skeleton_msgs.srv import Calibrate, ChangeId
 
 RATE = 30.0
 

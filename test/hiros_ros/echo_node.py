@@ -4,10 +4,11 @@ from __future__ import annotations
 
 import sys
 
+from hiros_skeleton_msgs.msg import SkeletonGroup
+
 from hiros_core.codec import decode_group, encode_group
 from hiros_ros import HirosNode, run_node
 from hiros_ros.node import pipeline_qos
-from hiros_skeleton_msgs.msg import SkeletonGroup
 
 
 class EchoNode(HirosNode):

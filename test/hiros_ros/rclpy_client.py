@@ -6,9 +6,8 @@ import sys
 import time
 
 import rclpy
-from rclpy.qos import QoSProfile
-
 from hiros_skeleton_msgs.msg import Link, Marker, Skeleton, SkeletonGroup
+from rclpy.qos import QoSProfile
 
 COUNT = 20
 

@@ -12,12 +12,12 @@ import time
 
 import numpy as np
 import rclpy
+from hiros_skeleton_msgs.msg import SkeletonGroup as SkeletonGroupMsg
 from rclpy.qos import QoSProfile
 
 from hiros_core.codec import decode_group, encode_group
 from hiros_core.layouts import AZURE_KINECT
 from hiros_core.model import Skeleton, SkeletonGroup
-from hiros_skeleton_msgs.msg import SkeletonGroup as SkeletonGroupMsg
 
 FRAMES = 60
 PEOPLE = {0: np.array([0.0, 0.0, 3.0]), 1: np.array([1.0, 0.0, 3.0])}
