@@ -128,7 +128,8 @@ class PoseSignature:
         norm = _moving_sum(counts, width)
         with np.errstate(invalid="ignore", divide="ignore"):
             smoothed = np.where(norm > width / 2, sums / norm, np.nan)
-        spread = np.nanstd(smoothed, axis=0)
+        finite = np.isfinite(smoothed).sum(axis=0) > 1
+        spread = np.nanstd(smoothed[:, finite], axis=0)
         spread = spread[np.isfinite(spread)]
         return float(np.percentile(spread, 90)) if spread.size else 0.0
 

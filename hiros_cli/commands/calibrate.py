@@ -1,0 +1,292 @@
+"""Spatio-temporal calibration of a recording from the people's own motion.
+
+Finds each camera's clock offset (and drift) and pose relative to the reference camera from
+the skeletons alone: no cables, no checkerboard. The people should move (walk, swing arms)
+for a minute in front of two or more cameras. Writes the calibration file every hiros stage
+reads (DESIGN.md format) with quality figures per camera, and prints a one-screen summary.
+
+The recording's message arrival (log) times narrow the clock search; cameras whose clocks
+differ by more than --prior-window seconds from what the arrival times say need a larger
+window.
+
+Examples:
+  hiros calibrate sample/recording.mcap --out calib.yaml
+  hiros calibrate rec/ --out calib.yaml --reference k02 --plots calib_plots/
+
+"""
+
+from __future__ import annotations
+
+import argparse
+from collections import Counter, defaultdict
+from collections.abc import Iterator
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from rich.console import Console
+
+    from hiros_calib.calibrator import CalibrationResult, CalibratorParams
+    from hiros_core.calibration import Calibration
+    from hiros_core.model import SkeletonGroup
+
+HELP = "clock offsets and camera poses from people's motion, written as a calibration file"
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """Options of ``hiros calibrate``."""
+    parser.add_argument("recording", type=Path, metavar="REC", help="recording (.mcap, folder)")
+    parser.add_argument("--out", type=Path, required=True, help="calibration file to write")
+    parser.add_argument("--plots", type=Path, metavar="DIR", help="write PNG plots here")
+    parser.add_argument(
+        "--reference", help="camera whose frame and clock are the reference (default: first)"
+    )
+    parser.add_argument(
+        "--prior-window",
+        type=float,
+        help="seconds searched around the lag the arrival times suggest (default 1)",
+    )
+    parser.add_argument(
+        "--no-arrival-times",
+        action="store_true",
+        help="ignore the recording's log times (search every lag the data allow)",
+    )
+    parser.add_argument("--no-drift", action="store_true", help="do not estimate clock drift")
+
+
+def run(args: argparse.Namespace) -> int:
+    """Calibrate, write the file (and plots), print the summary."""
+    from rich.console import Console
+
+    from hiros_calib.calibrator import CalibratorParams
+    from hiros_core.calibration import save_calibration
+
+    console = Console()
+    params = CalibratorParams(reference=args.reference or "")
+    if args.prior_window is not None:
+        params.prior_window = args.prior_window
+    if args.no_drift:
+        params.estimate_drift = False
+    calibration, result = calibrate_recording(
+        args.recording,
+        console=console,
+        params=params,
+        use_arrival=not args.no_arrival_times,
+        details=True,
+    )
+    save_calibration(calibration, args.out)
+    print_summary(console, result)
+    console.print(f"wrote {args.out}")
+    if args.plots:
+        written = write_plots(result, args.plots)
+        console.print(f"wrote {len(written)} plots to {args.plots}")
+    return 0
+
+
+def read_camera_groups(
+    recording: Path, drops: Counter[str] | None = None
+) -> tuple[dict[str, list[SkeletonGroup]], dict[str, list[int]]]:
+    """Per camera its SkeletonGroups and the log (arrival) time of each, in log order."""
+    from hiros_core.recording import RecordingReader, iter_groups
+
+    reader = RecordingReader(recording)
+    last_log_time = [0]
+    read_messages = reader.messages
+
+    def messages_noting_log_time(*args: object, **kwargs: object) -> Iterator[object]:
+        # iter_groups yields a camera's group right after reading its message, so the last
+        # log time read is that group's arrival time
+        for message in read_messages(*args, **kwargs):  # type: ignore[arg-type]
+            last_log_time[0] = message.log_time_ns
+            yield message
+
+    reader.messages = messages_noting_log_time  # type: ignore[method-assign]
+    groups: dict[str, list[SkeletonGroup]] = defaultdict(list)
+    arrivals: dict[str, list[int]] = defaultdict(list)
+    try:
+        for source, group in iter_groups(reader, drops=drops):
+            groups[source].append(group)
+            arrivals[source].append(last_log_time[0])
+    finally:
+        reader.close()
+    return dict(groups), dict(arrivals)
+
+
+def calibrate_recording(
+    recording: Path,
+    *,
+    console: Console | None = None,
+    params: CalibratorParams | None = None,
+    use_arrival: bool = True,
+    details: bool = False,
+) -> Calibration | tuple[Calibration, CalibrationResult]:
+    """Calibrate a recording with a progress display; with ``details`` also the full result.
+
+    Raises:
+        CalibrationError: the data cannot determine some camera's clock or pose (the message
+            says which and why).
+        RecordingError: the recording cannot be read or holds fewer than two cameras.
+
+    """
+    from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
+
+    from hiros_calib.calibrator import Calibrator
+    from hiros_core.errors import RecordingError
+
+    with Progress(
+        TextColumn("{task.description:<24}"),
+        BarColumn(),
+        TimeElapsedColumn(),
+        console=console,
+        transient=True,
+    ) as bar:
+        task = bar.add_task("reading the recording", total=100)
+        groups, arrivals = read_camera_groups(recording)
+        if len(groups) < 2:
+            msg = (
+                f"{recording}: calibration needs skeletons of two or more cameras, "
+                f"found {sorted(groups)}"
+            )
+            raise RecordingError(msg)
+
+        def progress(stage: str, done: float) -> None:
+            bar.update(task, description=stage, completed=10 + 90 * done)
+
+        progress("body tracks", 0.0)
+        calibrator = Calibrator(params)
+        calibration = calibrator.calibrate(
+            groups, progress=progress, arrival_ns=arrivals if use_arrival else None
+        )
+    assert calibrator.result is not None
+    return (calibration, calibrator.result) if details else calibration
+
+
+def print_summary(console: Console, result: CalibrationResult) -> None:
+    """One screen: per camera offset, drift, pose and quality; per pair the correlation."""
+    import numpy as np
+    from rich import box
+    from rich.table import Table
+
+    calibration = result.calibration
+    table = Table(
+        title=f"calibration (reference {calibration.reference}; drift in ppm, rotation in deg)",
+        box=box.SIMPLE,
+        pad_edge=False,
+    )
+    for column in ("camera", "offset s", "drift", "position m", "rot", "peak", "inliers",
+                   "res cm"):  # fmt: skip
+        table.add_column(column, justify="right", no_wrap=True)
+    for name, cam in calibration.cameras.items():
+        q = cam.quality
+        table.add_row(
+            name,
+            f"{cam.time_offset:+.4f}",
+            f"{cam.drift * 1e6:+.0f}",
+            " ".join(f"{v:+.2f}" for v in cam.translation),
+            f"{np.degrees(cam.extrinsics.rotation.magnitude()):.1f}",
+            f"{q['time_peak']:.2f}" if "time_peak" in q else "-",
+            f"{100 * q['inlier_ratio']:.0f}%" if "inlier_ratio" in q else "-",
+            f"{100 * q['residual_m']:.1f}" if "residual_m" in q else "-",
+        )
+    console.print(table)
+    pairs = Table(title="camera pairs", box=box.SIMPLE, pad_edge=False)
+    for column in ("pair", "lag s", "peak", "sharp", "bodies", "windows", "inliers", "L/R swap"):
+        pairs.add_column(column, justify="right")
+    poses = {(p.camera_a, p.camera_b): p for p in result.pose_pairs}
+    for sync in result.sync_pairs:
+        pose = poses.get((sync.camera_a, sync.camera_b))
+        pq = pose.quality if pose is not None and pose.ok else {}
+        pairs.add_row(
+            f"{sync.camera_a}-{sync.camera_b}",
+            f"{sync.offset:+.4f}" if sync.ok else sync.reason[:40],
+            f"{sync.quality.get('peak', np.nan):.2f}",
+            f"{sync.quality.get('sharpness', np.nan):.1f}",
+            str(sync.quality.get("pairs_used", "-")),
+            str(sync.quality.get("windows", "-")),
+            f"{100 * pq['inlier_ratio']:.0f}%" if "inlier_ratio" in pq else "-",
+            f"{100 * pq['mirrored_fraction']:.0f}%" if "mirrored_fraction" in pq else "-",
+        )
+    console.print(pairs)
+    for camera, reason in result.refused.items():
+        console.print(f"[yellow]{camera} left out: {reason}[/]")
+
+
+def write_plots(result: CalibrationResult, folder: Path) -> list[Path]:
+    """Correlation curves per pair, lag over time, residuals per joint (PNG files)."""
+    import matplotlib as mpl
+
+    mpl.use("Agg")
+    folder.mkdir(parents=True, exist_ok=True)
+    return [
+        _plot_correlation(result, folder / "correlation.png"),
+        _plot_offsets(result, folder / "offset_over_time.png"),
+        _plot_joint_residuals(result, folder / "joint_residuals.png"),
+    ]
+
+
+def _plot_correlation(result: CalibrationResult, path: Path) -> Path:
+    import matplotlib.pyplot as plt
+
+    usable = [p for p in result.sync_pairs if p.ok and len(p.lags)]
+    fig, axes = plt.subplots(len(usable) or 1, 1, figsize=(8, 2.6 * max(1, len(usable))),
+                             squeeze=False)  # fmt: skip
+    for ax, pair in zip(axes[:, 0], usable, strict=False):
+        ax.plot(pair.lags, pair.correlation, lw=1)
+        ax.axvline(pair.offset, color="C3", lw=1, label=f"lag {pair.offset:+.4f} s")
+        ax.set_title(f"{pair.camera_a}-{pair.camera_b}: pooled signature correlation")
+        ax.set_xlabel("lag t_a - t_b (s)")
+        ax.set_ylabel("correlation")
+        ax.legend(loc="upper right")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
+def _plot_offsets(result: CalibrationResult, path: Path) -> Path:
+    import matplotlib.pyplot as plt
+    import numpy as np
+
+    clocks = result.clocks
+    fig, ax = plt.subplots(figsize=(8, 4))
+    for pair in result.sync_pairs:
+        a, b = clocks[pair.camera_a], clocks[pair.camera_b]
+        if not (pair.ok and len(pair.windows) and a.ok and b.ok):
+            continue
+        t_b, tau = pair.windows[:, 0], pair.windows[:, 1]
+        grid = np.linspace(t_b.min(), t_b.max(), 50)
+        model = np.asarray(a.from_reference(b.to_reference(grid))) - grid
+        centre, start = float(np.median(tau)), float(t_b.min())
+        line = ax.plot(grid - start, 1e3 * (model - centre), lw=1)[0]
+        ax.plot(t_b - start, 1e3 * (tau - centre), "o", color=line.get_color(),
+                label=f"{pair.camera_a}-{pair.camera_b} (lag {centre:+.4f} s)")  # fmt: skip
+    ax.set_xlabel("time in the recording (s)")
+    ax.set_ylabel("lag minus its median (ms)")
+    ax.set_title("lag per window (dots) and the solved clocks (lines)")
+    ax.legend(loc="best")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
+def _plot_joint_residuals(result: CalibrationResult, path: Path) -> Path:
+    import matplotlib.pyplot as plt
+
+    cameras = {
+        c: cal.quality["joint_residual_m"]
+        for c, cal in result.calibration.cameras.items()
+        if cal.quality.get("joint_residual_m")
+    }
+    fig, axes = plt.subplots(len(cameras) or 1, 1, figsize=(10, 2.8 * max(1, len(cameras))),
+                             squeeze=False)  # fmt: skip
+    for ax, (camera, per_joint) in zip(axes[:, 0], cameras.items(), strict=False):
+        names = list(per_joint)
+        ax.bar(range(len(names)), [100 * per_joint[n] for n in names])
+        ax.set_xticks(range(len(names)), names, rotation=70, fontsize=7)
+        ax.set_ylabel("RMS residual (cm)")
+        ax.set_title(f"{camera}: joint residuals of inlier correspondences")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
