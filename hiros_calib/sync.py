@@ -72,11 +72,11 @@ class SyncParams:
     Lag aliases of periodic motion (a looped walk) correlate as well as the true lag; the
     times the messages arrived at one receiver pin the lag to within network latency.
     """
-    min_overlap: float = 5.0
+    min_overlap: float = 3.0
     """Seconds two tracks must overlap at a lag for that lag to count."""
-    min_motion: float = 0.02
+    min_motion: float = 0.01
     """A track whose smoothed signature moves less than this (m) is a still body: skipped."""
-    min_peak: float = 0.1
+    min_peak: float = 0.05
     """Lowest peak correlation of a usable body pair (noisy SDK joints correlate weakly;
     the sharpness is the stronger test)."""
     min_sharpness: float = 4.0

@@ -168,18 +168,25 @@ def print_summary(console: Console, result: CalibrationResult) -> None:
     from rich.table import Table
 
     calibration = result.calibration
+    # long camera names (IP addresses) get short labels so the table fits one screen
+    label = {
+        name: name if len(name) <= 8 else f"c{k}" for k, name in enumerate(calibration.cameras)
+    }
+    for name, short in label.items():
+        if short != name:
+            console.print(f"{short} = {name}", highlight=False)
     table = Table(
-        title=f"calibration (reference {calibration.reference}; drift in ppm, rotation in deg)",
+        title=f"calibration (reference {label[calibration.reference]}; drift ppm, rot deg)",
         box=box.SIMPLE,
         pad_edge=False,
+        collapse_padding=True,
     )
-    for column in ("camera", "offset s", "drift", "position m", "rot", "peak", "inliers",
-                   "res cm"):  # fmt: skip
-        table.add_column(column, justify="right", no_wrap=True)
+    for column in ("camera", "offset s", "drift", "position m", "rot", "corr", "inl", "res cm"):
+        table.add_column(column, justify="right", no_wrap=True, overflow="fold")
     for name, cam in calibration.cameras.items():
         q = cam.quality
         table.add_row(
-            name,
+            label[name],
             f"{cam.time_offset:+.4f}",
             f"{cam.drift * 1e6:+.0f}",
             " ".join(f"{v:+.2f}" for v in cam.translation),
@@ -189,15 +196,15 @@ def print_summary(console: Console, result: CalibrationResult) -> None:
             f"{100 * q['residual_m']:.1f}" if "residual_m" in q else "-",
         )
     console.print(table)
-    pairs = Table(title="camera pairs", box=box.SIMPLE, pad_edge=False)
+    pairs = Table(title="camera pairs", box=box.SIMPLE, pad_edge=False, collapse_padding=True)
     for column in ("pair", "lag s", "peak", "sharp", "bodies", "windows", "inliers", "L/R swap"):
-        pairs.add_column(column, justify="right")
+        pairs.add_column(column, justify="right", no_wrap=True)
     poses = {(p.camera_a, p.camera_b): p for p in result.pose_pairs}
     for sync in result.sync_pairs:
         pose = poses.get((sync.camera_a, sync.camera_b))
         pq = pose.quality if pose is not None and pose.ok else {}
         pairs.add_row(
-            f"{sync.camera_a}-{sync.camera_b}",
+            f"{label.get(sync.camera_a, sync.camera_a)}-{label.get(sync.camera_b, sync.camera_b)}",
             f"{sync.offset:+.4f}" if sync.ok else sync.reason[:40],
             f"{sync.quality.get('peak', np.nan):.2f}",
             f"{sync.quality.get('sharpness', np.nan):.1f}",
