@@ -186,6 +186,7 @@ class _Scored:
     """One frame's correspondences, whichever way they were found."""
 
     source: str
+    stamp_ns: int
     ids: np.ndarray  # (H,) track ids
     present: np.ndarray  # (P,) people that should be in the frame
     match: np.ndarray  # (H,) person of each hypothesis, -1 for none
@@ -228,7 +229,14 @@ def _scored_by_distance(
 ) -> list[_Scored]:
     frames, at, matches, distances = match_to_truth(groups, truth, threshold=threshold)
     return [
-        _Scored(f.source, f.ids, np.isfinite(people).all(axis=2).any(axis=1), m, d < threshold)
+        _Scored(
+            f.source,
+            f.stamp_ns,
+            f.ids,
+            np.isfinite(people).all(axis=2).any(axis=1),
+            m,
+            d < threshold,
+        )
         for f, people, m, d in zip(frames, at, matches, distances, strict=True)
     ]
 
@@ -257,7 +265,7 @@ def _scored_by_label(
         hit = match >= 0
         close[match[hit], np.flatnonzero(hit)] = True
         ids = np.array([s.id for s in skeletons], dtype=np.int64)
-        scored.append(_Scored(key[0], ids, present, match, close))
+        scored.append(_Scored(key[0], key[1], ids, present, match, close))
     return scored
 
 

@@ -69,12 +69,15 @@ class TrackerParams:
             confirmed anyway (a person only one camera sees); longer than a ghost body lasts.
         tentative_timeout: seconds a tentative track survives without a hit.
         track_timeout: seconds a confirmed track survives without a hit.
+        recent_window: seconds; confirmed tracks hit within it are matched before those that
+            have gone unseen longer (a person who left must not take another's detections).
         max_prediction: seconds of constant-velocity extrapolation at most.
         position_smoothing: weight (0..1] of a new detection in the track's reference pose.
         velocity_window: seconds of history the per-joint velocities are fitted over.
         body_id_bonus: metres taken off the cost when a camera reports the body id it gave the
-            track's previous detection: a tie-breaker when two people are close, small enough
-            that positions overrule a camera's own id changes and swaps.
+            track's previous detection, and added to the track's other candidates when that id
+            is in the frame: a tie-breaker when two people are close, small enough that
+            positions overrule a camera's own id changes and swaps.
         velocity_weight: metres of cost per m/s of velocity difference (0: positions only;
             used when detections carry velocities).
         orientation_weight: metres of cost per radian of joint orientation difference
@@ -103,6 +106,7 @@ class TrackerParams:
     single_camera_confirm: float = 2.0
     tentative_timeout: float = 0.3
     track_timeout: float = 2.0
+    recent_window: float = 0.2
     max_prediction: float = 0.5
     position_smoothing: float = 0.6
     velocity_window: float = 0.25
@@ -249,8 +253,12 @@ def _velocity_sums(times: np.ndarray, positions: np.ndarray) -> np.ndarray:
     return np.concatenate([ones, ones * t, ones * (t * t), filled, filled * t], axis=2)
 
 
-def _solve_velocities(sums: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def _solve_velocities(
+    sums: np.ndarray, weights: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Slopes from per-camera sums ``(U, C, J, 9)``: one intercept per camera (fixed effects).
+
+    ``weights`` ``(J,)`` pool the joints into the body velocity (the core, as in the cost).
 
     Returns:
         ``(U, J, 3)`` joint velocities (0 where undetermined), ``(U, 3)`` body velocities
@@ -262,8 +270,10 @@ def _solve_velocities(sums: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndar
     sxy = (sums[..., 6:9] - sums[..., 1:2] * sums[..., 3:6] / n[..., None]).sum(axis=1)
     determined = sxx > 1e-5
     velocities = sxy / np.where(determined, sxx, np.inf)[..., None]
-    pooled = np.where(determined, sxx, 0.0).sum(axis=1)
-    body = (sxy * determined[..., None]).sum(axis=1) / np.maximum(pooled, 1e-12)[:, None]
+    pooled = (np.where(determined, sxx, 0.0) * weights).sum(axis=1)
+    body = (sxy * (determined * weights)[..., None]).sum(axis=1) / np.maximum(pooled, 1e-12)[
+        :, None
+    ]
     return velocities, body, determined.any(axis=1)
 
 
@@ -462,8 +472,8 @@ class Tracker:
         no_flip = np.zeros(parts.count, dtype=bool)
         assigned: dict[int, tuple[_Track, np.ndarray]] = {}
         free = list(range(len(detections)))
-        for confirmed in (True, False):
-            tracks = [t for t in self._tracks if t.confirmed == confirmed]
+        recent_ns = stamp - round(params.recent_window * 1e9)
+        for tracks in self._cascade(recent_ns):
             if tracks and free:
                 for det, track, flips in self._match(
                     tracks, detections, positions, free, stamp=stamp, camera=code
@@ -493,6 +503,16 @@ class Tracker:
             for detection, track, order in zip(chosen, tracks, orders, strict=True)
             if track.confirmed
         ]
+
+    def _cascade(self, recent_ns: int) -> tuple[list[_Track], list[_Track], list[_Track]]:
+        """Tracks in matching order: confirmed and seen recently, confirmed, tentative.
+
+        Like DeepSORT's matching cascade: a track that has just lost its person (who left,
+        or whom every camera lost) must not take a detection that a live track explains.
+        """
+        live = [t for t in self._tracks if t.confirmed and t.last_hit_ns >= recent_ns]
+        stale = [t for t in self._tracks if t.confirmed and t.last_hit_ns < recent_ns]
+        return live, stale, [t for t in self._tracks if not t.confirmed]
 
     def _valid_detections(self, skeletons: list[Skeleton]) -> list[Skeleton]:
         """Skeletons with a finite joint and the layout of the first one (and of the tracks)."""
@@ -536,9 +556,9 @@ class Tracker:
         if params.velocity_weight > 0 or params.orientation_weight > 0:
             cost = cost + self._motion_costs(tracks, [detections[d] for d in free], parts, flips)
         if params.body_id_bonus:
-            body_ids = np.array([detections[d].id for d in free])
-            known = np.array([t.cameras.get(camera, -1) for t in tracks])
-            cost = cost - params.body_id_bonus * ((known[:, None] == body_ids) & (body_ids >= 0))
+            cost = cost + params.body_id_bonus * self._body_id_terms(
+                tracks, detections, free, camera
+            )
         unseen = np.array([(stamp - t.last_hit_ns) * _NS for t in tracks])
         gate = params.gate_distance + params.gate_growth * np.clip(unseen, 0.0, None)
         feasible = np.isfinite(cost) & (cost <= gate[:, None])
@@ -550,6 +570,23 @@ class Tracker:
             for r, c in zip(rows, cols, strict=True)
             if feasible[r, c]
         ]
+
+    @staticmethod
+    def _body_id_terms(
+        tracks: list[_Track], detections: list[Skeleton], free: list[int], camera: int
+    ) -> np.ndarray:
+        """``(T, D)`` body-id evidence: -1 agrees, +1 contradicts, 0 says nothing.
+
+        -1 where the camera keeps the body id it gave the track last time; +1 for the track's
+        other candidates when that id is in the frame (the camera still follows the track's
+        body as another detection).
+        """
+        ids = np.array([detections[d].id for d in free])
+        frame_ids = {detection.id for detection in detections if detection.id >= 0}
+        known = np.array([t.cameras.get(camera, -1) for t in tracks])
+        same = (known[:, None] == ids) & (ids >= 0)
+        elsewhere = np.array([k >= 0 and k in frame_ids for k in known])[:, None] & ~same
+        return elsewhere.astype(float) - same
 
     def _motion_costs(
         self,
@@ -640,7 +677,8 @@ class Tracker:
         sums = np.zeros((len(tracks), cameras, *tracks[0].sums.shape[1:]))
         for u, track in enumerate(tracks):
             sums[u, : len(track.sums)] = track.sums
-        velocities, body, determined = _solve_velocities(sums)
+        weights = _joint_weights(detections[0].layout, params.joint_weight_decay)
+        velocities, body, determined = _solve_velocities(sums, weights)
 
         swaps = np.zeros_like(flips)
         for u, track in enumerate(tracks):

@@ -252,3 +252,32 @@ def test_parameter_file_matches_the_dataclass():
 
     values = load_config_defaults("tracker")
     assert {k: values[k] for k in asdict(TrackerParams())} == asdict(TrackerParams())
+
+
+def test_a_person_appearing_beside_another_does_not_take_its_track(scenes):
+    def appear(camera, t, person, pose):
+        if person == 1 and t < 1.0:
+            return None  # person 1 appears at t = 1 s, 0.45 m from person 0 (along world x)
+        if person == 0 and 1.0 <= t < 1.04:
+            # Meanwhile the camera's detection of person 0 jumps 0.48 m the other way: by
+            # position alone the newcomer is the nearer one; the camera's body ids tell.
+            return pose + scene_shift
+        return pose
+
+    calibration = scenes.camera_ring(1)
+    extrinsics = calibration.cameras["k01"].extrinsics
+    scene_shift = extrinsics.inverse().rotate(np.array([-0.48, 0.0, 0.0]))
+    people = [scenes.straight((0.0, 0.0), (0.0, 0.0)), scenes.straight((0.45, 0.0), (0.0, 0.0))]
+    scene = scenes.render(people, n_cameras=1, duration=2.0, noise=0.0, modify=appear)
+
+    def one_person_per_id(params):
+        _, outputs = _track(scenes, scene, params)
+        people_of: dict[int, set[int]] = {}
+        for group in outputs:
+            for skeleton in group.skeletons:
+                person = int(skeleton.positions[0, 0] > 0.2)
+                people_of.setdefault(skeleton.id, set()).add(person)
+        return all(len(people) == 1 for people in people_of.values())
+
+    assert one_person_per_id(TrackerParams())
+    assert not one_person_per_id(TrackerParams(body_id_bonus=0.0))
