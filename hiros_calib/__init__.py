@@ -1,14 +1,16 @@
 """hiros_calib: spatio-temporal camera calibration from people's own motion."""
 
-from hiros_calib.sync import CameraClock, PairOffset, SyncParams, estimate_pair_offset, synchronise
-from hiros_calib.tracks import BodyTrack, extract_tracks
+from hiros_calib.calibrator import CalibrationResult, Calibrator, CalibratorParams
+from hiros_calib.extrinsics import ExtrinsicsParams
+from hiros_calib.live import LiveCalibrator, LiveCalibratorParams
+from hiros_calib.sync import SyncParams
 
 __all__ = [
-    "BodyTrack",
-    "CameraClock",
-    "PairOffset",
+    "CalibrationResult",
+    "Calibrator",
+    "CalibratorParams",
+    "ExtrinsicsParams",
+    "LiveCalibrator",
+    "LiveCalibratorParams",
     "SyncParams",
-    "estimate_pair_offset",
-    "extract_tracks",
-    "synchronise",
 ]

@@ -132,6 +132,7 @@ def make_scene(
     still: bool = False,
     seed: int = 0,
     clock_origin: tuple[float, ...] = (100.0, 5000.0, 12.0),
+    moves: dict[int, tuple[float, RigidTransform]] | None = None,
 ) -> Scene:
     """Cameras on a 3.5 m circle at the given angles, each on its own clock.
 
@@ -139,7 +140,9 @@ def make_scene(
     frame period) and ``offsets[i]`` is the extra shift of its motion: ``t_ref = t_cam +
     time_offset + drift (t_cam - e)`` with ``time_offset = clock_origin[0] - clock_origin[i] +
     offsets[i]`` and ``e = clock_origin[i]``; camera 0 (offset 0) is the reference. The
-    truth's world frame is the scene's world frame.
+    truth's world frame is the scene's world frame. ``moves`` maps a camera index to
+    ``(reference time, world-frame transform)``: from then on the camera's pose is the
+    transform applied to its original pose (the truth keeps the original pose).
     """
     rng = np.random.default_rng(seed + 1000)
     people = [Person(seed * 10 + i, scale=1.0 + 0.08 * i, still=still) for i in range(n_people)]
@@ -160,9 +163,13 @@ def make_scene(
         frame = f"{name}_depth_camera_link"
         inverse = pose.inverse()
         per_person = []
+        move = (moves or {}).get(index)
         for person in people:
             world = person.positions(t_ref)
             local = inverse.apply(world)
+            if move is not None:
+                after = t_ref >= move[0]
+                local[after] = (move[1] @ pose).inverse().apply(world[after])
             local = local + rng.normal(0, noise, local.shape) if noise else local
             behind = (person.facing(t_ref) * (position - world[:, 0])).sum(1) < 0
             if mirror_behind:

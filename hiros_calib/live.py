@@ -1,0 +1,312 @@
+"""Live calibration: a sliding window of frames, estimates that keep refining, change detection.
+
+:class:`LiveCalibrator` is what the ``calib`` node runs. Frames go in through :meth:`update`
+(cheap, thread-safe); :meth:`step` does the work when it is due:
+
+- every ``update_period`` seconds, a full :class:`~hiros_calib.calibrator.Calibrator` run
+  over the window; a camera's new estimate that agrees with the current one is blended in
+  (``blend``), so the calibration keeps refining as data accumulate;
+- every ``check_period`` seconds, a cheap check of the last ``check_length`` seconds: with the
+  current calibration, the same people seen by two cameras should land on the same points.
+  When every pair a camera belongs to disagrees by more than ``moved_ratio`` times its usual
+  residual (and ``moved_floor``), the camera was moved or its clock jumped: its older frames
+  are dropped and it is recalibrated from ``recalibrate_after`` seconds of new data.
+
+All times are nanoseconds on the receiver's clock (``arrival_ns``) except the frames' own
+stamps, which stay on their camera clocks.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import threading
+from collections import Counter, deque
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from scipy.spatial.transform import Rotation, Slerp
+
+from hiros_calib.calibrator import Calibrator, CalibratorParams
+from hiros_calib.extrinsics import Correspondences, associate, pair_correspondences
+from hiros_calib.sync import CameraClock
+from hiros_calib.tracks import extract_tracks
+from hiros_core.calibration import Calibration, CameraCalibration
+from hiros_core.errors import CalibrationError
+from hiros_core.geometry import RigidTransform
+from hiros_core.model import SkeletonGroup
+
+__all__ = ["LiveCalibrator", "LiveCalibratorParams"]
+
+
+@dataclass
+class LiveCalibratorParams(CalibratorParams):
+    """Every parameter of the ``calib`` node: calibration ones plus the live schedule."""
+
+    buffer_length: float = 60.0
+    """Seconds of frames kept per camera (the sliding window)."""
+    first_estimate_after: float = 20.0
+    """Seconds of frames needed before the first estimate."""
+    update_period: float = 10.0
+    """Seconds between full re-estimates."""
+    blend: float = 0.3
+    """Weight of a new estimate that agrees with the current one (1: replace)."""
+    agree_time: float = 0.02
+    """A new clock estimate within this (s) of the current one agrees with it."""
+    agree_rotation: float = 2.0
+    """A new pose estimate within this rotation (deg) ..."""
+    agree_translation: float = 0.1
+    """... and this translation (m) of the current one agrees with it."""
+    check_period: float = 1.0
+    """Seconds between moved-camera checks."""
+    check_length: float = 3.0
+    """Seconds of the newest frames a check looks at."""
+    moved_ratio: float = 2.5
+    """A pair residual this many times its usual value flags a change ..."""
+    moved_floor: float = 0.12
+    """... if it also exceeds this (m)."""
+    recalibrate_after: float = 5.0
+    """Seconds of frames after a change before the camera is recalibrated."""
+
+
+def _blend(old: CameraCalibration, new: CameraCalibration, weight: float) -> CameraCalibration:
+    """``old`` moved ``weight`` of the way to ``new`` (slerp for the rotation)."""
+    rotations = Rotation.from_quat([old.rotation, new.rotation])
+    rotation = Slerp([0.0, 1.0], rotations)([weight]).as_quat()[0]
+    # the offsets are compared at the same epoch so that a drift term does not leak in
+    at = new.drift_epoch
+    old_offset = old.time_offset + old.drift * (at - old.drift_epoch)
+    return CameraCalibration(
+        frame_id=new.frame_id,
+        time_offset=old_offset + weight * (new.time_offset - old_offset),
+        drift=old.drift + weight * (new.drift - old.drift),
+        drift_epoch=at,
+        translation=old.translation + weight * (new.translation - old.translation),
+        rotation=rotation if rotation[3] >= 0 else -rotation,
+        quality=dict(new.quality),
+    )
+
+
+def _agrees(old: CameraCalibration, new: CameraCalibration, params: LiveCalibratorParams) -> bool:
+    at = new.drift_epoch
+    old_offset = old.time_offset + old.drift * (at - old.drift_epoch)
+    angle = math.degrees((old.extrinsics.rotation.inv() * new.extrinsics.rotation).magnitude())
+    return (
+        abs(old_offset - new.time_offset) <= params.agree_time
+        and angle <= params.agree_rotation
+        and float(np.linalg.norm(old.translation - new.translation)) <= params.agree_translation
+    )
+
+
+def _clock(name: str, cam: CameraCalibration) -> CameraClock:
+    return CameraClock(name, "ok", "", cam.time_offset, cam.drift, cam.drift_epoch)
+
+
+class LiveCalibrator:
+    """Sliding-window calibration that refines itself and notices moved cameras.
+
+    Args:
+        params: the parameters.
+        calibration: a starting calibration (e.g. loaded from a file), or None.
+
+    Attributes:
+        calibration: the current calibration (cameras appear as they are calibrated).
+        drops: counted drop reasons of the frames and of the estimates.
+        events: ``(receiver time ns, message)`` of what happened: cameras calibrated,
+            estimates that failed, changes detected.
+
+    """
+
+    def __init__(
+        self, params: LiveCalibratorParams | None = None, calibration: Calibration | None = None
+    ) -> None:
+        self.params = params or LiveCalibratorParams()
+        self.calibration = calibration or Calibration(
+            reference=self.params.reference, world_frame=self.params.world_frame
+        )
+        self.drops: Counter[str] = Counter()
+        self.events: list[tuple[int, str]] = []
+        self._frames: dict[str, deque[tuple[SkeletonGroup, int]]] = {}
+        self._since: dict[str, int] = {}  # per camera: frames stamped earlier are ignored
+        self._changed: set[str] = set()  # cameras waiting for recalibration
+        self._baseline: dict[tuple[str, str], float] = {}
+        self._first_arrival: int | None = None
+        self._last_estimate: int | None = None
+        self._last_check: int | None = None
+        self._changed_at: dict[str, int] = {}
+        self._lock = threading.Lock()
+
+    # -- input
+    def update(self, group: SkeletonGroup, arrival_ns: int) -> SkeletonGroup:
+        """Keep a camera frame (and when it arrived); returns it unchanged."""
+        if not group.frame_id:
+            self.drops["no_frame_id"] += 1
+            return group
+        camera = group.camera
+        horizon = round(self.params.buffer_length * 1e9)
+        with self._lock:
+            frames = self._frames.setdefault(camera, deque())
+            if frames and group.stamp_ns <= frames[-1][0].stamp_ns:
+                self.drops["out_of_order"] += 1
+                return group
+            frames.append((group, arrival_ns))
+            while frames and frames[0][0].stamp_ns < group.stamp_ns - horizon:
+                frames.popleft()
+            if self._first_arrival is None:
+                self._first_arrival = arrival_ns
+        return group
+
+    # -- work
+    def step(self, now_ns: int) -> bool:
+        """Run the check and the estimate that are due at ``now_ns``; True if anything changed."""
+        params = self.params
+        if self._first_arrival is None:
+            return False
+        changed = False
+        if self._due(self._last_check, now_ns, params.check_period) and self.calibration.cameras:
+            self._last_check = now_ns
+            changed |= self.check(now_ns)
+        recalibrate = any(
+            now_ns - self._changed_at[c] >= params.recalibrate_after * 1e9 for c in self._changed
+        )
+        enough = now_ns - self._first_arrival >= params.first_estimate_after * 1e9
+        if recalibrate or (enough and self._due(self._last_estimate, now_ns, params.update_period)):
+            self._last_estimate = now_ns
+            changed |= self.estimate(now_ns)
+        return changed
+
+    @staticmethod
+    def _due(last: int | None, now_ns: int, period: float) -> bool:
+        return last is None or now_ns - last >= period * 1e9
+
+    def _window(self, length: float | None = None) -> tuple[dict[str, list], dict[str, list]]:
+        """Per camera the frames (after any change) and arrivals, optionally only the newest."""
+        groups, arrivals = {}, {}
+        with self._lock:
+            for camera, frames in self._frames.items():
+                if not frames:
+                    continue
+                start = self._since.get(camera, -1)
+                if length is not None:
+                    start = max(start, frames[-1][0].stamp_ns - round(length * 1e9))
+                kept = [(g, a) for g, a in frames if g.stamp_ns >= start]
+                if kept:
+                    groups[camera] = [g for g, _ in kept]
+                    arrivals[camera] = [a for _, a in kept]
+        return groups, arrivals
+
+    def estimate(self, now_ns: int = 0) -> bool:
+        """A full calibration of the window, merged into the current one; True if it changed."""
+        groups, arrivals = self._window()
+        if len(groups) < 2:
+            return False
+        params = dataclasses.replace(
+            self.params,
+            require_all=False,
+            reference=self.calibration.reference or self.params.reference,
+        )
+        calibrator = Calibrator(params)
+        try:
+            estimate = calibrator.calibrate(groups, arrival_ns=arrivals)
+        except CalibrationError as exc:
+            self.drops["estimate_failed"] += 1
+            self.events.append((now_ns, f"estimate failed: {exc}"))
+            return False
+        self.drops.update(calibrator.drops)
+        changed = False
+        if not self.calibration.reference:
+            self.calibration.reference = estimate.reference
+        for camera, new in estimate.cameras.items():
+            old = self.calibration.cameras.get(camera)
+            if old is None or camera in self._changed:
+                self.calibration.cameras[camera] = new
+                self._changed.discard(camera)
+                self.events.append((now_ns, f"{camera}: calibrated"))
+                changed = True
+            elif _agrees(old, new, self.params):
+                self.calibration.cameras[camera] = _blend(old, new, self.params.blend)
+                changed = True
+            else:
+                self.drops["estimate_disagrees"] += 1
+        for camera, reason in (calibrator.result.refused if calibrator.result else {}).items():
+            self.events.append((now_ns, f"{camera}: not calibrated yet ({reason})"))
+        self._baseline = self._residuals(groups)
+        return changed
+
+    def check(self, now_ns: int) -> bool:
+        """Look for moved cameras or jumped clocks in the newest frames; True if one is found."""
+        groups, _ = self._window(self.params.check_length)
+        residuals = self._residuals(groups)
+        suspicious = {
+            pair
+            for pair, value in residuals.items()
+            if value > self.params.moved_floor
+            and value > self.params.moved_ratio * self._baseline.get(pair, value)
+        }
+        flagged = set()
+        for camera in self.calibration.cameras:
+            mine = [pair for pair in residuals if camera in pair]
+            if mine and all(pair in suspicious for pair in mine):
+                flagged.add(camera)
+        reference = self.calibration.reference
+        if reference in flagged or (flagged and len(self.calibration.cameras) == 2):
+            # with two cameras, or when the reference itself moved, the others are redone
+            flagged = {c for c in self.calibration.cameras if c != reference}
+        flagged -= self._changed
+        if not flagged:
+            return False
+        with self._lock:
+            for camera in flagged:
+                frames = self._frames.get(camera)
+                if frames:
+                    self._since[camera] = frames[-1][0].stamp_ns - round(
+                        self.params.check_length * 1e9
+                    )
+                self._changed.add(camera)
+                self._changed_at[camera] = now_ns
+        for camera in sorted(flagged):
+            self.calibration.cameras[camera].quality["status"] = "recalibrating"
+            self.events.append((now_ns, f"{camera}: moved or clock jumped, recalibrating"))
+        return True
+
+    def _residuals(self, groups: dict[str, list]) -> dict[tuple[str, str], float]:
+        """Median joint disagreement (m) per calibrated camera pair in these frames."""
+        cal = self.calibration
+        cameras = [c for c in groups if c in cal.cameras and c not in self._changed]
+        params = self.params
+        tracks = {
+            c: extract_tracks(groups[c], c, max_gap=params.max_gap, min_frames=5) for c in cameras
+        }
+        out = {}
+        for k, a in enumerate(cameras):
+            for b in cameras[k + 1 :]:
+                clock_a, clock_b = _clock(a, cal.cameras[a]), _clock(b, cal.cameras[b])
+                check = dataclasses.replace(params, min_common_time=1.0)
+                matches = associate(tracks[a], tracks[b], clock_a, clock_b, check)
+                values = []
+                relative = cal.cameras[a].extrinsics.inverse() @ cal.cameras[b].extrinsics
+                for i, j, _ in matches:
+                    c = pair_correspondences(tracks[a][i], tracks[b][j], clock_a, clock_b, params)
+                    if c is None:
+                        continue
+                    values.append(_invariant_residuals(c, relative))
+                if values:
+                    out[a, b] = float(np.median(np.concatenate(values)))
+        return out
+
+    def snapshot(self) -> dict[str, Any]:
+        """Counts for diagnostics: frames buffered per camera, cameras waiting, drops."""
+        with self._lock:
+            buffered = {c: len(f) for c, f in self._frames.items()}
+        return {"buffered": buffered, "recalibrating": sorted(self._changed), **self.drops}
+
+
+def _invariant_residuals(c: Correspondences, relative: RigidTransform) -> np.ndarray:
+    """Distances of mirror-proof points (midline joints, left/right midpoints) under a pose."""
+    keep = np.flatnonzero(np.arange(len(c.mirror)) <= c.mirror)
+    partner = c.mirror[keep]
+    points_a = 0.5 * (c.points_a[:, keep] + c.points_a[:, partner])
+    points_b = 0.5 * (c.points_b[:, keep] + c.points_b[:, partner])
+    valid = np.minimum(c.weights[:, keep], c.weights[:, partner]) > 0
+    return np.linalg.norm(relative.apply(points_b) - points_a, axis=2)[valid]
