@@ -45,7 +45,7 @@ class CameraCorrection:
         self.uncalibrated: set[str] = set()
         self._cameras: dict[str, CameraCalibration] = {}
         self._by_frame: dict[str, str] = {}
-        self._extrinsics: dict[str, RigidTransform] = {}
+        self._transforms: dict[str, tuple[np.ndarray, np.ndarray]] = {}
         if calibration is not None:
             self.set_calibration(calibration)
 
@@ -59,14 +59,14 @@ class CameraCorrection:
         self.world_frame = calibration.world_frame
         self._cameras = {}
         self._by_frame = {}
-        self._extrinsics = {}
+        self._transforms = {}
         for name, camera in calibration.cameras.items():
             self.set_camera(name, camera)
 
     def set_camera(self, name: str, camera: CameraCalibration) -> None:
         """Replace one camera's calibration (a live parameter update from ``calib``)."""
         self._cameras[name] = camera
-        self._extrinsics[name] = camera.extrinsics
+        self._transforms[name] = _row_transform(camera.extrinsics)
         if camera.frame_id:
             self._by_frame[camera.frame_id] = name
         self.uncalibrated.discard(name)
@@ -91,32 +91,61 @@ class CameraCorrection:
             self.drops[UNCALIBRATED] += 1
             return None
         camera = self._cameras[name]
-        skeletons = _moved(group.skeletons, self._extrinsics[name])
+        skeletons = _moved(group.skeletons, self._transforms[name])
         for moved in skeletons:
             moved.src_time_ns = camera.to_reference_ns(moved.src_time_ns or group.stamp_ns)
             moved.src_frame = moved.src_frame or group.frame_id
         return SkeletonGroup(camera.to_reference_ns(group.stamp_ns), self.world_frame, skeletons)
 
 
-def _moved(skeletons: list[Skeleton], extrinsics: RigidTransform) -> list[Skeleton]:
-    """New skeletons moved by ``extrinsics``, all rows of a frame in one product.
+_GROUP_OF_COLUMN = np.repeat(np.arange(7), [1, 3, 4, 3, 3, 3, 3])
+"""Field of each of the 20 floats of a row: confidence, position, quaternion, 4 vectors."""
+_GROUPS = np.zeros((7, 20))
+_GROUPS[_GROUP_OF_COLUMN, np.arange(20)] = 1.0
 
-    The result equals ``extrinsics.apply_to_skeleton`` on each skeleton (a test checks it);
-    doing a whole frame at once keeps the per-frame cost flat in the number of people, which
-    is what the tracker's time budget needs. The new skeletons' rows are views into one array
-    owned by them alone.
+
+def _row_transform(extrinsics: RigidTransform) -> tuple[np.ndarray, np.ndarray]:
+    """``(20, 20)`` matrix and ``(20,)`` offset moving a whole marker/link row at once.
+
+    Block diagonal: confidence unchanged, ``R`` on the position (plus ``t``), the quaternion
+    product ``q_R ⊗ q`` on the orientation, ``R`` on each twist and accel vector.
+    """
+    rotation = extrinsics.rotation.as_matrix()
+    matrix = np.zeros((20, 20))
+    matrix[0, 0] = 1.0
+    matrix[4:8, 4:8] = _left_product(extrinsics.rotation.as_quat())
+    for start in (1, 8, 11, 14, 17):
+        matrix[start : start + 3, start : start + 3] = rotation
+    offset = np.zeros(20)
+    offset[1:4] = extrinsics.translation
+    return matrix, offset
+
+
+def _moved(skeletons: list[Skeleton], transform: tuple[np.ndarray, np.ndarray]) -> list[Skeleton]:
+    """New skeletons moved by a ``_row_transform``, all rows of a frame in one product.
+
+    The result equals ``RigidTransform.apply_to_skeleton`` on each skeleton (a test checks it):
+    a field with any NaN stays all NaN, quaternions are normalised first. Doing a whole frame
+    as one ``(20, 20) @ (20, N)`` product, column-wise, keeps the per-frame cost small and flat
+    in the number of people, which is what the tracker's time budget needs. The new
+    skeletons' rows are views into one array owned by them alone.
     """
     if not skeletons:
         return []
-    matrix = extrinsics.rotation.as_matrix()
-    left = _left_product(extrinsics.rotation.as_quat())
-    rows = np.concatenate([part for s in skeletons for part in (s.markers, s.links)])
-    rows[:, 1:4] = rows[:, 1:4] @ matrix.T + extrinsics.translation
-    rows[:, 4:8] = _unit(rows[:, 4:8]) @ left.T
-    rows[:, 8:20] = (rows[:, 8:20].reshape(-1, 4, 3) @ matrix.T).reshape(-1, 12)
+    matrix, offset = transform
+    columns = np.concatenate([part for s in skeletons for part in (s.markers, s.links)]).T
+    q = columns[4:8]
+    norm = np.sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3])
+    with np.errstate(invalid="ignore", divide="ignore"):
+        columns = np.concatenate([columns[:4], q / norm, columns[8:]])
+    unknown = np.isnan(columns)
+    unknown = (_GROUPS @ unknown > 0)[_GROUP_OF_COLUMN]
+    moved_columns = matrix @ np.where(unknown, 0.0, columns) + offset[:, None]
+    moved_columns[unknown] = np.nan
+    rows = np.ascontiguousarray(moved_columns.T)
     boxes = np.stack([s.bounding_box for s in skeletons])
-    boxes[:, 0:3] = boxes[:, 0:3] @ matrix.T + extrinsics.translation
-    boxes[:, 3:7] = _unit(boxes[:, 3:7]) @ left.T
+    boxes[:, 0:3] = boxes[:, 0:3] @ matrix[1:4, 1:4].T + offset[1:4]
+    boxes[:, 3:7] = _unit(boxes[:, 3:7]) @ matrix[4:8, 4:8].T
     moved = []
     start = 0
     for skeleton, box in zip(skeletons, boxes, strict=True):
@@ -150,6 +179,6 @@ def _left_product(rotation: np.ndarray) -> np.ndarray:
 
 def _unit(quaternions: np.ndarray) -> np.ndarray:
     """Rows ``(N, 4)`` scaled to unit norm; NaN or all-zero rows become NaN (unknown)."""
-    norm = np.sqrt(np.einsum("ij,ij->i", quaternions, quaternions))[:, None]
+    norm = np.sqrt((quaternions * quaternions).sum(axis=1, keepdims=True))
     with np.errstate(invalid="ignore", divide="ignore"):
         return quaternions / norm

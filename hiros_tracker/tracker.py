@@ -299,6 +299,7 @@ class _Track:
         "hits",
         "id",
         "last_hit_ns",
+        "mirrored",
         "orientations",
         "positions",
         "records",
@@ -323,6 +324,7 @@ class _Track:
         self.sums = np.zeros((1, len(positions), 9))  # (cameras, J, 9)
         self.epoch_ns = time_ns
         self.votes: dict[int, tuple[int, np.ndarray]] = {}
+        self.mirrored: set[int] = set()  # cameras whose last vote flips some part
 
     def predict(self, time_ns: int, max_prediction: float) -> np.ndarray:
         """``(J, 3)`` pose extrapolated to ``time_ns`` with the body's mean velocity."""
@@ -696,6 +698,12 @@ class Tracker:
     ) -> np.ndarray:
         """Swap a track's sides of the parts that most cameras seeing it now call mirrored."""
         track.votes[camera] = (time_ns, flips)
+        if not flips.any():
+            track.mirrored.discard(camera)
+            if not track.mirrored:  # nobody calls the sides mirrored: nothing to count
+                return np.zeros_like(flips)
+        else:
+            track.mirrored.add(camera)
         recent = time_ns - round(self.params.velocity_window * 1e9)
         votes = [vote for t, vote in track.votes.values() if t >= recent]
         if len(votes) < 2:
@@ -704,6 +712,7 @@ class Tracker:
         if swap.any():
             track.relabel(parts.permutation(swap))
             track.votes = {cam: (t, vote ^ swap) for cam, (t, vote) in track.votes.items()}
+            track.mirrored = {cam for cam, (_, vote) in track.votes.items() if vote.any()}
         return swap
 
     def _confirm(self, track: _Track, layout: Layout, time_ns: int) -> None:
