@@ -1,0 +1,212 @@
+"""``calib`` node: camera skeleton topics in, a live calibration out as parameters and TF.
+
+    /<cam>/skeletons (raw CDR, camera frame and clock) -> LiveCalibrator -> parameters
+        cameras.<cam>.{frame_id, time_offset, drift, drift_epoch, translation, rotation,
+        quality.*} and /tf_static (world -> each camera's frame)
+
+Other nodes follow the parameters through ``/parameter_events`` (``ros2 param get /calib
+cameras.k02.time_offset`` reads one). A calibration file (``calibration_file``) is loaded at
+start and published at once; ``~/save`` (std_srvs/Trigger) writes the current calibration to
+``save_file`` (default: ``calibration_file``), and so does shutdown. The estimates run on a
+worker thread so that frames keep arriving while a window is being solved.
+"""
+
+from __future__ import annotations
+
+import copy
+import threading
+from collections import Counter
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from geometry_msgs.msg import TransformStamped
+from hiros_skeleton_msgs.msg import SkeletonGroup as SkeletonGroupMsg
+from rclpy.parameter import Parameter
+from rclpy.qos import DurabilityPolicy, QoSProfile
+from std_srvs.srv import Trigger
+from tf2_msgs.msg import TFMessage
+
+from hiros_calib.live import LiveCalibrator, LiveCalibratorParams
+from hiros_core.calibration import Calibration, load_calibration, save_calibration
+from hiros_core.codec import decode_group
+from hiros_core.errors import CalibrationError
+from hiros_ros import HirosNode, run_node
+from hiros_ros.node import camera_qos
+
+__all__ = ["CalibNode", "CalibNodeParams", "main"]
+
+
+@dataclass
+class CalibNodeParams(LiveCalibratorParams):
+    """The live calibration's parameters plus the node's topics and files."""
+
+    camera_names: list[str] = field(default_factory=lambda: ["k01", "k02", "k03"])
+    """Cameras to listen to (not ``cameras``: that prefix holds the results)."""
+    camera_topic: str = "/{camera}/skeletons"
+    camera_qos: str = "sensor_data"
+    calibration_file: str = ""
+    """Loaded at start when it exists; the default place ``~/save`` writes to."""
+    save_file: str = ""
+    """Where ``~/save`` and shutdown write; empty: ``calibration_file`` or calibration.yaml."""
+    publish_tf: bool = True
+    """Publish world -> camera transforms on /tf_static."""
+    step_period: float = 0.2
+    """Seconds between the worker's looks at whether a check or an estimate is due."""
+
+
+def _flat_quality(quality: dict[str, Any], prefix: str) -> dict[str, Any]:
+    """``quality.*`` parameters: numbers as doubles, nested mappings one level deep."""
+    out: dict[str, Any] = {}
+    for key, value in quality.items():
+        name = f"{prefix}.{key}"
+        if isinstance(value, dict):
+            out.update(_flat_quality(value, name))
+        elif isinstance(value, bool | str):
+            out[name] = value
+        elif isinstance(value, int | float):
+            out[name] = float(value)
+    return out
+
+
+def calibration_parameters(calibration: Calibration) -> dict[str, Any]:
+    """The node's result parameters, ``cameras.<cam>.*``, as plain values."""
+    out: dict[str, Any] = {}
+    for name, cam in calibration.cameras.items():
+        prefix = f"cameras.{name}"
+        out[f"{prefix}.frame_id"] = cam.frame_id
+        out[f"{prefix}.time_offset"] = float(cam.time_offset)
+        out[f"{prefix}.drift"] = float(cam.drift)
+        out[f"{prefix}.drift_epoch"] = float(cam.drift_epoch)
+        out[f"{prefix}.translation"] = [float(v) for v in cam.translation]
+        out[f"{prefix}.rotation"] = [float(v) for v in cam.rotation]
+        out.update(_flat_quality(cam.quality, f"{prefix}.quality"))
+    return out
+
+
+class CalibNode(HirosNode):
+    """Camera topics -> ``LiveCalibrator`` -> parameters, /tf_static, calibration file."""
+
+    def __init__(self) -> None:
+        super().__init__("calib")
+        self.params = self.declare_params(CalibNodeParams)
+        self.live = LiveCalibrator(self.params, self._initial_calibration())
+        # snapshots handed from the worker thread: the newest result, and the one to publish
+        self._current = copy.deepcopy(self.live.calibration)
+        self._latest: Calibration | None = self._current
+        self._published: dict[str, Any] = {}
+        self._seen_drops: Counter[str] = Counter()
+        self._logged_events = 0
+        qos = camera_qos(self.params.camera_qos)
+        topics = [self.params.camera_topic.format(camera=c) for c in self.params.camera_names]
+        for topic in topics:
+            self.create_raw_subscription(SkeletonGroupMsg, topic, self.on_group, qos)
+        tf_qos = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)
+        self._tf = self.create_publisher(TFMessage, "/tf_static", tf_qos)
+        self.create_service(Trigger, "~/save", self.on_save)
+        self.create_timer(0.5, self.publish_result)
+        self._stop = threading.Event()
+        self._worker = threading.Thread(target=self._work, name="calib-worker", daemon=True)
+        self._worker.start()
+        self.get_logger().info(f"{topics} -> LiveCalibrator -> parameters cameras.*, /tf_static")
+
+    def _initial_calibration(self) -> Calibration | None:
+        path = self.params.calibration_file
+        if not path or not Path(path).exists():
+            return None
+        try:
+            calibration = load_calibration(path)
+        except CalibrationError as exc:
+            self.get_logger().error(f"{exc}; starting without it")
+            return None
+        self.get_logger().info(f"loaded {path}: cameras {sorted(calibration.cameras)}")
+        return calibration
+
+    def on_group(self, data: bytes) -> None:
+        """Buffer one camera frame with its arrival time on this node's clock."""
+        self.live.update(decode_group(data), self.get_clock().now().nanoseconds)
+
+    def _work(self) -> None:
+        while not self._stop.wait(self.params.step_period):
+            try:
+                if self.live.step(self.get_clock().now().nanoseconds):
+                    self._current = copy.deepcopy(self.live.calibration)
+                    self._latest = self._current
+            except Exception as exc:  # the worker must survive a bad window
+                self.drop(type(exc).__name__, f"calibration step: {exc}")
+
+    def publish_result(self) -> None:
+        """Apply a new result (parameters, TF) and log what happened since the last call."""
+        events = self.live.events
+        for _, message in events[self._logged_events :]:
+            self.get_logger().info(message)
+        self._logged_events = len(events)
+        self.absorb_drops(self.live.drops, self._seen_drops)
+        latest, self._latest = self._latest, None
+        if latest is None or not latest.cameras:
+            return
+        values = calibration_parameters(latest)
+        changed = [
+            Parameter(name, value=value)
+            for name, value in values.items()
+            if self._published.get(name) != value
+        ]
+        for parameter in changed:
+            if not self.has_parameter(parameter.name):
+                self.declare_parameter(parameter.name, parameter.value)
+        self.set_parameters(changed)
+        self._published.update(values)
+        if self.params.publish_tf:
+            self._tf.publish(self._transforms(latest))
+        self.count("results_published")
+
+    def _transforms(self, calibration: Calibration) -> TFMessage:
+        stamp = self.get_clock().now().to_msg()
+        transforms = []
+        for cam in calibration.cameras.values():
+            t = TransformStamped()
+            t.header.stamp = stamp
+            t.header.frame_id = calibration.world_frame
+            t.child_frame_id = cam.frame_id
+            (t.transform.translation.x, t.transform.translation.y,
+             t.transform.translation.z) = (float(v) for v in cam.translation)  # fmt: skip
+            (t.transform.rotation.x, t.transform.rotation.y, t.transform.rotation.z,
+             t.transform.rotation.w) = (float(v) for v in cam.rotation)  # fmt: skip
+            transforms.append(t)
+        return TFMessage(transforms=transforms)
+
+    def _save_path(self) -> Path:
+        return Path(self.params.save_file or self.params.calibration_file or "calibration.yaml")
+
+    def save(self) -> str:
+        """Write the current calibration; returns what happened, for the service and logs."""
+        calibration = self._current
+        if not calibration.cameras:
+            return "nothing to save: no camera is calibrated yet"
+        path = self._save_path()
+        save_calibration(calibration, path)
+        return f"saved {sorted(calibration.cameras)} to {path}"
+
+    def on_save(self, _request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
+        """``~/save``: write the calibration file."""
+        try:
+            response.message = self.save()
+            response.success = not response.message.startswith("nothing")
+        except OSError as exc:
+            response.success, response.message = False, f"cannot save: {exc}"
+        self.get_logger().info(response.message)
+        return response
+
+    def on_shutdown(self) -> None:
+        """Stop the worker and save what was found (called by ``run_node``)."""
+        self._stop.set()
+        self._worker.join(timeout=5.0)
+        try:
+            self.get_logger().info(self.save())
+        except OSError as exc:
+            self.get_logger().error(f"cannot save at shutdown: {exc}")
+
+
+def main(args: list[str] | None = None) -> None:
+    """``ros2 run hiros calib``."""
+    run_node(CalibNode, args)

@@ -1,0 +1,57 @@
+"""The calib node on live topics: two cameras on their own clocks, results as parameters."""
+
+from __future__ import annotations
+
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+import yaml
+
+pytestmark = [pytest.mark.ros, pytest.mark.slow]
+HERE = Path(__file__).resolve().parent
+
+
+def test_calib_node_publishes_parameters_tf_and_saves(ros_env, tmp_path: Path) -> None:
+    pytest.importorskip("hiros_skeleton_msgs.msg")
+    pytest.importorskip("tf2_msgs.msg")
+    pytest.importorskip("std_srvs.srv")
+    saved = tmp_path / "calib.yaml"
+    params = [
+        "camera_names:=[cam0, cam1]",
+        "first_estimate_after:=6.0",
+        "update_period:=100.0",
+        f"save_file:={saved}",
+    ]
+    node = subprocess.Popen(
+        [sys.executable, "-c", "from hiros_calib.node import main; main()", "--ros-args",
+         *[arg for p in params for arg in ("-p", p)]],
+        env=ros_env,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
+    )  # fmt: skip
+    try:
+        client = subprocess.run(
+            [sys.executable, str(HERE / "ros_publisher.py")],
+            env=ros_env,
+            capture_output=True,
+            text=True,
+            timeout=150,
+            check=False,
+        )
+    finally:
+        node.terminate()
+        node_log = node.communicate(timeout=30)[0]
+    log = client.stdout + client.stderr + node_log
+    assert client.returncode == 0, log
+    found = re.search(r"offset (\S+) truth (\S+) tf \[(.*)\] save: (.*)", log)
+    assert found, log
+    assert float(found.group(1)) == pytest.approx(float(found.group(2)), abs=5e-3), log
+    assert "cam1_depth_camera_link" in found.group(3), log
+    assert found.group(4).startswith("saved ['cam0', 'cam1']"), log
+    written = yaml.safe_load(saved.read_text())
+    assert set(written["cameras"]) == {"cam0", "cam1"}
+    assert "Traceback" not in log, log
