@@ -1,4 +1,4 @@
-"""Records raw /hiros/filter messages to a file until it has been quiet for a while."""
+"""Records raw /hiros/filter messages and their arrival times until quiet for a while."""
 
 from __future__ import annotations
 
@@ -15,9 +15,13 @@ def main(path: str, quiet: float, deadline: float) -> int:
     rclpy.init()
     node = rclpy.create_node("hiros_test_recorder")
     received: list[bytes] = []
-    node.create_subscription(
-        SkeletonGroup, "/hiros/filter", received.append, QoSProfile(depth=1000), raw=True
-    )
+    arrivals: list[float] = []
+
+    def keep(data: bytes) -> None:
+        received.append(data)
+        arrivals.append(time.time())
+
+    node.create_subscription(SkeletonGroup, "/hiros/filter", keep, QoSProfile(depth=1000), raw=True)
     print("recorder ready", flush=True)
     end = time.monotonic() + deadline
     last = None
@@ -25,12 +29,14 @@ def main(path: str, quiet: float, deadline: float) -> int:
         count = len(received)
         rclpy.spin_once(node, timeout_sec=0.05)
         if len(received) != count:
+            if last is None:
+                print("first output", flush=True)
             last = time.monotonic()
         if last is not None and time.monotonic() - last > quiet:
             break
     with open(path, "wb") as stream:
-        for data in received:
-            stream.write(struct.pack("<I", len(data)) + data)
+        for arrival, data in zip(arrivals, received, strict=True):
+            stream.write(struct.pack("<dI", arrival, len(data)) + data)
     print(f"recorded {len(received)}", flush=True)
     node.destroy_node()
     rclpy.shutdown()

@@ -41,12 +41,15 @@ def scene(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 
 def _read_recorded(path: Path) -> list:
+    """Groups as received, each with ``arrival`` (wall-clock seconds) set on it."""
     data, groups = path.read_bytes(), []
     offset = 0
     while offset < len(data):
-        (size,) = struct.unpack_from("<I", data, offset)
-        groups.append(decode_group(data[offset + 4 : offset + 4 + size]))
-        offset += 4 + size
+        arrival, size = struct.unpack_from("<dI", data, offset)
+        group = decode_group(data[offset + 12 : offset + 12 + size])
+        group.arrival = arrival
+        groups.append(group)
+        offset += 12 + size
     return groups
 
 
@@ -138,3 +141,56 @@ def test_live_pipeline_agrees_with_hiros_run(
     assert distance < 0.02, (
         f"people differ by {distance * 100:.1f} cm (median) between live and offline"
     )
+
+
+def test_a_killed_node_restarts_and_the_pipeline_resumes(
+    scene: Path, ros_env: dict[str, str], tmp_path: Path
+) -> None:
+    calibration = scene / "calibration.yaml"
+    commands = _commands("nodes", calibration)
+    merger_command = commands[2]
+    nodes = [subprocess.Popen(c, env=ros_env, stdout=subprocess.DEVNULL) for c in commands]
+    out = tmp_path / "live.bin"
+    recorder = subprocess.Popen(
+        [sys.executable, str(HERE / "recorder.py"), str(out), "12.0", "120"],
+        env=ros_env,
+        stdout=subprocess.PIPE,
+        text=True,
+    )
+    try:
+        assert recorder.stdout is not None
+        assert "ready" in recorder.stdout.readline()
+        time.sleep(3.0)
+        play = subprocess.Popen(
+            [
+                str(BIN / "hiros"),
+                "play",
+                str(scene / "recording.mcap"),
+                "--delay",
+                "10",
+                "--no-clock",
+                "--rate",
+                "0.4",
+            ],
+            env=ros_env,
+            stdout=subprocess.DEVNULL,
+        )
+        assert "first output" in recorder.stdout.readline()
+        time.sleep(1.5)
+        killed_wall = time.time()
+        nodes[2].kill()  # the merger dies mid-stream
+        nodes[2].wait(timeout=10)
+        restarted_wall = time.time()
+        nodes[2] = subprocess.Popen(merger_command, env=ros_env, stdout=subprocess.DEVNULL)
+        assert play.wait(timeout=120) == 0
+        recorder.wait(timeout=120)
+    finally:
+        for node in nodes:
+            node.terminate()
+            node.wait(timeout=30)
+    arrivals = np.array([g.arrival for g in _read_recorded(out)])
+    before = arrivals[arrivals < killed_wall]
+    after = arrivals[arrivals > restarted_wall]
+    assert before.size > 10, "no output before the merger was killed"
+    assert after.size > 10, "the pipeline did not resume after the merger was restarted"
+    assert not ((arrivals > killed_wall + 0.2) & (arrivals < restarted_wall)).any()
