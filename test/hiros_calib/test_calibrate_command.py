@@ -1,0 +1,54 @@
+"""``hiros calibrate`` end to end on a small recording written from a synthetic scene."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from hiros_cli.main import main
+from hiros_core.calibration import load_calibration
+from hiros_core.codec import encode_group
+from hiros_core.recording import SKELETON_GROUP, RecordingWriter
+
+
+@pytest.fixture(scope="module")
+def recording(make_scene, tmp_path_factory):
+    scene = make_scene(angles_deg=(0.0, 180.0), duration=15.0, noise=0.005, seed=2)
+    path = tmp_path_factory.mktemp("rec") / "scene.mcap"
+    writer = RecordingWriter(path)
+    messages = sorted(
+        (round((scene.truth.cameras[name].to_reference_time(g.stamp) + 0.03) * 1e9), name, g)
+        for name, groups in scene.camera_groups.items()
+        for g in groups
+    )
+    for log_time, name, group in messages:
+        writer.write(f"/{name}/skeletons", SKELETON_GROUP, encode_group(group), log_time)
+    writer.close()
+    return scene, path
+
+
+def test_calibrate_writes_the_file_and_plots(recording, tmp_path: Path, capsys) -> None:
+    scene, path = recording
+    out, plots = tmp_path / "calib.yaml", tmp_path / "plots"
+    assert main(["calibrate", str(path), "--out", str(out), "--plots", str(plots)]) == 0
+    calibration = load_calibration(out)
+    assert calibration.reference == "cam0"
+    truth = scene.truth.cameras["cam1"]
+    assert calibration.cameras["cam1"].time_offset == pytest.approx(truth.time_offset, abs=3e-3)
+    assert calibration.cameras["cam1"].quality["inlier_ratio"] > 0.9
+    assert sorted(p.name for p in plots.iterdir()) == [
+        "correlation.png",
+        "joint_residuals.png",
+        "offset_over_time.png",
+    ]
+    assert "cam0-cam1" in capsys.readouterr().out
+
+
+def test_calibrate_takes_a_named_reference_and_rejects_an_unknown_one(recording, tmp_path, capsys):
+    _, path = recording
+    out = tmp_path / "calib.yaml"
+    assert main(["calibrate", str(path), "--out", str(out), "--reference", "cam1"]) == 0
+    assert load_calibration(out).reference == "cam1"
+    assert main(["calibrate", str(path), "--out", str(out), "--reference", "nope"]) == 1
+    assert "reference camera 'nope' is not among the cameras" in capsys.readouterr().err
