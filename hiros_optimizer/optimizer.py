@@ -293,6 +293,7 @@ class Optimizer:
         self.new_calibrations = []
         out = SkeletonGroup(group.stamp_ns, group.frame_id, [])
         seen: set[int] = set()
+        learning: dict[str, list[tuple[int, Skeleton, _Track]]] = {}
         batches: dict[str, list[tuple[int, Skeleton, _Track]]] = {}
         for skeleton in group.skeletons:
             if skeleton.markers.shape[0] != skeleton.layout.n_joints:
@@ -314,11 +315,11 @@ class Optimizer:
             seen.add(result.id)
             out.skeletons.append(result)
             track = self._track(result)
-            if track.calibration is None:
-                self._learn(result.id, track, result)
-                self._remember(track, result, None)
-                continue
-            batches.setdefault(result.layout.name, []).append((result.id, result, track))
+            target = learning if track.calibration is None else batches
+            target.setdefault(result.layout.name, []).append((result.id, result, track))
+        # Learning and fitting touch disjoint tracks, so their order does not matter.
+        for items in learning.values():
+            self._learn(items)
         for items in batches.values():
             self._fit(items)
         return out
@@ -351,31 +352,45 @@ class Optimizer:
             tree = self._trees[layout.name] = KinematicTree.from_layout(layout)
         return tree
 
-    def _learn(self, track_id: int, track: _Track, skeleton: Skeleton) -> None:
-        """Push this frame's link lengths; accept a calibration when the window is steady."""
-        weights = _weights(skeleton)
-        positions = np.where((weights > 0)[:, None], skeleton.positions, np.nan)
-        row = track.filled % track.window.shape[0]
-        track.window[row] = link_lengths(positions, np.asarray(skeleton.layout.parents))
-        track.filled += 1
-        if track.filled < track.window.shape[0]:
-            return
-        window = track.window
-        seen = np.isfinite(window).mean(axis=0) >= self.params.min_link_presence
-        median = np.full(window.shape[1], np.nan)
-        variation = np.full(window.shape[1], np.nan)
-        if seen.any():
-            median[seen] = np.nanmedian(window[:, seen], axis=0)
-            mad = np.nanmedian(np.abs(window[:, seen] - median[seen]), axis=0)
-            with np.errstate(invalid="ignore", divide="ignore"):
-                variation[seen] = _MAD_TO_SD * mad / median[seen]
+    def _learn(self, items: list[tuple[int, Skeleton, _Track]]) -> None:
+        """Push this frame's link lengths; accept calibrations whose window is steady.
+
+        All learning people of one layout at once: one link-length computation, and one
+        median over the windows of those whose window is full.
+        """
+        layout = items[0][1].layout
+        skeletons = [skeleton for _, skeleton, _ in items]
+        weights = _stacked_weights(skeletons)
+        positions = np.stack([skeleton.positions for skeleton in skeletons])
+        positions = np.where((weights > 0)[..., None], positions, np.nan)
+        lengths = link_lengths(positions, self._tree(layout).parents)
+        full: list[tuple[int, _Track]] = []
+        for (track_id, skeleton, track), row_lengths in zip(items, lengths, strict=True):
+            size = track.window.shape[0]
+            track.window[track.filled % size] = row_lengths
+            track.filled += 1
+            if track.filled >= size:
+                full.append((track_id, track))
+            self._remember(track, skeleton, None)
+        if full:
+            self._accept(layout, full)
+
+    def _accept(self, layout: Layout, full: list[tuple[int, _Track]]) -> None:
+        """Accept the calibration of each full window that is steady enough."""
+        params = self.params
+        windows = np.stack([track.window for _, track in full])  # (R, N, J)
+        seen = np.isfinite(windows).mean(axis=1) >= params.min_link_presence
+        median = _nanmedian_rows(windows)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            mad = _nanmedian_rows(np.abs(windows - median[:, None]))
+            variation = np.where(seen, _MAD_TO_SD * mad / median, np.nan)
+        median = np.where(seen, median, np.nan)
         with np.errstate(invalid="ignore"):
             steady = (
-                seen
-                & (median > 0)
-                & (variation < self.params.max_calibration_coefficient_of_variation)
+                seen & (median > 0) & (variation < params.max_calibration_coefficient_of_variation)
             )
-        if steady.sum() < self.params.min_calibrated_fraction * skeleton.layout.link_children.size:
+        enough = steady.sum(axis=1) >= params.min_calibrated_fraction * layout.link_children.size
+        if not enough.any():
             return
         # Noise perpendicular to a link lengthens it on average: |d + n|^2 = L^2 + 3 s^2 with
         # s the per-axis noise of d, of which the radial part shows as the spread s of the
@@ -383,9 +398,13 @@ class Optimizer:
         spread = variation * median
         unbiased = np.sqrt(np.maximum(median**2 - 2 * spread**2, 0.25 * median**2))
         lengths = np.where(seen & (median > 0), unbiased, np.nan)
-        track.calibration = PersonCalibration(skeleton.layout, lengths, variation, window.shape[0])
-        self.calibrations[track_id] = track.calibration
-        self.new_calibrations.append(track_id)
+        for row in np.flatnonzero(enough):
+            track_id, track = full[row]
+            track.calibration = PersonCalibration(
+                layout, lengths[row], variation[row], track.window.shape[0]
+            )
+            self.calibrations[track_id] = track.calibration
+            self.new_calibrations.append(track_id)
 
     def _fit(self, items: list[tuple[int, Skeleton, _Track]]) -> None:
         """One least-squares fit for all calibrated people of one layout."""
@@ -448,6 +467,28 @@ class Optimizer:
         track.positions = positions
         track.vectors = vectors
         track.time_ns = skeleton.src_time_ns
+
+
+def _nanmedian_rows(values: np.ndarray) -> np.ndarray:
+    """``np.nanmedian(values, axis=1)`` of ``(R, N, J)``, by one sort (NaN sorts last).
+
+    The same numbers as numpy's (mean of the two middle values for an even count, NaN where a
+    column has no value) at a fraction of the cost: numpy's small-array path goes through
+    masked arrays, which made the calibration check the stage's most expensive step.
+    """
+    ordered = np.sort(values, axis=1)
+    count = np.count_nonzero(~np.isnan(values), axis=1)  # (R, J)
+    low = np.take_along_axis(ordered, np.maximum(count - 1, 0)[:, None] // 2, axis=1)[:, 0]
+    high = np.take_along_axis(ordered, (count // 2)[:, None], axis=1)[:, 0]
+    return np.where(count > 0, (low + high) / 2, np.nan)
+
+
+def _stacked_weights(skeletons: list[Skeleton]) -> np.ndarray:
+    """``(P, J)`` :func:`_weights` of several skeletons of one layout (floor 0)."""
+    confidence = np.stack([skeleton.confidences for skeleton in skeletons])
+    present = np.stack([skeleton.marker_present for skeleton in skeletons])
+    confidence = np.where(np.isfinite(confidence), confidence, 1.0)
+    return np.where(present, np.clip(confidence, 0.0, None), 0.0)
 
 
 def _weights(skeleton: Skeleton, floor: float = 0.0) -> np.ndarray:
