@@ -39,7 +39,7 @@ import yaml
 from hiros_core.codec import MarkerArrayData
 from hiros_core.errors import CodecError, ConfigError, LayoutError
 from hiros_core.layouts import AZURE_KINECT, Layout, get_layout
-from hiros_core.model import Skeleton, SkeletonGroup
+from hiros_core.model import STATE_WIDTH, Skeleton, SkeletonGroup
 
 __all__ = [
     "ADD",
@@ -192,7 +192,7 @@ class DriverBridge:
             raise ConfigError(msg)
         self.drops: Counter[str] = Counter()
         self.last_stamp_ns: int | None = None
-        self._lookups: dict[str, tuple[Layout, np.ndarray]] = {}
+        self._lookups: dict[str, tuple[Layout, np.ndarray | None]] = {}
         self._lookup("")  # an unknown name in joint_names fails here, not per message
 
     def _count(self, reason: str, amount: int) -> None:
@@ -204,18 +204,20 @@ class DriverBridge:
         """Forget the last stamp (a new recording or a restarted source)."""
         self.last_stamp_ns = None
 
-    def _lookup(self, namespace: str) -> tuple[Layout, np.ndarray]:
-        """The layout of a namespace and the driver-joint -> marker-id table for it."""
+    def _lookup(self, namespace: str) -> tuple[Layout, np.ndarray | None]:
+        """The layout of a namespace and the driver-joint -> marker-id table for it.
+
+        The table is None when driver joint index = marker id (no ``joint_names``).
+        """
         found = self._lookups.get(namespace)
         if found is None:
             try:
                 layout = get_layout(namespace) if namespace else self.layout
             except LayoutError:
                 layout = self.layout
+            table = None
             if self.params.joint_names and layout is self.layout:
                 table = np.array([layout.index(n) for n in self.params.joint_names])
-            else:
-                table = np.arange(layout.n_joints)
             found = self._lookups[namespace] = (layout, table)
         return found
 
@@ -226,16 +228,20 @@ class DriverBridge:
             self.drops["empty_array"] += 1
             return None
         add = actions == ADD
-        deleteall = actions == DELETEALL
-        self._count("delete_marker", int((actions == DELETE).sum()))
-        self._count("deleteall_marker", int(deleteall.sum()))
-        self._count("unknown_action", int((~add & ~deleteall & (actions != DELETE)).sum()))
-        rows = np.flatnonzero(add if add.any() else deleteall)
-        if len(rows) == 0:
-            return None
-        stamp = int(data.stamps_ns[rows[0]])
-        frame = self.params.frame_id or data.frame_ids[rows[0]]
-        if not add.any():
+        if add.all():  # the driver's usual message: every marker a joint to add
+            rows = None
+        else:
+            deleteall = actions == DELETEALL
+            self._count("delete_marker", int((actions == DELETE).sum()))
+            self._count("deleteall_marker", int(deleteall.sum()))
+            self._count("unknown_action", int((~add & ~deleteall & (actions != DELETE)).sum()))
+            rows = np.flatnonzero(add if add.any() else deleteall)
+            if len(rows) == 0:
+                return None
+        first = 0 if rows is None else int(rows[0])
+        stamp = int(data.stamps_ns[first])
+        frame = self.params.frame_id or data.frame_ids[first]
+        if rows is not None and not add.any():
             # Clearing markers are often unstamped: they say "nobody in view" only when they
             # carry a new stamp, and never restart the clock.
             if self.last_stamp_ns is not None and stamp <= self.last_stamp_ns:
@@ -244,7 +250,8 @@ class DriverBridge:
             return SkeletonGroup(stamp, frame, [])
         if not self._accept_stamp(stamp):
             return None
-        if (data.stamps_ns[rows] != stamp).any():
+        stamps = data.stamps_ns if rows is None else data.stamps_ns[rows]
+        if (stamps != stamp).any():
             self.drops["mixed_stamps"] += 1
         return SkeletonGroup(stamp, frame, self._skeletons(data, rows, stamp, frame))
 
@@ -260,56 +267,91 @@ class DriverBridge:
         return True
 
     def _skeletons(
-        self, data: MarkerArrayData, rows: np.ndarray, stamp: int, frame: str
+        self, data: MarkerArrayData, rows: np.ndarray | None, stamp: int, frame: str
     ) -> list[Skeleton]:
-        """Skeletons of the ADD markers ``rows``, one per body id in increasing order."""
-        layout, table = self._lookup(data.namespaces[rows[0]])
-        ids = np.asarray(data.ids, dtype=np.int64)[rows]
-        stride = self.params.id_stride
-        major, minor = ids // stride, ids % stride
+        """Skeletons of the ADD markers ``rows`` (None: all), one per body id in increasing order.
+
+        Every body of the message in one pass (a fixed number of numpy calls per message); the
+        usual message (ids increasing, no duplicates, whole bodies) skips the sorting and
+        scattering the general case needs.
+        """
+        layout, body, joint, block = self._kept_markers(data, rows)
+        if len(body) == 0:
+            return []
+        # ``body`` is in increasing order (sorted keys): people start where it changes.
+        change = np.empty(len(body), dtype=bool)
+        change[0] = True
+        np.not_equal(body[1:], body[:-1], out=change[1:])
+        starts = np.flatnonzero(change)
+        n_people, n_joints = len(starts), layout.n_joints
+        markers = np.full((n_people, n_joints, STATE_WIDTH), np.nan)
+        present = np.zeros((n_people, n_joints), dtype=bool)
+        if len(body) == n_people * n_joints:
+            # Strictly increasing keys, at most J joints per body: every body is whole, in order.
+            markers[..., :8] = block.reshape(n_people, n_joints, 8)
+            present[:] = True
+        else:
+            flat = (np.cumsum(change) - 1) * n_joints + joint
+            markers.reshape(-1, STATE_WIDTH)[flat, :8] = block
+            present.reshape(-1)[flat] = True
+        return Skeleton.many_from_rows(
+            markers,
+            present,
+            layout,
+            skeleton_ids=body[starts].tolist(),
+            src_time_ns=stamp,
+            src_frame=frame,
+        )
+
+    def _kept_markers(
+        self, data: MarkerArrayData, rows: np.ndarray | None
+    ) -> tuple[Layout, np.ndarray, np.ndarray, np.ndarray]:
+        """The markers that make joints, in (body, joint) order, drops counted.
+
+        Returns the layout, body ids ``(n,)``, marker ids ``(n,)`` and rows ``(n, 8)`` of
+        [confidence, position, orientation] (NaN orientation where the driver gave none).
+        """
+        layout, table = self._lookup(data.namespaces[0 if rows is None else rows[0]])
+        ids = np.asarray(data.ids, dtype=np.int64)
+        poses = np.asarray(data.poses, dtype=float)
+        texts = data.texts
+        if rows is not None:
+            ids, poses = ids[rows], poses[rows]
+            texts = [texts[i] for i in rows.tolist()]
+        major, minor = np.divmod(ids, self.params.id_stride)
         body, driver_joint = (
             (major, minor) if self.params.id_scheme == "body_major" else (minor, major)
         )
-        known = (ids >= 0) & (driver_joint < len(table))
-        joint = np.where(known, table[np.minimum(driver_joint, len(table) - 1)], -1)
-        known &= joint >= 0
-        self._count("unknown_joint", int((~known).sum()))
-        poses = np.asarray(data.poses, dtype=float)[rows]
-        positions = poses[:, :3] * self.params.position_scale
-        finite = np.isfinite(positions).all(axis=1)
-        self._count("nan_position", int((known & ~finite).sum()))
-        keep = np.flatnonzero(known & finite)
-        key = body[keep] * layout.n_joints + joint[keep]
-        _, first = np.unique(key, return_index=True)
-        self._count("duplicate_marker", len(keep) - len(first))
-        keep = keep[first]
-        if len(keep) == 0:
-            return []
-        quaternions = poses[keep, 3:7]
-        unknown = ~(np.linalg.norm(quaternions, axis=1) > 0)  # zero or NaN: no orientation
-        quaternions[unknown] = np.nan
-        levels = np.array([_level(data.texts[rows[i]]) for i in keep])
-        confidences = levels / self.params.confidence_levels
-        bodies, person = np.unique(body[keep], return_inverse=True)
-        shape = (len(bodies), layout.n_joints)
-        grid_positions = np.full((*shape, 3), np.nan)
-        grid_orientations = np.full((*shape, 4), np.nan)
-        grid_confidences = np.full(shape, np.nan)
-        grid_positions[person, joint[keep]] = positions[keep]
-        grid_orientations[person, joint[keep]] = quaternions
-        grid_confidences[person, joint[keep]] = confidences
-        return [
-            Skeleton.from_positions(
-                grid_positions[p],
-                layout,
-                skeleton_id=int(body_id),
-                src_time_ns=stamp,
-                src_frame=frame,
-                confidences=grid_confidences[p],
-                orientations=grid_orientations[p],
-            )
-            for p, body_id in enumerate(bodies)
-        ]
+        if table is None:
+            known = (ids >= 0) & (driver_joint < layout.n_joints)
+            joint = driver_joint
+        else:
+            known = (ids >= 0) & (driver_joint < len(table))
+            joint = np.where(known, table[np.minimum(driver_joint, len(table) - 1)], -1)
+            known &= joint >= 0
+        block = np.empty((len(ids), 8))
+        block[:, 1:8] = poses[:, :7]
+        if self.params.position_scale != 1.0:
+            block[:, 1:4] *= self.params.position_scale
+        finite = np.isfinite(block[:, 1:4]).all(axis=1)
+        usable = known & finite
+        if not usable.all():
+            self._count("unknown_joint", int((~known).sum()))
+            self._count("nan_position", int((known & ~finite).sum()))
+            keep = np.flatnonzero(usable)
+            body, joint, block = body[keep], joint[keep], block[keep]
+            texts = [texts[i] for i in keep.tolist()]
+        key = body * layout.n_joints + joint
+        if not (key[1:] > key[:-1]).all():
+            _, first = np.unique(key, return_index=True)
+            self._count("duplicate_marker", len(key) - len(first))
+            body, joint, block = body[first], joint[first], block[first]
+            texts = [texts[i] for i in first.tolist()]
+        block[:, 0] = np.fromiter(map(_level, texts), float, len(texts))
+        block[:, 0] /= self.params.confidence_levels
+        unknown = ~(np.einsum("ij,ij->i", block[:, 4:8], block[:, 4:8]) > 0)
+        block[unknown, 4:8] = np.nan  # zero or NaN quaternion: no orientation
+        return layout, body, joint, block
 
 
 def group_to_driver_markers(

@@ -15,6 +15,7 @@ Stamps are integer nanoseconds so that messages round-trip exactly.
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -27,6 +28,7 @@ __all__ = [
     "Skeleton",
     "SkeletonGroup",
     "camera_from_frame",
+    "link_rows",
     "ns_to_sec",
     "sec_to_ns",
 ]
@@ -69,6 +71,34 @@ def camera_from_frame(frame_id: str) -> str:
 
 def _nan_rows(count: int, width: int = STATE_WIDTH) -> np.ndarray:
     return np.full((count, width), np.nan)
+
+
+def link_rows(
+    markers: np.ndarray, marker_present: np.ndarray, layout: Layout
+) -> tuple[np.ndarray, np.ndarray]:
+    """Link rows ``(..., J, 20)`` and link presence ``(..., J)`` from marker rows.
+
+    A link is present where both its end joints are: its position is their midpoint, its
+    orientation the child joint's, its confidence the smaller one (``fmin``); every other row is
+    NaN. Any leading shape (one skeleton or a stack of them) in one pass: a fixed dozen numpy
+    calls, so stages rebuild the links of all their people at once.
+    """
+    parents, children = layout.link_parents, layout.link_children
+    shape = marker_present.shape
+    head = markers[..., : _ORIENTATION.stop]  # confidence, position, orientation
+    parent_rows = head[..., parents, :]
+    values = head[..., children, :]  # a copy: becomes the link rows
+    np.fmin(parent_rows[..., _CONFIDENCE], values[..., _CONFIDENCE], out=values[..., _CONFIDENCE])
+    position = values[..., _POSITION]
+    position += parent_rows[..., _POSITION]
+    position *= 0.5
+    both = marker_present[..., parents] & marker_present[..., children]
+    values[~both] = np.nan
+    links = np.full((*shape, STATE_WIDTH), np.nan)
+    links[..., children, : _ORIENTATION.stop] = values
+    present = np.zeros(shape, dtype=bool)
+    present[..., children] = both
+    return links, present
 
 
 @dataclass(eq=False)
@@ -148,31 +178,82 @@ class Skeleton:
         Links are present where both end joints are; their orientation is the child joint's
         orientation when given (the Azure SDK's convention), their position the midpoint.
         """
-        skeleton = cls.empty(
-            layout, skeleton_id=skeleton_id, src_time_ns=src_time_ns, src_frame=src_frame
-        )
         positions = np.asarray(positions, dtype=float)
-        present = np.isfinite(positions).all(axis=1)
-        skeleton.marker_present[:] = present
-        skeleton.positions[present] = positions[present]
+        return cls.many_from_positions(
+            positions[None],
+            layout,
+            skeleton_ids=(skeleton_id,),
+            src_time_ns=src_time_ns,
+            src_frame=src_frame,
+            confidences=None if confidences is None else np.asarray(confidences)[None],
+            orientations=None if orientations is None else np.asarray(orientations)[None],
+        )[0]
+
+    @classmethod
+    def many_from_positions(
+        cls,
+        positions: np.ndarray,
+        layout: Layout = AZURE_KINECT,
+        *,
+        skeleton_ids: Sequence[int],
+        src_time_ns: int = 0,
+        src_frame: str = "",
+        confidences: np.ndarray | None = None,
+        orientations: np.ndarray | None = None,
+    ) -> list[Skeleton]:
+        """:meth:`from_positions` of ``(P, J, 3)`` positions at once (one per id).
+
+        ``confidences`` ``(P, J)`` and ``orientations`` ``(P, J, 4)`` as there. The skeletons'
+        rows are views into arrays shared by them alone (distinct rows, so changing one
+        skeleton never changes another); a bridge frame costs a fixed number of numpy calls
+        whatever the number of people.
+        """
+        positions = np.asarray(positions, dtype=float)
+        n_people, n_joints = positions.shape[:2]
+        present = np.isfinite(positions).all(axis=2)
+        markers = np.full((n_people, n_joints, STATE_WIDTH), np.nan)
+        markers[..., _POSITION] = np.where(present[..., None], positions, np.nan)
         if confidences is not None:
-            skeleton.confidences[present] = np.asarray(confidences, dtype=float)[present]
+            markers[..., _CONFIDENCE] = np.where(present, confidences, np.nan)
         if orientations is not None:
-            skeleton.orientations[present] = np.asarray(orientations, dtype=float)[present]
-        skeleton.update_links()
-        return skeleton
+            markers[..., _ORIENTATION] = np.where(present[..., None], orientations, np.nan)
+        return cls.many_from_rows(
+            markers, present, layout, skeleton_ids=skeleton_ids, src_time_ns=src_time_ns,
+            src_frame=src_frame,
+        )  # fmt: skip
+
+    @classmethod
+    def many_from_rows(
+        cls,
+        markers: np.ndarray,
+        marker_present: np.ndarray,
+        layout: Layout = AZURE_KINECT,
+        *,
+        skeleton_ids: Sequence[int],
+        src_time_ns: int = 0,
+        src_frame: str = "",
+    ) -> list[Skeleton]:
+        """Skeletons from ``(P, J, 20)`` marker rows (taken, not copied) and ``(P, J)`` presence.
+
+        Links are built as :meth:`update_links` does, for all people at once; each skeleton's
+        arrays are views of distinct rows of arrays shared by these skeletons alone.
+        """
+        links, link_present = link_rows(markers, marker_present, layout)
+        boxes = np.full((len(markers), BOX_WIDTH), np.nan)
+        n_joints, n_links = layout.n_joints, layout.n_links
+        # Positional arguments in field order: this runs for every person of every frame.
+        fields = (math.nan, n_joints, n_links)
+        return [
+            cls(int(i), src_time_ns, src_frame, layout, markers[p], links[p],
+                marker_present[p], link_present[p], fields[0], boxes[p], *fields[1:])
+            for p, i in enumerate(skeleton_ids)
+        ]  # fmt: skip
 
     def update_links(self) -> None:
         """Recompute link rows from marker rows: midpoint, child orientation, min confidence."""
-        parents, children = self.layout.link_parents, self.layout.link_children
-        both = self.marker_present[parents] & self.marker_present[children]
-        self.link_present[:] = False
-        self.link_present[children[both]] = True
-        self.links[:] = np.nan
-        ids, par = children[both], parents[both]
-        self.links[ids, _POSITION] = 0.5 * (self.positions[par] + self.positions[ids])
-        self.links[ids, _ORIENTATION] = self.orientations[ids]
-        self.links[ids, _CONFIDENCE] = np.fmin(self.confidences[par], self.confidences[ids])
+        links, present = link_rows(self.markers, self.marker_present, self.layout)
+        self.links[:] = links
+        self.link_present[:] = present
 
     # Views into the marker rows: (J,) or (J, k), writable.
     @property
