@@ -17,6 +17,17 @@ different clocks and in different frames, so the fit first aligns them:
    to ~25 cm): those frames give the flip figure and are left out of the noise figures;
 4. the residuals ``kinect - (R xsens + t)`` in the camera frame give the figures below.
 
+Whether the errors are independent per joint or coherent along the skeleton
+(``skeleton_errors``, the same code measures the simulator with ``simulated_errors``):
+
+- limb-length CV: SD / mean of each link's length over the unflipped frames;
+- whole-body scale: per frame, the median over links of the link's length divided by its
+  median length; its CV, spread and correlation time (lag-1 autocorrelation), and the limb CV
+  left after dividing each frame's lengths by it (0 for a skeleton that keeps its ratios);
+- joint-parent correlation: per camera axis, the correlation of a core joint's residual (bias
+  removed) with that of its nearest core ancestor (shoulder with spine chest, elbow with
+  shoulder, ...).
+
 Figures (``hiros simulate --fit-noise`` prints them; ``SimParams`` defaults use them):
 
 - time shift, rigid-fit RMS, how much the subject faces the camera and the flipped share;
@@ -46,7 +57,19 @@ frame interval, stamp jitter           33.0 ms, 0.47 ms
 dropped frames, frames with no body    0.56 %, 0.56 %
 per-joint RMS error                    median 54 mm; ankles 121 / 85 mm (hidden by the
                                        bending torso), head 78 mm, wrists 73 / 65 mm
+limb length CV                         3.5 % on every limb (3.47-3.50 %), thumbs 5.8 / 6.1 %
+whole-body scale CV per frame          3.5 % (5-95 %: 0.948-1.065), correlation time 197 ms
+limb CV left after the scale           0.0 % (ratios exact), thumbs 4.9 %
+error corr. joint-parent x, y, z       0.70, 0.64, 0.53
 =====================================  ==============================================
+
+So the SDK reports one rigid body model per frame: the limb lengths keep exact ratios and vary
+only with one per-frame body scale, and a joint's error largely follows its parent's. The
+simulator's former independent per-joint noise gave 14-44 % limb CV (median 27 %), a
+joint-parent correlation of 0.0 and a whole-body "scale" CV of 5.7 %; its rigid model
+(``hiros_sim.noise``) gives 3.7-5.0 % (median 3.8 %, thumbs 5.9 %), 0.62 / 0.73 / 0.65 and
+3.8 %, with the same per-joint error (noise std 39-48 mm against 42-52 mm, bias RMS 24-29
+mm against 24-27 mm; ``simulated_errors`` default, occlusion on).
 
 The residual holds more than the SDK's noise: the Xsens suit's own error, the different joint
 definitions of the two skeletons (bias) and the mapping of the spine. The take is a single
@@ -60,18 +83,33 @@ from __future__ import annotations
 import gzip
 import io
 import itertools
-from dataclasses import dataclass
+import warnings
+from collections.abc import Sequence
+from dataclasses import dataclass, replace
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from hiros_core.errors import RecordingError
 from hiros_core.layouts import AZURE_KINECT
 from hiros_data import DATA_DIR
+from hiros_eval.body import limb_length_cv
 from hiros_sim.bvh import read_bvh
 from hiros_sim.mapping import map_to_azure
 
-__all__ = ["NoiseFit", "align", "fit_noise", "read_kinect_csv"]
+if TYPE_CHECKING:
+    from hiros_sim.simulate import SimParams
+
+__all__ = [
+    "NoiseFit",
+    "SkeletonErrors",
+    "align",
+    "fit_noise",
+    "read_kinect_csv",
+    "simulated_errors",
+    "skeleton_errors",
+]
 
 _DATA = DATA_DIR / "unipd_bpe_sample"
 DEFAULT_BVH = _DATA / "sbj01_bend1.bvh.gz"
@@ -144,6 +182,194 @@ def _kabsch_batch(source: np.ndarray, target: np.ndarray) -> tuple[np.ndarray, n
     rotation = np.einsum("fji,fj,fkj->fik", vt, fix, u)
     residual = dst - np.einsum("fij,fmj->fmi", rotation, src)
     return rotation, np.sqrt(np.mean(np.sum(residual**2, axis=2), axis=1))
+
+
+def _core_parents() -> np.ndarray:
+    """Each core joint's nearest core ancestor in the Azure tree (-1 for the pelvis)."""
+    parents = np.asarray(AZURE_KINECT.parents)
+    core = set(_CORE.tolist())
+    nearest = []
+    for joint in _CORE:
+        parent = parents[joint]
+        while parent >= 0 and parent not in core:
+            parent = parents[parent]
+        nearest.append(parent)
+    return np.array(nearest)
+
+
+_CORE_PARENT = _core_parents()
+_THUMBS = np.array([AZURE_KINECT.index("ThumbLeft"), AZURE_KINECT.index("ThumbRight")])
+
+
+@dataclass
+class SkeletonErrors:
+    """Whether a stream's errors are independent per joint or coherent along the skeleton.
+
+    Attributes:
+        limb_cv: ``(32,)`` coefficient of variation (SD / mean) of each link's length over
+            time, by link id (the child joint); NaN for the root.
+        scale_cv: CV of the per-frame whole-body scale, the median over links of the link's
+            length divided by its median length.
+        unscaled_limb_cv: ``(32,)`` the limb-length CV left after dividing each frame's
+            lengths by that scale: 0 for a skeleton whose limbs keep their ratios.
+        scale_span: 5th and 95th percentile of that scale.
+        scale_correlation_time: seconds, from the scale's lag-1 autocorrelation.
+        parent_correlation: ``(3,)`` per camera axis, the correlation of a core joint's error
+            (its bias removed) with its nearest core ancestor's.
+        noise_std: ``(3,)`` per axis, the error's standard deviation, each joint's bias removed.
+        bias_rms: ``(3,)`` per axis, the RMS over joints of each joint's mean error.
+        joint_error: mean per-joint position error, metres.
+        frames: frames the figures come from (over all streams).
+
+    The error figures are over the 17 core joints (``_CORE``) that the SDK and a mocap
+    reference define alike; the limb and scale figures over every link.
+
+    """
+
+    limb_cv: np.ndarray
+    scale_cv: float
+    unscaled_limb_cv: np.ndarray
+    scale_span: tuple[float, float]
+    scale_correlation_time: float
+    parent_correlation: np.ndarray
+    noise_std: np.ndarray
+    bias_rms: np.ndarray
+    joint_error: float
+    frames: int
+
+    @property
+    def body_limb_cv(self) -> float:
+        """Median limb-length CV over the links other than the thumbs."""
+        cv = np.delete(self.limb_cv, _THUMBS)
+        return float(np.nanmedian(cv))
+
+    def figures(self) -> list[tuple[str, str]]:
+        """Named, formatted figures for a table or a report."""
+        thumbs = np.nanmean(self.limb_cv[_THUMBS])
+        return [
+            ("limb length CV, median (not thumbs)", f"{self.body_limb_cv * 100:.1f} %"),
+            (
+                "limb length CV, range (not thumbs)",
+                _range_percent(np.delete(self.limb_cv, _THUMBS)),
+            ),
+            ("limb length CV, thumbs", f"{thumbs * 100:.1f} %"),
+            ("whole-body scale CV per frame", f"{self.scale_cv * 100:.1f} %"),
+            (
+                "limb CV beyond the scale, body, thumbs",
+                f"{np.nanmedian(np.delete(self.unscaled_limb_cv, _THUMBS)) * 100:.1f} %, "
+                f"{np.nanmean(self.unscaled_limb_cv[_THUMBS]) * 100:.1f} %",
+            ),
+            ("whole-body scale 5-95 %", f"{self.scale_span[0]:.3f}-{self.scale_span[1]:.3f}"),
+            ("scale correlation time", f"{self.scale_correlation_time * 1000:.0f} ms"),
+            (
+                "error corr. joint-parent x, y, z",
+                ", ".join(f"{c:.2f}" for c in self.parent_correlation),
+            ),
+            ("noise std x, y, z (bias removed)", _mm(self.noise_std)),
+            ("per-joint bias RMS x, y, z", _mm(self.bias_rms)),
+            ("mean per-joint error", f"{self.joint_error * 1000:.1f} mm"),
+        ]
+
+
+def _range_percent(values: np.ndarray) -> str:
+    return f"{np.nanmin(values) * 100:.1f}-{np.nanmax(values) * 100:.1f} %"
+
+
+def _lag1(series: list[np.ndarray], follows: list[np.ndarray]) -> float:
+    """Lag-1 autocorrelation pooled over series (each centred), only over consecutive pairs."""
+    num = den_a = den_b = 0.0
+    for values, consecutive in zip(series, follows, strict=True):
+        centred = values - np.nanmean(values)
+        pair = consecutive[1:] & np.isfinite(centred[1:]) & np.isfinite(centred[:-1])
+        a, b = centred[:-1][pair], centred[1:][pair]
+        num, den_a, den_b = num + a @ b, den_a + a @ a, den_b + b @ b
+    return float(num / np.sqrt(den_a * den_b)) if den_a > 0 and den_b > 0 else float("nan")
+
+
+def _limb_figures(observed: np.ndarray) -> tuple[np.ndarray, ...]:
+    """Limb-length figures of one ``(F, 32, 3)`` stream.
+
+    Returns per link the frames measured, the length CV and the CV left after the whole-body
+    scale, and the ``(F,)`` scale itself (NaN where fewer than 8 links are measured).
+    """
+    parents = np.asarray(AZURE_KINECT.parents)
+    lengths = np.linalg.norm(observed - observed[:, np.maximum(parents, 0)], axis=-1)
+    lengths[:, parents < 0] = np.nan
+    counts = np.isfinite(lengths).sum(axis=0)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)  # all-NaN links and frames
+        cv = limb_length_cv(observed)
+        ratio = lengths / np.nanmedian(lengths, axis=0)
+        scale = np.nanmedian(ratio, axis=1)
+        scale[np.isfinite(ratio).sum(axis=1) < 8] = np.nan
+        unscaled = ratio / scale[:, None]
+        unscaled_cv = np.nanstd(unscaled, axis=0) / np.nanmean(unscaled, axis=0)
+    return counts, cv, unscaled_cv, scale
+
+
+def skeleton_errors(
+    streams: Sequence[tuple[np.ndarray, np.ndarray, np.ndarray]], interval: float
+) -> SkeletonErrors:
+    """The ``SkeletonErrors`` figures pooled over streams (one per camera and person).
+
+    Args:
+        streams: ``(observed, reference, consecutive)`` per stream: ``(F, 32, 3)`` reported
+            and true joints in the same frame (NaN where not reported) and ``(F,)`` True where
+            a frame follows the previous one by one regular interval.
+        interval: the frame interval, seconds.
+
+    """
+    cv2_sum = np.zeros(AZURE_KINECT.n_joints)
+    unscaled2_sum = np.zeros(AZURE_KINECT.n_joints)
+    cv_count = np.zeros(AZURE_KINECT.n_joints)
+    scales, follows, noises, biases, errors = [], [], [], [], []
+    for observed, reference, consecutive in streams:
+        counts, cv, unscaled, scale = _limb_figures(observed)
+        if counts.max(initial=0) < 10:
+            continue
+        use = np.isfinite(cv) & (counts >= 10)
+        cv2_sum[use] += counts[use] * cv[use] ** 2
+        unscaled2_sum[use] += counts[use] * unscaled[use] ** 2
+        cv_count[use] += counts[use]
+        scales.append(scale)
+        follows.append(np.asarray(consecutive, dtype=bool))
+        residual = observed[:, _CORE] - reference[:, _CORE]  # (F, 17, 3)
+        seen = np.isfinite(residual[..., 0]).sum(axis=0)  # (17,)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)
+            bias = np.nanmean(residual, axis=0)
+        bias[seen < 10] = np.nan
+        noises.append(residual - bias)
+        biases.append(bias)
+        errors.append(np.linalg.norm(residual, axis=-1).ravel())
+    if not noises:
+        msg = "no stream has ten frames with the joints to measure"
+        raise RecordingError(msg)
+    all_scales = np.concatenate(scales)
+    all_scales = all_scales[np.isfinite(all_scales)]
+    rho = _lag1(scales, follows)
+    noise = np.concatenate(noises)  # (F, 17, 3)
+    child = np.flatnonzero(_CORE_PARENT >= 0)
+    parent = np.searchsorted(_CORE, _CORE_PARENT[child])
+    a, b = noise[:, child].reshape(-1, 3), noise[:, parent].reshape(-1, 3)
+    pair = np.isfinite(a).all(axis=1) & np.isfinite(b).all(axis=1)
+    a, b = a[pair], b[pair]
+    with np.errstate(invalid="ignore", divide="ignore"):
+        limb_cv = np.sqrt(cv2_sum / cv_count)
+        unscaled_limb_cv = np.sqrt(unscaled2_sum / cv_count)
+    return SkeletonErrors(
+        limb_cv=limb_cv,
+        scale_cv=float(np.std(all_scales) / np.mean(all_scales)),
+        unscaled_limb_cv=unscaled_limb_cv,
+        scale_span=(float(np.percentile(all_scales, 5)), float(np.percentile(all_scales, 95))),
+        scale_correlation_time=float(-interval / np.log(np.clip(rho, 1e-6, 0.999))),
+        parent_correlation=np.sum(a * b, axis=0)
+        / np.sqrt(np.sum(a * a, axis=0) * np.sum(b * b, axis=0)),
+        noise_std=np.sqrt(np.nanmean(noise.reshape(-1, 3) ** 2, axis=0)),
+        bias_rms=np.sqrt(np.nanmean(np.concatenate(biases) ** 2, axis=0)),
+        joint_error=float(np.nanmean(np.concatenate(errors))),
+        frames=int(sum(len(s) for s in scales)),
+    )
 
 
 @dataclass
@@ -256,6 +482,7 @@ class NoiseFit:
     drop_rate: float
     empty_rate: float
     per_joint_error: dict[str, float]  # RMS error per joint (bias + noise), m
+    skeleton: SkeletonErrors  # limb lengths, body scale, joint-parent correlation
 
     def figures(self) -> list[tuple[str, str]]:
         """Named, formatted figures for a table or a report."""
@@ -278,6 +505,7 @@ class NoiseFit:
             ("dropped frames", f"{self.drop_rate * 100:.2f} %"),
             ("frames with no body", f"{self.empty_rate * 100:.2f} %"),
             ("worst joints (RMS)", ", ".join(f"{n} {v * 1000:.0f} mm" for n, v in worst)),
+            *self.skeleton.figures()[:8],
         ]
 
 
@@ -325,6 +553,9 @@ def fit_noise(bvh: str | Path = DEFAULT_BVH, csv: str | Path = DEFAULT_CSV) -> N
     correlation_time = -interval / np.log(np.clip(rho, 1e-6, 0.999))
 
     per_joint = np.sqrt(np.mean(np.sum(residual**2, axis=2), axis=0))
+    follows = np.zeros(len(index), dtype=bool)
+    follows[consecutive + 1] = True
+    skeleton = skeleton_errors([(observed[ok], moved[ok], follows)], interval)
     return NoiseFit(
         alignment=alignment,
         bias_rms=np.sqrt(np.mean(bias**2, axis=0)),
@@ -341,4 +572,64 @@ def fit_noise(bvh: str | Path = DEFAULT_BVH, csv: str | Path = DEFAULT_CSV) -> N
         per_joint_error={
             AZURE_KINECT.joint_names[j]: float(e) for j, e in zip(_CORE, per_joint, strict=True)
         },
+        skeleton=skeleton,
     )
+
+
+def simulated_errors(
+    params: SimParams | None = None, *, facing_only: bool = False
+) -> SkeletonErrors:
+    """The ``SkeletonErrors`` figures of the simulator's camera streams, to compare with the take.
+
+    Simulates ``params`` with the SDK's discrete mistakes off (flips, swaps, ghosts, misses,
+    dropped frames), so that only the joint noise model is measured. Joints outside the field
+    of view (confidence 0) count as not reported. The default, with ``facing_only`` (frames
+    where the body faces the camera within 60°), is the take's situation: one camera 3.3 m
+    from one person playing the take's own Xsens motion.
+    """
+    from hiros_sim.simulate import SimParams, simulate
+
+    if params is None:
+        params = SimParams(
+            n_cameras=1,
+            setup="room",
+            n_people=1,
+            duration=40.0,
+            camera_radius=3.3,
+            walk_area=0.0,
+            bvh_files=(str(DEFAULT_BVH),),
+        )
+        facing_only = True
+    params = replace(
+        params,
+        flip_rate=0.0,
+        flip_probability=0.0,
+        swap_rate=0.0,
+        ghost_rate=0.0,
+        miss_rate=0.0,
+        id_change_rate=0.0,
+        drop_rate=0.0,
+    )
+    result = simulate(params)
+    streams = []
+    for name, groups in result.camera_groups.items():
+        cam = result.calibration.camera(name)
+        stamps = np.array([group.stamp_ns for group in groups], dtype=np.int64)
+        world = result.truth.at(cam.to_reference_time(stamps * 1e-9))  # (P, N, 32, 3)
+        reference = cam.extrinsics.inverse().apply(world.reshape(-1, 3)).reshape(world.shape)
+        observed = np.full(world.shape, np.nan)
+        for n, (group, persons) in enumerate(zip(groups, result.labels[name], strict=True)):
+            for skeleton, person in zip(group.skeletons, persons, strict=True):
+                if person >= 0:
+                    observed[person, n] = np.where(
+                        skeleton.confidences[:, None] > 0.0, skeleton.positions, np.nan
+                    )
+        if facing_only:  # like the take, whose subject faces the camera
+            from hiros_sim.people import body_forward
+
+            to_camera = cam.translation - world[:, :, AZURE_KINECT.index("Pelvis")]
+            facing = np.einsum("pnc,pnc->pn", body_forward(world), to_camera)
+            observed[~(facing > 0.5 * np.linalg.norm(to_camera, axis=-1))] = np.nan
+        follows = np.concatenate([[False], np.diff(stamps) < 1.5e9 / params.rate])
+        streams.extend((observed[p], reference[p], follows) for p in range(world.shape[0]))
+    return skeleton_errors(streams, 1.0 / params.rate)

@@ -41,6 +41,7 @@ from hiros_sim.noise import (
     LEVEL_MEDIUM,
     LEVEL_NONE,
     ar1_noise,
+    fit_body_model,
     flip_front_back,
     in_view,
     occluded,
@@ -52,6 +53,7 @@ __all__ = ["SimParams", "SimResult", "Truth", "default_bvh_files", "simulate"]
 _DATA = DATA_DIR
 _IDX = AZURE_KINECT.index
 _MAX_PEOPLE = 6
+_THUMBS = np.array([_IDX("ThumbLeft"), _IDX("ThumbRight")])
 
 
 def default_bvh_files() -> tuple[str, ...]:
@@ -131,7 +133,20 @@ class SimParams:
     1.6-2.2x the median joint)."""
     out_of_view_gain: float = 4.0
     noise_correlation_time: float = 0.22
-    """Seconds for the joint error's autocorrelation to fall to 1/e (fitted: 220 ms)."""
+    """Seconds for the joint error's autocorrelation to fall to 1/e (fitted: 220 ms; the
+    body scale's, 200 ms, is close enough to share it)."""
+    noise_body_share: float = 0.5
+    """Share of the evidence noise variance that is one shift of the whole body, 0..1 (tuned:
+    a joint's error then correlates with its parent's by 0.6-0.75 per axis, 0.5-0.7 on the
+    take)."""
+    body_scale_cv: float = 0.035
+    """CV of the SDK's per-frame whole-body scale (fitted: 3.5 %, which is also every limb's
+    length CV on the take)."""
+    thumb_length_cv: float = 0.048
+    """Extra CV of the thumb links' length (fitted: 4.8 %; the SDK fits the thumbs apart)."""
+    noise_residual: float = 0.0
+    """Sigma of independent noise on top of the SDK's rigid model, metres (the take shows none:
+    its limb lengths keep exact ratios)."""
 
     # SDK mistakes
     miss_rate: float = 0.0056
@@ -165,6 +180,8 @@ class SimParams:
             problems.append(f"duration must exceed {2 * self.start_spread + 1.0:g} s")
         if self.rate <= 0:
             problems.append(f"rate must be positive, not {self.rate}")
+        if not 0.0 <= self.noise_body_share <= 1.0:
+            problems.append(f"noise_body_share must be in 0..1, not {self.noise_body_share}")
         if problems:
             raise ConfigError("; ".join(problems))
 
@@ -357,7 +374,11 @@ def _joint_noise(
     params: SimParams,
     rng: np.random.Generator,
 ) -> np.ndarray:
-    """Positions plus correlated noise and a fixed bias (model in ``hiros_sim.noise``)."""
+    """What the SDK reports for true ``(P, N, 32, 3)`` positions (model in ``hiros_sim.noise``).
+
+    The evidence is each joint plus correlated noise (part of it one shift of the whole body)
+    and a fixed bias; the SDK's rigid body model, scaled per frame, is fitted to it.
+    """
     obliqueness = np.sqrt(np.clip(1.0 - _facing_cos(positions, forward) ** 2, 0.0, 1.0))
     depth = np.abs(positions[..., 2])
     sigma = (params.noise_base + params.noise_per_metre * depth) * (
@@ -366,11 +387,22 @@ def _joint_noise(
     sigma = sigma * np.where(hidden, params.occluded_gain, 1.0)
     sigma = sigma * np.where(joint_in, 1.0, params.out_of_view_gain)
     rho = float(np.exp(-1.0 / (params.rate * params.noise_correlation_time)))
-    error = ar1_noise(rng, positions.shape, rho) * sigma[..., None]
+    n_people, n_frames, n_joints, _ = positions.shape
+    share = params.noise_body_share
+    own = ar1_noise(rng, positions.shape, rho)
+    body = ar1_noise(rng, (n_people, n_frames, 1, 3), rho)
+    error = (np.sqrt(1.0 - share) * own + np.sqrt(share) * body) * sigma[..., None]
     error[..., 2] *= params.depth_axis_gain
-    n_people = positions.shape[0]
-    bias = rng.normal(0.0, params.joint_bias, (n_people, 1, AZURE_KINECT.n_joints, 3))
-    return positions + error + bias
+    bias = rng.normal(0.0, params.joint_bias, (n_people, 1, n_joints, 3))
+    scale = 1.0 + params.body_scale_cv * ar1_noise(rng, (n_people, n_frames), rho)
+    length_gain = np.ones((n_people, n_frames, n_joints))
+    length_gain[..., _THUMBS] += params.thumb_length_cv * ar1_noise(
+        rng, (n_people, n_frames, _THUMBS.size), rho
+    )
+    fitted = fit_body_model(positions + error + bias, positions, scale, length_gain)
+    if params.noise_residual > 0.0:
+        fitted += params.noise_residual * ar1_noise(rng, positions.shape, rho)
+    return fitted
 
 
 def _sdk_mistakes(

@@ -14,7 +14,8 @@ Examples:
   hiros simulate --out sim --setup facing --people 1 --duration 20 --no-noise
   hiros simulate --out sim --bvh my_take.bvh --cameras 4 --setup ring --rate 15
   hiros simulate --sample --out sample          # the demo's recording
-  hiros simulate --fit-noise                    # fit the noise model to the real take
+  hiros simulate --fit-noise                    # fit the noise model to the real take and
+                                                # compare the simulator's errors with it
 
 """
 
@@ -129,7 +130,7 @@ def _fit_noise() -> int:
     from rich.console import Console
     from rich.table import Table
 
-    from hiros_sim.fit import fit_noise
+    from hiros_sim.fit import fit_noise, simulated_errors
 
     fit = fit_noise()
     console = Console()
@@ -138,6 +139,14 @@ def _fit_noise() -> int:
     table.add_column("value", justify="right")
     for name, value in fit.figures():
         table.add_row(name, value)
+    console.print(table)
+    # the same figures on the simulator, in the take's situation (hiros_sim.fit.simulated_errors)
+    simulated = simulated_errors()
+    table = Table(title="Coherence of the errors: the take vs the simulator (one camera, 3.3 m)")
+    for column in ("figure", "real take", "simulator"):
+        table.add_column(column, justify="left" if column == "figure" else "right")
+    for (name, real), (_, sim) in zip(fit.skeleton.figures(), simulated.figures(), strict=True):
+        table.add_row(name, real, sim)
     console.print(table)
     return 0
 

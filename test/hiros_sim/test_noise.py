@@ -3,7 +3,7 @@ import pytest
 
 from hiros_core.layouts import AZURE_KINECT
 from hiros_sim import default_bvh_files, read_bvh
-from hiros_sim.noise import ar1_noise, flip_front_back, in_view, occluded
+from hiros_sim.noise import ar1_noise, fit_body_model, flip_front_back, in_view, occluded
 from hiros_sim.people import body_forward, prepare_clip
 
 IDX = AZURE_KINECT.index
@@ -70,3 +70,55 @@ def test_ar1_noise_statistics():
     lag1 = np.mean(noise[:, 1:] * noise[:, :-1])
     assert lag1 == pytest.approx(0.8, abs=0.05)
     assert noise[:, 0].std() == pytest.approx(1.0, abs=0.1)  # stationary from the first frame
+
+
+def _random_poses(standing, rng, frames=400):
+    """``(frames, 32, 3)`` copies of the standing pose, each turned and moved at random."""
+    yaw = rng.uniform(0.0, 2.0 * np.pi, frames)
+    c, s = np.cos(yaw), np.sin(yaw)
+    zero, one = np.zeros(frames), np.ones(frames)
+    turn = np.stack([c, -s, zero, s, c, zero, zero, zero, one], axis=-1).reshape(frames, 3, 3)
+    return np.einsum("nab,jb->nja", turn, standing) + rng.normal(0.0, 1.0, (frames, 1, 3))
+
+
+def test_fit_body_model_without_noise_is_the_truth(standing):
+    truth = _random_poses(standing, np.random.default_rng(0), 20)
+    fitted = fit_body_model(truth, truth, np.ones(20), np.ones((20, 32)))
+    np.testing.assert_allclose(fitted, truth, atol=1e-12)
+
+
+def test_fit_body_model_keeps_limb_ratios(standing):
+    """Whatever the evidence, every limb is its true length times the frame's scale."""
+    rng = np.random.default_rng(1)
+    truth = _random_poses(standing, rng, 50)
+    evidence = truth + rng.normal(0.0, 0.05, truth.shape)
+    scale = rng.uniform(0.9, 1.1, 50)
+    gain = np.ones((50, 32))
+    gain[:, IDX("ThumbLeft")] = 1.2
+    fitted = fit_body_model(evidence, truth, scale, gain)
+    parents = np.asarray(AZURE_KINECT.parents)[1:]
+    true_lengths = np.linalg.norm(truth[:, 1:] - truth[:, parents], axis=-1)
+    lengths = np.linalg.norm(fitted[:, 1:] - fitted[:, parents], axis=-1)
+    np.testing.assert_allclose(lengths, scale[:, None] * gain[:, 1:] * true_lengths, rtol=1e-9)
+    # the scale is about the centroid: the body's centre stays where the evidence put it
+    unscaled = fit_body_model(evidence, truth, np.ones(50), gain)
+    np.testing.assert_allclose(fitted.mean(axis=1), unscaled.mean(axis=1), atol=1e-12)
+
+
+def test_fit_body_model_errors_are_coherent_and_do_not_grow(standing):
+    """Independent evidence noise becomes errors correlated with the parent's, about as large
+    at the hand tip (8 links from the root) as at the pelvis."""
+    rng = np.random.default_rng(2)
+    truth = _random_poses(standing, rng)
+    sigma = 0.02
+    fitted = fit_body_model(
+        truth + rng.normal(0.0, sigma, truth.shape), truth, np.ones(len(truth)), np.ones((400, 32))
+    )
+    error = fitted - truth
+    rms = np.sqrt(np.mean(error**2, axis=(0, 2)))  # (32,) per axis
+    for joint in ("Pelvis", "WristLeft", "HandTipLeft", "AnkleRight", "Nose"):
+        assert 0.8 * sigma < rms[IDX(joint)] < 1.25 * sigma, joint
+    parents = np.asarray(AZURE_KINECT.parents)
+    child, parent = error[:, 1:].reshape(-1, 3), error[:, parents[1:]].reshape(-1, 3)
+    correlation = np.sum(child * parent) / np.sqrt(np.sum(child**2) * np.sum(parent**2))
+    assert correlation > 0.2  # independent joint noise would give 0

@@ -39,6 +39,33 @@ def test_truth_in_camera_is_the_clean_stream(clean):
     assert checked > 1000
 
 
+def test_noise_model_with_zero_magnitudes_is_the_truth(clean):
+    """Noise on but every magnitude zero: the SDK's fitted body model is exactly the truth."""
+    zero = replace(
+        SHORT,
+        noise_base=0.0,
+        noise_per_metre=0.0,
+        joint_bias=0.0,
+        body_scale_cv=0.0,
+        thumb_length_cv=0.0,
+        jitter=0.0,
+        drop_rate=0.0,
+        miss_rate=0.0,
+        flip_rate=0.0,
+        flip_probability=0.0,
+        swap_rate=0.0,
+        ghost_rate=0.0,
+        id_change_rate=0.0,
+    )
+    quiet = simulate(zero)
+    for name, groups in clean.camera_groups.items():
+        assert len(groups) == len(quiet.camera_groups[name])
+        for expected, group in zip(groups, quiet.camera_groups[name], strict=True):
+            assert group.stamp_ns == expected.stamp_ns
+            for want, got in zip(expected.skeletons, group.skeletons, strict=True):
+                np.testing.assert_allclose(got.positions, want.positions, atol=1e-9)
+
+
 def test_clean_stream_covers_everyone_in_view(clean):
     # with no noise nobody visible is missed and there are no ghosts
     for labels in clean.labels.values():
@@ -133,7 +160,14 @@ def test_confidence_levels_match_the_bridge_convention():
 
 @pytest.mark.parametrize(
     "bad",
-    [{"n_people": 7}, {"n_people": 0}, {"n_cameras": 0}, {"duration": 1.0}, {"setup": "nowhere"}],
+    [
+        {"n_people": 7},
+        {"n_people": 0},
+        {"n_cameras": 0},
+        {"duration": 1.0},
+        {"setup": "nowhere"},
+        {"noise_body_share": 1.5},
+    ],
 )
 def test_bad_params(bad):
     with pytest.raises(ConfigError):
