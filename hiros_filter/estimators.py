@@ -7,7 +7,7 @@ fixed number of numpy calls, whatever the number of people:
   every coordinate of every joint of every track, ``(S, J*3)`` channels.
 - :class:`KalmanBank`: one constant-acceleration Kalman filter per joint, state
   ``[position, velocity, acceleration]`` per axis under a continuous white-jerk model (process
-  noise from filterpy's ``Q_continuous_white_noise``); predict and update are ``einsum`` over
+  noise as filterpy's ``Q_continuous_white_noise``); predict and update are ``einsum`` over
   all slots and joints.
 - :func:`slerp` and :func:`rotation_vectors`: quaternion smoothing and angular velocity on SO(3).
 
@@ -19,7 +19,6 @@ from __future__ import annotations
 from functools import lru_cache
 
 import numpy as np
-from filterpy.common import Q_continuous_white_noise
 from scipy.signal import butter, sosfilt, sosfilt_zi
 
 __all__ = ["ButterworthBank", "KalmanBank", "rotation_vectors", "slerp"]
@@ -69,10 +68,12 @@ class KalmanBank:
 
     The three axes of a joint see the same measurement noise and model, so their covariances
     are equal and one ``(3, 3)`` matrix per joint serves all three (filterpy-style names).
+    Joints are the last axis: every step is a few numpy calls on ``(n, ..., J)`` blocks with
+    long contiguous inner loops (a trailing axis of 3 makes numpy loop 3 values at a time).
 
     Attributes:
-        x: ``(S, J, 3, 3)`` slot, joint, [position, velocity, acceleration], axis.
-        P: ``(S, J, 3, 3)`` covariance over [position, velocity, acceleration].
+        x: ``(S, 3, 3, J)`` slot, [position, velocity, acceleration], axis, joint.
+        P: ``(S, 3, 3, J)`` covariance over [position, velocity, acceleration], per joint.
         q: spectral density of the white jerk, m^2/s^5.
         r: variance of a position measurement, m^2.
         scale: ``(S, J)`` adaptive factor on ``q``: the smoothed normalised innovation squared
@@ -97,8 +98,9 @@ class KalmanBank:
         self.scale = np.ones(shape)
         self.r = measurement_noise**2
         self._initial = np.diag([self.r, initial_velocity_sd**2, initial_acceleration_sd**2])
-        self.x = np.zeros((*shape, 3, 3))
-        self.P = np.zeros((*shape, 3, 3))
+        slots, joints = shape
+        self.x = np.zeros((slots, 3, 3, joints))
+        self.P = np.zeros((slots, 3, 3, joints))
 
     def grow(self, slots: int) -> None:
         """Make room for ``slots`` rows."""
@@ -110,41 +112,114 @@ class KalmanBank:
 
     def reset(self, slots: np.ndarray, joints: np.ndarray, positions: np.ndarray) -> None:
         """Start (slot, joint) pairs at rest at ``(n, 3)`` positions, wide velocity prior."""
-        self.x[slots, joints] = 0.0
-        self.x[slots, joints, 0] = positions
-        self.P[slots, joints] = self._initial
+        self.x[slots, :, :, joints] = 0.0
+        self.x[slots, 0, :, joints] = positions
+        self.P[slots, :, :, joints] = self._initial
         self.scale[slots, joints] = 1.0
 
+    def state(self, slots: np.ndarray) -> np.ndarray:
+        """``(n, J, 3, 3)`` [position, velocity, acceleration] × axis of each joint of ``slots``."""
+        return self.x[_block(slots)].transpose(0, 3, 1, 2)
+
     def predict(self, slots: np.ndarray, dt: np.ndarray) -> None:
-        """Advance each slot by its own ``dt`` seconds (the model is continuous-time)."""
-        F = np.zeros((len(dt), 3, 3))
-        F[:, 0, 0] = F[:, 1, 1] = F[:, 2, 2] = 1.0
-        F[:, 0, 1] = F[:, 1, 2] = dt
-        F[:, 0, 2] = 0.5 * dt * dt
-        Q = np.stack([_process_noise(round(float(step), 6), self.q) for step in dt])
-        self.x[slots] = np.einsum("nab,njbk->njak", F, self.x[slots])
-        self.P[slots] = F[:, None] @ self.P[slots] @ F[:, None].transpose(0, 1, 3, 2)
-        self.P[slots] += Q[:, None] * self.scale[slots][..., None, None]
+        """Advance each slot by its own ``dt`` seconds (the model is continuous-time).
+
+        ``x ← F x`` and ``P ← F P Fᵀ + Q`` with ``F = [[1, dt, dt²/2], [0, 1, dt], [0, 0, 1]]``,
+        written out row by row and column by column on whole blocks: numpy's batched 3×3
+        products cost a call per matrix, these a few calls per frame.
+        """
+        index = _block(slots)
+        step = dt[:, None, None]
+        half_square = (0.5 * dt * dt)[:, None, None]
+        Q = np.stack([_process_noise(round(float(s), 6), self.q) for s in dt])
+        x = self.x[index]  # a view when the slots are one block
+        x[:, 0] += step * x[:, 1] + half_square * x[:, 2]
+        x[:, 1] += step * x[:, 2]
+        P = self.P[index]
+        P[:, 0] += step * P[:, 1] + half_square * P[:, 2]  # F P, row by row
+        P[:, 1] += step * P[:, 2]
+        P[:, :, 0] += step * P[:, :, 1] + half_square * P[:, :, 2]  # (F P) Fᵀ, column by column
+        P[:, :, 1] += step * P[:, :, 2]
+        P += Q[..., None] * self.scale[index][:, None, None, :]
+        if not isinstance(index, slice):
+            self.x[index] = x
+            self.P[index] = P
 
     def update(self, slots: np.ndarray, joints: np.ndarray, positions: np.ndarray) -> None:
         """Correct (slot, joint) pairs with measured ``(n, 3)`` positions (H = [1, 0, 0])."""
-        P = self.P[slots, joints]
+        P = self.P[slots, :, :, joints]  # (n, 3, 3)
         gain = P[:, :, 0] / (P[:, 0, 0] + self.r)[:, None]  # (n, 3)
-        innovation = positions - self.x[slots, joints, 0]  # (n, 3 axes)
+        innovation = positions - self.x[slots, 0, :, joints]  # (n, 3 axes)
         if self.max_noise_scale > 1.0:
             surprise = np.sum(innovation**2, axis=-1) / (3.0 * (P[:, 0, 0] + self.r))
             smoothed = self.scale[slots, joints] + self.adaptation_rate * (
                 surprise - self.scale[slots, joints]
             )
             self.scale[slots, joints] = np.clip(smoothed, 1.0, self.max_noise_scale)
-        self.x[slots, joints] += gain[:, :, None] * innovation[:, None, :]
-        self.P[slots, joints] = P - gain[:, :, None] * P[:, None, 0, :]
+        self.x[slots, :, :, joints] += gain[:, :, None] * innovation[:, None, :]
+        self.P[slots, :, :, joints] = P - gain[:, :, None] * P[:, None, 0, :]
+
+    def correct(self, slots: np.ndarray, mask: np.ndarray, positions: np.ndarray) -> None:
+        """:meth:`update` of the (slot, joint) pairs where ``mask`` ``(n, J)`` is set.
+
+        ``positions`` is ``(n, J, 3)`` (ignored where the mask is clear). Every joint of the
+        slots is computed and the masked ones kept: the same numbers as :meth:`update`, with
+        whole-block numpy calls instead of scattered pairs.
+        """
+        index = _block(slots)
+        P = self.P[index]  # (n, 3, 3, J), a view when the slots are one block
+        x = self.x[index]
+        variance = P[:, 0, 0] + self.r  # (n, J)
+        everywhere = mask.all()
+        with np.errstate(invalid="ignore", over="ignore"):
+            gain = P[:, :, 0] / variance[:, None]  # (n, 3, J)
+            innovation = positions.transpose(0, 2, 1) - x[:, 0]  # (n, 3 axes, J)
+            if self.max_noise_scale > 1.0:
+                surprise = np.sum(innovation**2, axis=1) / (3.0 * variance)
+                scale = self.scale[index]
+                smoothed = np.clip(
+                    scale + self.adaptation_rate * (surprise - scale), 1.0, self.max_noise_scale
+                )
+                self.scale[index] = smoothed if everywhere else np.where(mask, smoothed, scale)
+            x_step = gain[:, :, None] * innovation[:, None]
+            P_step = gain[:, :, None] * P[:, None, 0]
+        if everywhere:
+            x += x_step
+            P -= P_step
+        else:
+            keep = mask[:, None, None]
+            x += np.where(keep, x_step, 0.0)
+            P -= np.where(keep, P_step, 0.0)
+        if not isinstance(index, slice):
+            self.x[index] = x
+            self.P[index] = P
+
+
+def _block(slots: np.ndarray) -> slice | np.ndarray:
+    """``slots`` as a slice when they are consecutive (views instead of copies), else as is."""
+    first = int(slots[0])
+    if slots.tolist() == list(range(first, first + len(slots))):
+        return slice(first, first + len(slots))
+    return slots
 
 
 @lru_cache(maxsize=256)
 def _process_noise(dt: float, spectral_density: float) -> np.ndarray:
-    """Q of the white-jerk model for one ``dt`` (µs-rounded, cached: frames repeat their dt)."""
-    return Q_continuous_white_noise(dim=3, dt=dt, spectral_density=spectral_density)
+    """Q of the white-jerk model for one ``dt`` (µs-rounded, cached: frames repeat their dt).
+
+    filterpy's ``Q_continuous_white_noise(dim=3, dt, spectral_density)``, term for term (a
+    test checks it), without its per-call ``block_diag``: a frame's dt rarely repeats exactly.
+    """
+    return (
+        np.array(
+            [
+                [(dt**5) / 20.0, (dt**4) / 8.0, (dt**3) / 6.0],
+                [(dt**4) / 8.0, (dt**3) / 3.0, (dt**2) / 2.0],
+                [(dt**3) / 6.0, (dt**2) / 2.0, dt],
+            ]
+        )
+        * spectral_density
+    )
 
 
 def slerp(start: np.ndarray, end: np.ndarray, fraction: float | np.ndarray) -> np.ndarray:

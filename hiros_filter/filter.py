@@ -33,7 +33,7 @@ import numpy as np
 
 from hiros_core.errors import ConfigError
 from hiros_core.layouts import Layout
-from hiros_core.model import Skeleton, SkeletonGroup
+from hiros_core.model import Skeleton, SkeletonGroup, link_rows
 from hiros_filter.estimators import ButterworthBank, KalmanBank, rotation_vectors, slerp
 
 __all__ = ["Filter", "FilterParams"]
@@ -101,6 +101,7 @@ class _Tracks:
     """State of every track of one layout, one row (slot) per track id."""
 
     def __init__(self, layout: Layout, params: FilterParams) -> None:
+        self.layout = layout
         self.n_joints = layout.n_joints
         capacity = 4
         self.slots: dict[int, int] = {}
@@ -189,7 +190,7 @@ class Filter:
     def update(self, group: SkeletonGroup) -> SkeletonGroup:
         """Filter every tracked person of ``group``; returns new skeletons, input untouched."""
         out = SkeletonGroup(group.stamp_ns, group.frame_id, [])
-        batches: dict[str, tuple[list[Skeleton], list[Skeleton]]] = {}
+        batches: dict[str, tuple[list[Skeleton], list[tuple[int, Skeleton]]]] = {}
         seen: set[int] = set()
         max_gap_ns = round(self.params.max_gap * 1e9)
         for skeleton in group.skeletons:
@@ -198,9 +199,9 @@ class Filter:
                     out.skeletons.append(skeleton.copy())
                 continue
             tracks = self._tracks_for(skeleton)
-            result = skeleton.copy()
             starts, steps = batches.setdefault(skeleton.layout.name, ([], []))
             if skeleton.id not in tracks.slots:
+                result = skeleton.copy()
                 starts.append(result)
             else:
                 elapsed = skeleton.src_time_ns - tracks.time_ns[tracks.slots[skeleton.id]]
@@ -208,17 +209,22 @@ class Filter:
                     self.drops["stamp not after the track's previous one"] += 1
                     continue
                 if elapsed > max_gap_ns:
+                    result = skeleton.copy()
                     starts.append(result)
                 else:
                     self._intervals.append(elapsed * 1e-9)
-                    steps.append(result)
+                    # Its output is built by ``_step`` from the batch; hold its place.
+                    steps.append((len(out.skeletons), skeleton))
+                    result = skeleton
             out.skeletons.append(result)
         for name, (starts, steps) in batches.items():
             tracks = self._layouts[name]
             if starts:
                 self._start(tracks, starts)
             if steps:
-                self._step(tracks, steps)
+                results = self._step(tracks, [skeleton for _, skeleton in steps])
+                for (index, _), result in zip(steps, results, strict=True):
+                    out.skeletons[index] = result
         self._forget_old_tracks(group.stamp_ns)
         return out
 
@@ -264,44 +270,60 @@ class Filter:
         slot_index, joints = np.nonzero(present)
         tracks.kalman.reset(rows[slot_index], joints, positions[slot_index, joints])
         tracks.quaternions[rows] = np.nan
-        self._smooth_orientations(tracks, rows, skeletons, dt=None)
-        for skeleton in skeletons:
-            skeleton.velocities[skeleton.marker_present] = 0.0
-            skeleton.accelerations[skeleton.marker_present] = 0.0
+        markers = np.stack([s.markers for s in skeletons])
+        self._smooth_orientations(tracks, rows, markers, present, dt=None)
+        markers[..., 8:11][present] = 0.0
+        markers[..., 14:17][present] = 0.0
+        for n, skeleton in enumerate(skeletons):  # the stage's own copies: rows replaced
+            skeleton.markers = markers[n]
 
-    def _step(self, tracks: _Tracks, skeletons: list[Skeleton]) -> None:
+    def _step(self, tracks: _Tracks, skeletons: list[Skeleton]) -> list[Skeleton]:
+        """Continue running tracks: the filtered copies of ``skeletons`` (input untouched).
+
+        Every track of the frame in one batch: the rows of all people are stacked once,
+        filtered, and the output skeletons are views of the stacked result (links rebuilt
+        for all of them at once).
+        """
         rows = np.array([tracks.slots[s.id] for s in skeletons])
         stamps = np.array([s.src_time_ns for s in skeletons], dtype=np.int64)
         dt = (stamps - tracks.time_ns[rows]) * 1e-9
+        markers = np.stack([s.markers for s in skeletons])  # (n, J, 20): the output rows
         present = np.stack([s.marker_present for s in skeletons])
-        measured = np.stack([s.positions for s in skeletons])
+        measured = markers[..., 1:4]
         max_gap_ns = round(self.params.max_gap * 1e9)
-        restart = present & (stamps[:, None] - tracks.joint_time_ns[rows] > max_gap_ns)
-        carry = present & ~restart
+        joint_time_ns = tracks.joint_time_ns[rows]
+        restart = present & (stamps[:, None] - joint_time_ns > max_gap_ns)
         kalman = tracks.kalman
         kalman.predict(rows, dt)
-        index, joints = np.nonzero(carry)
-        kalman.update(rows[index], joints, measured[index, joints])
-        index, joints = np.nonzero(restart)
-        kalman.reset(rows[index], joints, measured[index, joints])
-        tracks.joint_time_ns[rows] = np.where(present, stamps[:, None], tracks.joint_time_ns[rows])
+        if restart.any():
+            kalman.correct(rows, present & ~restart, measured)
+            index, joints = np.nonzero(restart)
+            kalman.reset(rows[index], joints, measured[index, joints])
+        else:
+            kalman.correct(rows, present, measured)
+        tracks.joint_time_ns[rows] = np.where(present, stamps[:, None], joint_time_ns)
+        state = kalman.state(rows)  # (n, J, [position, velocity, acceleration], axis)
         if self.params.filter == "kalman":
-            smoothed = kalman.x[rows, :, 0]
+            smoothed = state[:, :, 0]
         else:
             # Joints lost for too long leave the low-pass input until they return.
             lost = stamps[:, None] - tracks.joint_time_ns[rows] > max_gap_ns
-            low_pass_input = np.where(present[..., None], measured, kalman.x[rows, :, 0])
+            low_pass_input = np.where(present[..., None], measured, state[:, :, 0])
             low_pass_input[lost] = np.nan
             smoothed = self._low_pass(tracks, rows, low_pass_input, restart, dt)
-        velocities, accelerations = kalman.x[rows, :, 1], kalman.x[rows, :, 2]
         tracks.time_ns[rows] = stamps
-        self._smooth_orientations(tracks, rows, skeletons, dt)
-        for n, skeleton in enumerate(skeletons):
-            mask = skeleton.marker_present
-            skeleton.positions[mask] = smoothed[n, mask]
-            skeleton.velocities[mask] = velocities[n, mask]
-            skeleton.accelerations[mask] = accelerations[n, mask]
-            skeleton.update_links()
+        self._smooth_orientations(tracks, rows, markers, present, dt)
+        mask = present[..., None]
+        np.copyto(markers[..., 1:4], smoothed, where=mask)
+        np.copyto(markers[..., 8:11], state[:, :, 1], where=mask)
+        np.copyto(markers[..., 14:17], state[:, :, 2], where=mask)
+        links, link_present = link_rows(markers, present, tracks.layout)
+        return [
+            Skeleton(s.id, s.src_time_ns, s.src_frame, s.layout, markers[n], links[n],
+                     present[n], link_present[n], s.confidence, s.bounding_box.copy(),
+                     s.max_markers, s.max_links)
+            for n, s in enumerate(skeletons)
+        ]  # fmt: skip
 
     def _low_pass(
         self,
@@ -358,45 +380,55 @@ class Filter:
         self,
         tracks: _Tracks,
         rows: np.ndarray,
-        skeletons: list[Skeleton],
+        markers: np.ndarray,
+        present: np.ndarray,
         dt: np.ndarray | None,
     ) -> None:
-        quaternions = np.stack([s.orientations for s in skeletons])
-        present = np.stack([s.marker_present for s in skeletons])
-        norms = np.linalg.norm(quaternions, axis=-1)
+        """Slerp-smooth the orientations of ``markers`` ``(n, J, 20)`` in place (and the state).
+
+        Orientations, angular velocities and accelerations of the valid joints are written
+        into ``markers``; every joint is computed at once and the results are kept by mask.
+        """
+        quaternions = markers[..., 4:8]
+        norms = np.sqrt(np.add.reduce(quaternions * quaternions, axis=-1))  # as np.linalg.norm
         valid = present & np.isfinite(norms) & (norms > 0.5)
         unit = quaternions / np.where(valid, norms, 1.0)[..., None]
         previous = tracks.quaternions[rows]
-        smoothed = previous.copy()
         angular_velocities = tracks.angular_velocities[rows]
         angular_accelerations = tracks.angular_accelerations[rows]
-        fresh = valid.copy()
+        fresh = valid
+        smoothed = previous
         if dt is not None:
             carry = valid & np.isfinite(previous).all(axis=-1)
-            fresh &= ~carry
             if carry.any():
+                fresh = valid & ~carry
                 cutoff = self.params.orientation_cutoff_frequency
-                track_of = np.nonzero(carry)[0]
-                weight = 1.0 - np.exp(-2.0 * np.pi * cutoff * dt[track_of])
-                smoothed[carry] = slerp(previous[carry], unit[carry], weight)
-                step = dt[track_of, None]
-                velocity = rotation_vectors(previous[carry], smoothed[carry]) / step
-                last = angular_velocities[carry]
-                angular_accelerations[carry] = np.where(
-                    np.isfinite(last), (velocity - last) / step, 0.0
-                )
-                angular_velocities[carry] = velocity
-        smoothed[fresh] = unit[fresh]
-        angular_velocities[fresh] = np.nan
-        angular_accelerations[fresh] = np.nan
+                weight = 1.0 - np.exp(-2.0 * np.pi * cutoff * dt)
+                with np.errstate(invalid="ignore", divide="ignore"):
+                    turned = slerp(previous, unit, weight[:, None])
+                    step = dt[:, None, None]
+                    velocity = rotation_vectors(previous, turned) / step
+                    acceleration = np.where(
+                        np.isfinite(angular_velocities),
+                        (velocity - angular_velocities) / step,
+                        0.0,
+                    )
+                keep = carry[..., None]
+                smoothed = np.where(keep, turned, previous)
+                angular_accelerations = np.where(keep, acceleration, angular_accelerations)
+                angular_velocities = np.where(keep, velocity, angular_velocities)
+        if fresh.any():
+            keep = fresh[..., None]
+            smoothed = np.where(keep, unit, smoothed)
+            angular_velocities = np.where(keep, np.nan, angular_velocities)
+            angular_accelerations = np.where(keep, np.nan, angular_accelerations)
         tracks.quaternions[rows] = smoothed
         tracks.angular_velocities[rows] = angular_velocities
         tracks.angular_accelerations[rows] = angular_accelerations
-        for n, skeleton in enumerate(skeletons):
-            mask = valid[n]
-            skeleton.orientations[mask] = smoothed[n, mask]
-            skeleton.angular_velocities[mask] = angular_velocities[n, mask]
-            skeleton.angular_accelerations[mask] = angular_accelerations[n, mask]
+        keep = valid[..., None]
+        np.copyto(markers[..., 4:8], smoothed, where=keep)
+        np.copyto(markers[..., 11:14], angular_velocities, where=keep)
+        np.copyto(markers[..., 17:20], angular_accelerations, where=keep)
 
     def _forget_old_tracks(self, stamp_ns: int) -> None:
         timeout_ns = round(self.params.track_timeout * 1e9)

@@ -176,3 +176,32 @@ def test_adaptive_noise_follows_a_movement_start_sooner():
         got = np.stack([s.positions for s in out[33:40]])  # after the first surprise
         errors[scale] = np.abs(got - trajectory[33:40]).max()
     assert errors[10.0] < 0.8 * errors[1.0]
+
+
+def test_process_noise_is_filterpys():
+    from filterpy.common import Q_continuous_white_noise
+
+    from hiros_filter.estimators import _process_noise
+
+    for dt in (0.001, 0.033333, 0.1, 0.5):
+        expected = Q_continuous_white_noise(dim=3, dt=dt, spectral_density=300.0)
+        np.testing.assert_array_equal(_process_noise(dt, 300.0), expected)
+
+
+def test_masked_correction_matches_pairwise_update():
+    from hiros_filter.estimators import KalmanBank
+
+    rng = np.random.default_rng(3)
+    banks = [KalmanBank((5, 6), 300.0, 0.01, max_noise_scale=10.0) for _ in range(2)]
+    slots = np.array([3, 1, 4])  # not one block: the scattered path
+    for bank in banks:
+        bank.reset(np.repeat(slots, 6), np.tile(np.arange(6), 3), rng.normal(size=(18, 3)) * 0)
+        bank.predict(slots, np.array([0.03, 0.04, 0.05]))
+    measured = rng.normal(scale=0.05, size=(3, 6, 3))
+    mask = rng.random((3, 6)) > 0.3
+    banks[0].correct(slots, mask, np.where(mask[..., None], measured, np.nan))
+    index, joints = np.nonzero(mask)
+    banks[1].update(slots[index], joints, measured[index, joints])
+    np.testing.assert_allclose(banks[0].x, banks[1].x, rtol=1e-12, atol=1e-15)
+    np.testing.assert_allclose(banks[0].P, banks[1].P, rtol=1e-12, atol=1e-15)
+    np.testing.assert_array_equal(banks[0].scale, banks[1].scale)
