@@ -172,7 +172,7 @@ class _Track:
     """What the stage remembers about one track id."""
 
     layout: Layout
-    window: np.ndarray  # (N, J) measured link lengths of the last N frames, NaN where missing
+    window: np.ndarray  # (J, N) measured link lengths of the last N frames, NaN where missing
     filled: int = 0  # frames pushed into the window (saturates at N... and beyond)
     calibration: PersonCalibration | None = None
     positions: np.ndarray | None = None  # (J, 3) last output
@@ -328,7 +328,7 @@ class Optimizer:
         track = self._tracks.get(skeleton.id)
         if track is None or track.layout.name != skeleton.layout.name:
             n = self.params.number_of_frames_for_calibration
-            track = _Track(skeleton.layout, np.full((n, skeleton.layout.n_joints), np.nan))
+            track = _Track(skeleton.layout, np.full((skeleton.layout.n_joints, n), np.nan))
             track.calibration = self._calibration_for(skeleton.id, skeleton.layout)
             self._tracks[skeleton.id] = track
         elif track.time_ns is not None and (
@@ -360,29 +360,66 @@ class Optimizer:
         """
         layout = items[0][1].layout
         skeletons = [skeleton for _, skeleton, _ in items]
-        weights = _stacked_weights(skeletons)
-        positions = np.stack([skeleton.positions for skeleton in skeletons])
-        positions = np.where((weights > 0)[..., None], positions, np.nan)
+        present = np.stack([skeleton.marker_present for skeleton in skeletons])
+        measured = np.stack([skeleton.positions for skeleton in skeletons])
+        weights = _stacked_weights(skeletons, present)
+        positions = np.where((weights > 0)[..., None], measured, np.nan)
         lengths = link_lengths(positions, self._tree(layout).parents)
         full: list[tuple[int, _Track]] = []
-        for (track_id, skeleton, track), row_lengths in zip(items, lengths, strict=True):
-            size = track.window.shape[0]
-            track.window[track.filled % size] = row_lengths
+        for (track_id, _, track), row_lengths in zip(items, lengths, strict=True):
+            size = track.window.shape[1]
+            track.window[:, track.filled % size] = row_lengths
             track.filled += 1
             if track.filled >= size:
                 full.append((track_id, track))
-            self._remember(track, skeleton, None)
+        self._remember_all(
+            [track for _, _, track in items],
+            skeletons,
+            np.where(present[..., None], measured, np.nan),
+        )
         if full:
             self._accept(layout, full)
+
+    def _remember_all(
+        self, tracks: list[_Track], skeletons: list[Skeleton], positions: np.ndarray
+    ) -> None:
+        """:meth:`_remember` (without link vectors) of several tracks at once.
+
+        ``positions`` ``(P, J, 3)`` are the skeletons' positions, NaN where absent.
+        """
+        previous = np.full_like(positions, np.nan)
+        dt = np.zeros(len(tracks))
+        for row, (track, skeleton) in enumerate(zip(tracks, skeletons, strict=True)):
+            if track.positions is not None:
+                previous[row] = track.positions
+            if track.time_ns is not None:
+                dt[row] = ns_to_sec(skeleton.src_time_ns - track.time_ns)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            velocities = (positions - previous) / np.where(dt > 0, dt, 1.0)[:, None, None]
+        velocities = np.where(np.isfinite(velocities), velocities, 0.0)
+        kept = np.where(np.isfinite(positions), positions, previous)
+        for row, (track, skeleton) in enumerate(zip(tracks, skeletons, strict=True)):
+            if track.positions is None:
+                track.velocities = None
+                track.positions = positions[row]
+            else:
+                if dt[row] >= _MIN_VELOCITY_DT:
+                    track.velocities = velocities[row]
+                # A joint missing this frame keeps its last position (the prediction survives).
+                track.positions = kept[row]
+            track.vectors = None
+            track.time_ns = skeleton.src_time_ns
 
     def _accept(self, layout: Layout, full: list[tuple[int, _Track]]) -> None:
         """Accept the calibration of each full window that is steady enough."""
         params = self.params
-        windows = np.stack([track.window for _, track in full])  # (R, N, J)
-        seen = np.isfinite(windows).mean(axis=1) >= params.min_link_presence
-        median = _nanmedian_rows(windows)
+        windows = np.stack([track.window for _, track in full])  # (R, J, N)
+        size = windows.shape[2]
+        count = size - np.isnan(windows).sum(axis=2)  # (R, J) frames each link was measured in
+        seen = count / size >= params.min_link_presence
+        median = _nanmedian_last(windows, count)
         with np.errstate(invalid="ignore", divide="ignore"):
-            mad = _nanmedian_rows(np.abs(windows - median[:, None]))
+            mad = _nanmedian_last(np.abs(windows - median[..., None]), count)
             variation = np.where(seen, _MAD_TO_SD * mad / median, np.nan)
         median = np.where(seen, median, np.nan)
         with np.errstate(invalid="ignore"):
@@ -401,7 +438,7 @@ class Optimizer:
         for row in np.flatnonzero(enough):
             track_id, track = full[row]
             track.calibration = PersonCalibration(
-                layout, lengths[row], variation[row], track.window.shape[0]
+                layout, lengths[row], variation[row], track.window.shape[1]
             )
             self.calibrations[track_id] = track.calibration
             self.new_calibrations.append(track_id)
@@ -469,24 +506,25 @@ class Optimizer:
         track.time_ns = skeleton.src_time_ns
 
 
-def _nanmedian_rows(values: np.ndarray) -> np.ndarray:
-    """``np.nanmedian(values, axis=1)`` of ``(R, N, J)``, by one sort (NaN sorts last).
+def _nanmedian_last(values: np.ndarray, count: np.ndarray) -> np.ndarray:
+    """``np.nanmedian(values, axis=-1)`` of ``(R, J, N)`` with ``count`` non-NaN values each.
 
-    The same numbers as numpy's (mean of the two middle values for an even count, NaN where a
-    column has no value) at a fraction of the cost: numpy's small-array path goes through
-    masked arrays, which made the calibration check the stage's most expensive step.
+    One sort (NaN sorts last) and two gathers give the same numbers as numpy's (mean of the two
+    middle values for an even count, NaN where nothing was measured) at a fraction of the
+    cost: numpy's small-array path goes through masked arrays, which made the calibration
+    check the stage's most expensive step.
     """
-    ordered = np.sort(values, axis=1)
-    count = np.count_nonzero(~np.isnan(values), axis=1)  # (R, J)
-    low = np.take_along_axis(ordered, np.maximum(count - 1, 0)[:, None] // 2, axis=1)[:, 0]
-    high = np.take_along_axis(ordered, (count // 2)[:, None], axis=1)[:, 0]
+    size = values.shape[-1]
+    ordered = np.sort(values, axis=-1).reshape(-1)
+    base = np.arange(count.size).reshape(count.shape) * size
+    low = ordered[base + np.maximum(count - 1, 0) // 2]
+    high = ordered[base + count // 2]
     return np.where(count > 0, (low + high) / 2, np.nan)
 
 
-def _stacked_weights(skeletons: list[Skeleton]) -> np.ndarray:
+def _stacked_weights(skeletons: list[Skeleton], present: np.ndarray) -> np.ndarray:
     """``(P, J)`` :func:`_weights` of several skeletons of one layout (floor 0)."""
     confidence = np.stack([skeleton.confidences for skeleton in skeletons])
-    present = np.stack([skeleton.marker_present for skeleton in skeletons])
     confidence = np.where(np.isfinite(confidence), confidence, 1.0)
     return np.where(present, np.clip(confidence, 0.0, None), 0.0)
 
