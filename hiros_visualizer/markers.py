@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import colorsys
 from dataclasses import dataclass
+from functools import lru_cache
 
 import numpy as np
 
@@ -17,6 +18,10 @@ from hiros_core.model import SkeletonGroup
 __all__ = ["VisualizerParams", "id_color", "skeleton_markers"]
 
 SPHERE_LIST, LINE_LIST, TEXT_VIEW_FACING = 7, 5, 9
+_NO_POINTS = np.empty((0, 3))
+_NO_POINTS.flags.writeable = False
+_NO_COLORS = np.empty((0, 4), dtype=np.float32)
+_NO_COLORS.flags.writeable = False
 
 
 @dataclass
@@ -29,46 +34,68 @@ class VisualizerParams:
     lifetime: float = 0.25
 
 
+@lru_cache(maxsize=1024)
+def _id_color(skeleton_id: int) -> tuple[float, float, float, float]:
+    hue = (skeleton_id * 0.618033988749895) % 1.0
+    return (*colorsys.hsv_to_rgb(hue, 0.75, 0.95), 1.0)
+
+
 def id_color(skeleton_id: int) -> np.ndarray:
     """A distinct, stable RGBA colour per id (golden-ratio hue steps)."""
-    hue = (skeleton_id * 0.618033988749895) % 1.0
-    return np.array([*colorsys.hsv_to_rgb(hue, 0.75, 0.95), 1.0], dtype=np.float32)
+    return np.array(_id_color(int(skeleton_id)), dtype=np.float32)
 
 
 def skeleton_markers(
     group: SkeletonGroup, namespace: str = "", params: VisualizerParams | None = None
 ) -> MarkerArrayData:
-    """Three markers per skeleton (ids ``3*i``, ``3*i+1``, ``3*i+2`` by skeleton id)."""
+    """Three markers per skeleton (ids ``3*i``, ``3*i+1``, ``3*i+2`` by skeleton id).
+
+    Per person: a sphere list of the present joints, a line list of the links whose both ends
+    are present, and a label 25 cm above the highest joint. Every person of one layout is
+    drawn with one set of numpy calls; only the per-person point lists are cut apart.
+    """
     params = params or VisualizerParams()
-    n = 3 * len(group.skeletons)
+    skeletons = group.skeletons
+    n = 3 * len(skeletons)
     data = MarkerArrayData.new(n, frame_id=group.frame_id, stamp_ns=group.stamp_ns)
     data.namespaces = [namespace] * n
     data.lifetimes_ns[:] = round(params.lifetime * 1e9)
-    data.points, data.texts = [], []
-    for index, skeleton in enumerate(group.skeletons):
-        joints = skeleton.positions[
-            skeleton.marker_present & np.isfinite(skeleton.positions).all(1)
-        ]
-        layout = skeleton.layout
-        children = layout.link_children
-        parents = layout.link_parents
-        drawn = skeleton.marker_present[children] & skeleton.marker_present[parents]
-        segments = np.stack(
-            [skeleton.positions[parents[drawn]], skeleton.positions[children[drawn]]], 1
-        )
-        segments = segments[np.isfinite(segments).all(axis=(1, 2))].reshape(-1, 3)
-        head = joints[:, 2].argmax() if len(joints) else None
-        label_at = joints[head] + [0.0, 0.0, 0.25] if head is not None else np.zeros(3)
-        base = 3 * index
-        color = id_color(skeleton.id)
-        data.ids[base : base + 3] = [3 * skeleton.id, 3 * skeleton.id + 1, 3 * skeleton.id + 2]
-        data.types[base : base + 3] = [SPHERE_LIST, LINE_LIST, TEXT_VIEW_FACING]
-        data.colors[base : base + 3] = color
-        data.scales[base] = params.joint_size
-        data.scales[base + 1] = params.link_width
-        data.scales[base + 2] = params.label_height
-        data.poses[base + 2, :3] = label_at
-        data.points += [joints, segments, np.empty((0, 3))]
-        data.texts += ["", "", f"id {skeleton.id}"]
-    data.point_colors = [np.empty((0, 4), dtype=np.float32)] * n
+    data.point_colors = [_NO_COLORS] * n
+    if not skeletons:
+        data.points, data.texts = [], []
+        return data
+    ids = np.array([s.id for s in skeletons], dtype=np.int64)
+    data.ids[:] = (3 * ids[:, None] + np.arange(3)).ravel()
+    data.types[:] = np.tile([SPHERE_LIST, LINE_LIST, TEXT_VIEW_FACING], len(skeletons))
+    data.colors[:] = np.repeat([_id_color(int(i)) for i in ids.tolist()], 3, axis=0)
+    data.scales[0::3] = params.joint_size
+    data.scales[1::3] = params.link_width
+    data.scales[2::3] = params.label_height
+    points: list[np.ndarray] = []
+    label_at = np.zeros((len(skeletons), 3))
+    layout = skeletons[0].layout
+    if all(s.layout is layout for s in skeletons):
+        groups = [(layout, list(range(len(skeletons))))]
+    else:
+        groups = [(s.layout, [index]) for index, s in enumerate(skeletons)]
+    drawn: dict[int, tuple[np.ndarray, np.ndarray]] = {}
+    for group_layout, members in groups:
+        positions = np.stack([skeletons[i].positions for i in members])  # (P, J, 3)
+        present = np.stack([skeletons[i].marker_present for i in members])
+        visible = present & np.isfinite(positions).all(axis=2)
+        parents, children = group_layout.link_parents, group_layout.link_children
+        segments = np.stack([positions[:, parents], positions[:, children]], axis=2)  # (P,L,2,3)
+        linked = present[:, children] & present[:, parents] & np.isfinite(segments).all(axis=(2, 3))
+        height = np.where(visible, positions[..., 2], -np.inf)
+        head = height.argmax(axis=1)
+        top = positions[np.arange(len(members)), head] + [0.0, 0.0, 0.25]
+        label_at[members] = np.where(visible.any(axis=1)[:, None], top, 0.0)
+        for row, index in enumerate(members):
+            drawn[index] = (positions[row][visible[row]], segments[row][linked[row]].reshape(-1, 3))
+    for index in range(len(skeletons)):
+        joints, lines = drawn[index]
+        points += [joints, lines, _NO_POINTS]
+    data.poses[2::3, :3] = label_at
+    data.points = points
+    data.texts = [text for i in ids.tolist() for text in ("", "", f"id {i}")]
     return data
