@@ -61,22 +61,22 @@ def main() -> int:
         if time.monotonic() > deadline:
             print("nodes not discovered", file=sys.stderr)
             return 1
-    for index in range(90):  # at the camera rate: a burst would overflow keep-last queues
+    def publish_and_wait(index: int) -> None:
+        """One frame, then wait for its output: a loaded machine must not lose frames."""
+        expected = len(received) + 1
         publisher.publish(frame(index, 3))
-        rclpy.spin_once(node, timeout_sec=1.0 / RATE)
-    deadline = time.monotonic() + 20
-    while len(received) < 90 and time.monotonic() < deadline:
-        rclpy.spin_once(node, timeout_sec=0.1)
+        wait_until = time.monotonic() + 5.0
+        while len(received) < expected and time.monotonic() < wait_until:
+            rclpy.spin_once(node, timeout_sec=0.05)
+
+    for index in range(90):
+        publish_and_wait(index)
     steady = received[min(len(received), 90) - 1].skeletons[0]
     velocity = steady.velocities[steady.marker_present].mean(axis=0)
     moved = call(node, change_id, ChangeId.Request(from_id=3, to_id=0))
     unknown = call(node, change_id, ChangeId.Request(from_id=42, to_id=1))
-    count = len(received)
     for index in range(90, 95):
-        publisher.publish(frame(index, 3))
-        rclpy.spin_once(node, timeout_sec=1.0 / RATE)
-    while len(received) < count + 5 and time.monotonic() < deadline:
-        rclpy.spin_once(node, timeout_sec=0.1)
+        publish_and_wait(index)
     recalibrated = call(node, calibrate, Calibrate.Request(track_ids=[0]))
     last = received[-1].skeletons[0]
     print(
