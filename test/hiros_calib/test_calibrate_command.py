@@ -11,6 +11,8 @@ from hiros_core.calibration import load_calibration
 from hiros_core.codec import encode_group
 from hiros_core.recording import SKELETON_GROUP, RecordingWriter
 
+pytestmark = pytest.mark.slow
+
 
 @pytest.fixture(scope="module")
 def recording(make_scene, tmp_path_factory):

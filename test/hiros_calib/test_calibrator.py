@@ -11,6 +11,7 @@ def three_cameras(make_scene):
     return make_scene(duration=15.0, noise=0.005, n_people=2, drop=0.01, seed=7)
 
 
+@pytest.mark.slow
 def test_three_cameras_recover_the_known_calibration(three_cameras):
     scene = three_cameras
     calibrator = Calibrator(CalibratorParams())
@@ -33,6 +34,7 @@ def test_three_cameras_recover_the_known_calibration(three_cameras):
     assert set(quality["joint_residual_m"]) >= {"Pelvis", "KneeLeft"}
 
 
+@pytest.mark.slow
 def test_reference_camera_can_be_named(three_cameras):
     calibration = Calibrator(CalibratorParams(reference="cam2")).calibrate(
         three_cameras.camera_groups
