@@ -20,7 +20,7 @@ from hiros_core.calibration import Calibration
 from hiros_core.codec import decode_group
 from hiros_core.errors import RecordingError
 from hiros_core.geometry import RigidTransform
-from hiros_core.model import SkeletonGroup
+from hiros_core.model import SkeletonGroup, camera_from_frame
 from hiros_core.recording import RecordingReader
 from hiros_eval.body import joint_angle_rmse, limb_length_cv, mpjpe
 from hiros_eval.calibration import CameraAccuracy, compare_calibration
@@ -162,5 +162,6 @@ def evaluate_run(
         for stage, groups in outputs.items()
         if groups
     }
-    cameras = camera_mpjpe(camera_groups, true, truth) if camera_groups else {}
+    per_frame = camera_mpjpe(camera_groups, true, truth) if camera_groups else {}
+    cameras = {camera_from_frame(frame): value for frame, value in sorted(per_frame.items())}
     return RunEvaluation(stages, cameras, compare_calibration(used, true))
