@@ -59,19 +59,18 @@ def _angle_curves(plt, evaluation: RunEvaluation):  # noqa: ANN001, ANN202
     for ax, angle in zip(
         axes.ravel(), ("knee_left", "hip_left", "elbow_right", "shoulder_right"), strict=True
     ):
-        for stage in ("tracker", "filter"):
+        for stage in ("merger", "filter"):
             figures = evaluation.stages.get(stage)
             if not figures or not figures.person_series:
                 continue
             person = min(figures.person_series)
             times, estimate, truth = figures.person_series[person]
             order = np.argsort(times)
-            ax.plot(times[order], joint_angles(estimate[order])[angle], lw=0.8, label=stage)
+            elapsed = times[order] - times[order][0]
+            ax.plot(elapsed, joint_angles(estimate[order])[angle], lw=0.8, label=stage)
             if stage == "filter":
-                ax.plot(
-                    times[order], joint_angles(truth[order])[angle], "k--", lw=0.8, label="truth"
-                )
-        ax.set_title(angle.replace("_", " "))
+                ax.plot(elapsed, joint_angles(truth[order])[angle], "k--", lw=0.8, label="truth")
+        ax.set_title(f"{angle.replace('_', ' ')} (first person)")
         ax.set_ylabel("degrees")
     axes[0, 0].legend(fontsize=8)
     for ax in axes[1]:

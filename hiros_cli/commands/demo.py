@@ -125,7 +125,7 @@ def _print_summary(  # noqa: PLR0917 - the four results of the demo and where th
     frames = sum(summary.frames_in.values())
     dropped = sum(summary.dropped.values())
     table.add_row("camera frames in / dropped with a reason", f"{frames} / {dropped}")
-    table.add_row("pipeline speed", f"{summary.real_time_factor:.0f}x real time")
+    table.add_row("pipeline speed", f"{summary.real_time_factor:.1f}x real time")
     table.add_row(
         "time: simulate / calibrate / run / evaluate",
         " / ".join(f"{v:.1f} s" for v in timings.values()),
