@@ -51,7 +51,7 @@ class CalibratorParams(SyncParams, ExtrinsicsParams):
     """
 
     reference: str = ""
-    """Reference camera (its frame is the world); empty: the first camera seen."""
+    """Reference camera (its frame is the world); empty: the first camera by name."""
     world_frame: str = "world"
     """Name of the world frame written to the calibration file."""
     max_gap: float = 0.25
@@ -140,7 +140,7 @@ class Calibrator:
         if len(groups) < 2:
             msg = f"calibration needs at least two cameras, got {sorted(groups)}"
             raise CalibrationError(msg)
-        reference = params.reference or next(iter(groups))
+        reference = params.reference or min(groups)
         if reference not in groups:
             msg = f"reference camera {reference!r} is not among the cameras {sorted(groups)}"
             raise CalibrationError(msg)

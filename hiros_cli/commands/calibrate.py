@@ -39,7 +39,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--out", type=Path, required=True, help="calibration file to write")
     parser.add_argument("--plots", type=Path, metavar="DIR", help="write PNG plots here")
     parser.add_argument(
-        "--reference", help="camera whose frame and clock are the reference (default: first)"
+        "--reference",
+        help="camera whose frame and clock are the reference (default: first by name)",
     )
     parser.add_argument(
         "--prior-window",
