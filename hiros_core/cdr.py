@@ -18,7 +18,7 @@ compare them.
 from __future__ import annotations
 
 import struct
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -137,15 +137,43 @@ class Plan:
     widths: dict[str, int]
     constant: np.ndarray
     meta: object = None
+    indices: dict[str, np.ndarray] = field(init=False, repr=False)
+    """slot kind -> ``(k, width)`` byte positions of its slots (computed once)."""
+    spans: dict[str, tuple[int, int]] = field(init=False, repr=False)
+    """slot kind -> its byte range in ``all_indices`` order, for ``gather_all``."""
+    all_indices: np.ndarray = field(init=False, repr=False)
+
+    def __post_init__(self) -> None:
+        indices = {
+            kind: offsets[:, None] + np.arange(self.widths[kind])
+            for kind, offsets in self.slots.items()
+            if offsets.size
+        }
+        spans, start = {}, 0
+        for kind, index in indices.items():
+            spans[kind] = (start, start + index.size)
+            start += index.size
+        flat = [index.ravel() for index in indices.values()]
+        object.__setattr__(self, "indices", indices)
+        object.__setattr__(self, "spans", spans)
+        object.__setattr__(
+            self, "all_indices", np.concatenate(flat) if flat else np.empty(0, dtype=np.intp)
+        )
 
     def encode(self, values: dict[str, np.ndarray]) -> bytes:
         """Fill each slot kind with ``values[kind]`` (any dtype, ``k`` rows of ``width`` bytes)."""
         out = self.template.copy()
-        for kind, offsets in self.slots.items():
-            if offsets.size:
-                raw = np.ascontiguousarray(values[kind]).view(np.uint8).reshape(offsets.size, -1)
-                out[offsets[:, None] + np.arange(self.widths[kind])] = raw
+        for kind, index in self.indices.items():
+            out[index] = np.ascontiguousarray(values[kind]).view(np.uint8).reshape(index.shape)
         return out.tobytes()
+
+    def gather_all(self, data: np.ndarray, start: int = 0) -> dict[str, np.ndarray]:
+        """Every slot kind's bytes ``(k, width)`` in one gather (a block at ``start``)."""
+        raw = data[self.all_indices + start] if start else data[self.all_indices]
+        return {
+            kind: raw[begin:end].reshape(self.indices[kind].shape)
+            for kind, (begin, end) in self.spans.items()
+        }
 
     @property
     def size(self) -> int:
@@ -166,12 +194,11 @@ class Plan:
         self, data: np.ndarray, kind: str, dtype: np.dtype | str, start: int = 0
     ) -> np.ndarray:
         """The values of one slot kind as ``(k, width / itemsize)`` of ``dtype``."""
-        offsets = self.slots.get(kind)
-        if offsets is None or not offsets.size:
+        index = self.indices.get(kind)
+        if index is None:
             dtype = np.dtype(dtype)
             return np.zeros((0, self.widths.get(kind, dtype.itemsize)), dtype=np.uint8).view(dtype)
-        raw = data[start + offsets[:, None] + np.arange(self.widths[kind])]
-        return raw.view(dtype)
+        return (data[index + start] if start else data[index]).view(dtype)
 
 
 class PlanBuilder:

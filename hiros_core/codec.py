@@ -219,9 +219,10 @@ def decode_group(data: bytes | bytearray | memoryview) -> SkeletonGroup:
 
 def _skeleton_from_block(plan: Plan, raw: np.ndarray, start: int) -> Skeleton:
     shape: _SkeletonShape = plan.meta  # type: ignore[assignment]
-    head = plan.gather(raw, "head", _HEAD, start).ravel()
-    maxes = plan.gather(raw, "maxes", _MAXES, start).ravel()
-    box = plan.gather(raw, "box", "<f8", start).ravel()
+    values = plan.gather_all(raw, start)
+    head = values["head"].view(_HEAD).ravel()
+    maxes = values["maxes"].view(_MAXES).ravel()
+    box = values["box"].view("<f8").ravel()
     skeleton = Skeleton.empty(shape.layout, skeleton_id=int(head["id"][0]))
     skeleton.src_time_ns = int(_join_ns(head)[0])
     skeleton.src_frame = shape.src_frame
@@ -229,12 +230,10 @@ def _skeleton_from_block(plan: Plan, raw: np.ndarray, start: int) -> Skeleton:
     skeleton.max_links = int(maxes["max_links"][0])
     skeleton.confidence = float(box[0])
     skeleton.bounding_box = box[1:].copy()
-    skeleton.markers[shape.marker_ids] = plan.gather(raw, "markers", "<f8", start).reshape(
-        -1, STATE_WIDTH
-    )
-    skeleton.links[shape.link_ids] = plan.gather(raw, "links", "<f8", start).reshape(
-        -1, STATE_WIDTH
-    )
+    if "markers" in values:
+        skeleton.markers[shape.marker_ids] = values["markers"].view("<f8")
+    if "links" in values:
+        skeleton.links[shape.link_ids] = values["links"].view("<f8")
     skeleton.marker_present[shape.marker_ids] = True
     skeleton.link_present[shape.link_ids] = True
     return skeleton
