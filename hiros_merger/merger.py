@@ -63,6 +63,9 @@ class MergerParams:
         view_weight_min: weight of a camera behind the person; facing it gives 1, the weight is
             ``max(view_weight_min, ((1 + cos θ) / 2)^view_power)``.
         view_power: exponent of the view weight.
+        flipped_weight: weight factor of a detection whose feet and nose point backwards
+            against the body's front (a front/back flip the tracker relabelled but whose limbs
+            are still reflected).
         occlusion_radius: metres; a joint whose camera ray passes this close to another
             person's torso, in front of the joint, is occluded (0 turns the check off).
         occlusion_weight: weight factor of an occluded joint.
@@ -86,6 +89,7 @@ class MergerParams:
     depth_gain: float = 0.33
     view_weight_min: float = 0.3
     view_power: float = 1.0
+    flipped_weight: float = 0.1
     occlusion_radius: float = 0.2
     occlusion_weight: float = 0.5
     agreement_scale: float = 0.1
@@ -106,6 +110,7 @@ class _BodyAxes:
     left: np.ndarray  # (2,) hip and shoulder on the left
     right: np.ndarray  # (2,)
     torso: np.ndarray  # joints standing for the torso in occlusion tests
+    pointers: np.ndarray  # (k, 2) joint pairs pointing forward: ankle -> foot, head -> nose
 
     @classmethod
     def of(cls, layout: Layout) -> _BodyAxes:
@@ -117,7 +122,32 @@ class _BodyAxes:
         right = np.array([names.get("HipRight", -1), names.get("ShoulderRight", -1)])
         torso_names = ("SpineNaval", "SpineMid", "SpineChest", "SpineShoulder", "Neck")
         torso = np.array([root] + [names[n] for n in torso_names if n in names])
-        return cls(root, neck, left, right, torso)
+        pairs = (("AnkleLeft", "FootLeft"), ("AnkleRight", "FootRight"), ("Head", "Nose"))
+        pointers = np.array(
+            [(names[a], names[b]) for a, b in pairs if a in names and b in names], dtype=np.int64
+        ).reshape(-1, 2)
+        return cls(root, neck, left, right, torso, pointers)
+
+    def front(self, positions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Unit up (root -> neck) and front (cross(left, up)) of poses ``(..., J, 3)``."""
+        up = _unit(positions[..., self.neck, :] - positions[..., self.root, :])
+        left = positions[..., self.left, :].mean(axis=-2) - positions[..., self.right, :].mean(
+            axis=-2
+        )
+        return up, _unit(np.cross(left, up))
+
+    def forward(self, positions: np.ndarray, up: np.ndarray) -> np.ndarray:
+        """Unit anatomical forward (feet and nose, ⟂ up) of poses ``(..., J, 3)``.
+
+        It does not depend on the left/right labels, so it tells a front/back flipped
+        detection (forward against the body's front) from a correct one.
+        """
+        total = np.zeros((*positions.shape[:-2], 3))
+        for start, end in self.pointers:
+            step = positions[..., end, :] - positions[..., start, :]
+            step = _unit(step - (step * up).sum(axis=-1, keepdims=True) * up)
+            total += np.where(np.isfinite(step), step, 0.0)
+        return _unit(total)
 
     @property
     def has_front(self) -> bool:
@@ -155,6 +185,12 @@ def _axes(layout: Layout) -> _BodyAxes:
     if axes is None:
         axes = _AXES[layout.name] = _BodyAxes.of(layout)
     return axes
+
+
+def _unit(vectors: np.ndarray) -> np.ndarray:
+    """Vectors ``(..., 3)`` scaled to unit length; zero or NaN ones become NaN."""
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return vectors / np.linalg.norm(vectors, axis=-1, keepdims=True)
 
 
 def _weighted_median(values: np.ndarray, weights: np.ndarray) -> np.ndarray:
@@ -328,8 +364,17 @@ class Merger:
         positions = batch.positions
         fused = _weighted_median(positions, weight)
         axes = _axes(layout)
-        if axes.has_front and batch.known.any():
-            weight = weight * self._view_weights(fused, batch.cameras, batch.known, axes)[..., None]
+        if axes.has_front:
+            up, front = axes.front(fused)
+            if len(axes.pointers):
+                forward = axes.forward(positions, up[:, None])
+                flipped = np.einsum("mck,mk->mc", forward, front) < 0
+                weight = weight * np.where(flipped, params.flipped_weight, 1.0)[..., None]
+            if batch.known.any():
+                weight = (
+                    weight
+                    * self._view_weights(fused, front, batch.cameras, batch.known, axes)[..., None]
+                )
         if params.occlusion_radius > 0 and len(track_ids) > 1 and batch.known.any():
             weight = weight * self._occlusion(fused, positions, batch.cameras, batch.known, axes)
         for _ in range(params.iterations):
@@ -428,14 +473,15 @@ class Merger:
         return np.where(batch.known[..., None], weight * depth_weight, weight)
 
     def _view_weights(
-        self, fused: np.ndarray, cameras: np.ndarray, known: np.ndarray, axes: _BodyAxes
+        self,
+        fused: np.ndarray,
+        front: np.ndarray,
+        cameras: np.ndarray,
+        known: np.ndarray,
+        axes: _BodyAxes,
     ) -> np.ndarray:
         """``(M, C)`` weight of each camera's view: 1 from the front, down to the back."""
         params = self.params
-        left = fused[:, axes.left].mean(axis=1) - fused[:, axes.right].mean(axis=1)  # (M, 3)
-        up = fused[:, axes.neck] - fused[:, axes.root]
-        front = np.cross(left, up)
-        front /= np.linalg.norm(front, axis=-1, keepdims=True)
         to_camera = cameras - fused[:, None, axes.root]
         to_camera /= np.linalg.norm(to_camera, axis=-1, keepdims=True)
         cosine = np.einsum("mk,mck->mc", front, to_camera)

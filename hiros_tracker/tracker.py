@@ -7,9 +7,13 @@ Data flow of ``Tracker.update`` (one call per camera frame; the node calls exact
 2. it waits in a small buffer for ``max_delay`` seconds so that frames of other cameras arriving
    late can be processed before it (frames are released in reference-time order);
 3. each released frame is associated with the tracks: every track is predicted to the frame's
-   corrected time with a constant-velocity model, the cost of a (track, detection) pair is the
-   mean joint distance, gated, and solved with ``scipy.optimize.linear_sum_assignment`` —
-   confirmed tracks first, tentative tracks with what is left;
+   corrected time with a constant-velocity model (per-joint velocities fitted over the last
+   ``velocity_window`` with one intercept per camera); the cost of a (track, detection) pair
+   is the mean joint distance weighted towards the body's core, minus/plus ``body_id_bonus``
+   where the camera's own body ids agree/disagree; pairs beyond the gate are excluded and the
+   rest solved with ``scipy.optimize.linear_sum_assignment`` in a cascade (DeepSORT-like):
+   confirmed tracks seen within ``recent_window`` first, then the other confirmed tracks,
+   then tentative tracks with the detections left;
 4. unmatched detections start tentative tracks; a tentative track is confirmed after
    ``min_hits`` hits from ``min_cameras`` cameras (or after ``single_camera_confirm`` seconds),
    unless it sits on a confirmed track (a duplicate body); tracks without hits expire.
@@ -85,8 +89,21 @@ class TrackerParams:
         mirror_check: compare each mirror part also with its left/right mirror and keep the
             cheaper labelling (front/back flips, side swaps).
         mirror_margin: metres (mean over a part's joints) the mirror must be cheaper by.
-        mirror_vote: relabel a track when most cameras currently seeing it call its sides
-            mirrored.
+        mirror_vote: without the facing check (or the joints it needs), relabel a part of a
+            track when most cameras currently seeing it call its sides mirrored.
+        facing_check: decide which way a track faces (hence its left and right) from the
+            evidence of every detection: a detection whose feet and nose point against the
+            track's front is flipped if the track is right, and SDKs flip mostly when they see
+            a person's back (``flip_prior_back`` against ``flip_prior``); walking forward
+            adds evidence. Majorities alone fail when two of three cameras are flipped. The
+            other parts (legs, eyes, ears) then take their left from the shoulders'.
+        flip_prior: chance that a detection is front/back flipped when its camera sees the
+            person's front or side.
+        flip_prior_back: the same when the camera sees the person's back (cos < -0.5).
+        facing_memory: seconds over which the facing evidence fades.
+        facing_threshold: log-odds against the track's facing at which it is relabelled.
+        walking_speed: m/s above which a person is taken to face where they walk.
+        walking_evidence: log-odds added per detection for facing the walking direction.
         duplicate_distance: metres; a tentative track closer than this to a confirmed track
             when it would be confirmed is a duplicate body and is deleted.
         joint_weight_decay: a joint's weight in the cost is this to the power of its depth in
@@ -116,6 +133,13 @@ class TrackerParams:
     mirror_check: bool = True
     mirror_margin: float = 0.02
     mirror_vote: bool = True
+    facing_check: bool = True
+    flip_prior: float = 0.1
+    flip_prior_back: float = 0.7
+    facing_memory: float = 3.0
+    facing_threshold: float = 3.0
+    walking_speed: float = 0.4
+    walking_evidence: float = 0.3
     duplicate_distance: float = 0.25
     joint_weight_decay: float = 0.5
     min_joints: int = 4
@@ -174,6 +198,102 @@ def _mirror_parts(layout: Layout) -> _MirrorParts:
     onehot = np.zeros((layout.n_joints, len(keys)))
     onehot[part >= 0, part[part >= 0]] = 1.0
     return _MirrorParts(mirror, part, onehot)
+
+
+@dataclass(frozen=True, eq=False)
+class _BodyFrame:
+    """Joints giving a body's up, its left and its anatomical forward (feet, nose).
+
+    ``front`` (from the left/right labels) and ``forward`` (from where the feet and the nose
+    point, whatever their labels) agree on a correctly labelled, unflipped detection; a
+    front/back flip (reflected body, swapped labels) reverses ``forward`` against the true
+    front, a side swap reverses ``front``.
+    """
+
+    root: int
+    neck: int
+    left: np.ndarray  # shoulder and hip on the left
+    right: np.ndarray
+    feet: np.ndarray  # (2, 2) ankle -> foot, left and right
+    head: np.ndarray  # (2,) head -> nose, or empty
+
+    @property
+    def usable(self) -> bool:
+        """Whether the layout names enough joints."""
+        return self.neck >= 0 and len(self.left) == 2 and (len(self.feet) or len(self.head))
+
+    def trunk(self, positions: np.ndarray) -> np.ndarray:
+        """``(U, 3)`` unit root -> neck of poses (the up of a person standing)."""
+        return _unit_rows(positions[:, self.neck] - positions[:, self.root])
+
+    def front(self, positions: np.ndarray, up: np.ndarray) -> np.ndarray:
+        """``(U, 3)`` unit front, cross(left, up), of poses ``(U, J, 3)`` given the up."""
+        left = positions[:, self.left].sum(axis=1) - positions[:, self.right].sum(axis=1)
+        return _unit_rows(np.cross(left, up))
+
+    def forward(self, positions: np.ndarray, up: np.ndarray) -> np.ndarray:
+        """``(U, 3)`` unit anatomical forward: feet and nose directions, ⟂ up, summed."""
+        total = np.zeros((len(positions), 3))
+        for start, end in (*self.feet, *([self.head] if len(self.head) else [])):
+            step = _unit_rows(_flat(positions[:, end] - positions[:, start], up))
+            total += np.where(np.isfinite(step), step, 0.0)
+        return _unit_rows(total)
+
+
+def _unit_rows(vectors: np.ndarray) -> np.ndarray:
+    """Rows scaled to unit length; zero or NaN rows become NaN."""
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return vectors / np.linalg.norm(vectors, axis=-1, keepdims=True)
+
+
+def _flat(vectors: np.ndarray, up: np.ndarray) -> np.ndarray:
+    """Rows with their component along ``up`` removed."""
+    return vectors - (vectors * up).sum(axis=-1, keepdims=True) * up
+
+
+@cache
+def _body_frame(layout: Layout) -> _BodyFrame:
+    names = {name: i for i, name in enumerate(layout.joint_names)}
+
+    def pair(a: str, b: str) -> list[int]:
+        return [names[a], names[b]] if a in names and b in names else []
+
+    sides = [pair(f"{j}Left", f"{j}Right") for j in ("Shoulder", "Hip")]
+    feet = [p for p in (pair("AnkleLeft", "FootLeft"), pair("AnkleRight", "FootRight")) if p]
+    return _BodyFrame(
+        root=layout.parents.index(-1),
+        neck=names.get("Neck", -1),
+        left=np.array([s[0] for s in sides if s], dtype=np.int64),
+        right=np.array([s[1] for s in sides if s], dtype=np.int64),
+        feet=np.array(feet, dtype=np.int64).reshape(-1, 2),
+        head=np.array(pair("Head", "Nose"), dtype=np.int64),
+    )
+
+
+@cache
+def _side_pairs(
+    layout: Layout, parts: _MirrorParts
+) -> tuple[tuple[int, int] | None, np.ndarray, np.ndarray]:
+    """The shoulders (left, right), and for every other part its top joints (left, right).
+
+    Returns:
+        the shoulder pair or None, ``(P, 2)`` left/right top joints and ``(P,)`` their parts.
+
+    """
+    names = layout.joint_names
+    if "ShoulderLeft" not in names or "ShoulderRight" not in names:
+        return None, np.empty((0, 2), dtype=np.int64), np.empty(0, dtype=np.int64)
+    reference = (names.index("ShoulderLeft"), names.index("ShoulderRight"))
+    pairs, part_ids = [], []
+    for k in range(parts.count):
+        if k == parts.part[reference[0]]:
+            continue
+        for joint in np.flatnonzero(parts.part == k):
+            parent = layout.parents[joint]
+            if "Left" in names[joint] and (parent < 0 or parts.part[parent] != k):
+                pairs.append((int(joint), int(parts.mirror[joint])))
+                part_ids.append(k)
+    return reference, np.array(pairs, dtype=np.int64).reshape(-1, 2), np.array(part_ids)
 
 
 @cache
@@ -296,6 +416,8 @@ class _Track:
         "cameras",
         "confirmed",
         "epoch_ns",
+        "facing",
+        "facing_ns",
         "hits",
         "id",
         "last_hit_ns",
@@ -325,6 +447,8 @@ class _Track:
         self.epoch_ns = time_ns
         self.votes: dict[int, tuple[int, np.ndarray]] = {}
         self.mirrored: set[int] = set()  # cameras whose last vote flips some part
+        self.facing = 0.0  # log-odds that the track's sides (hence its front) are right
+        self.facing_ns = time_ns
 
     def predict(self, time_ns: int, max_prediction: float) -> np.ndarray:
         """``(J, 3)`` pose extrapolated to ``time_ns`` with the body's mean velocity."""
@@ -359,7 +483,7 @@ class _Track:
             self.records = rebuilt
 
     def relabel(self, permutation: np.ndarray) -> None:
-        """Reorder the track's joints (swap the sides of some parts)."""
+        """Reorder the track's joints (swap the sides of some parts); votes are the caller's."""
         self.positions = self.positions[permutation]
         self.orientations = self.orientations[permutation]
         self.velocities = self.velocities[permutation]
@@ -392,6 +516,7 @@ class Tracker:
         self._camera_codes: dict[str, int] = {}
         self._newest_ns: int | None = None
         self._released_ns: int | None = None
+        self._up: np.ndarray | None = None
 
     # ----------------------------------------------------------------------------- calibration
     def set_calibration(self, calibration: Calibration) -> None:
@@ -498,7 +623,17 @@ class Tracker:
         canonical = positions[rows[:, None], parts.permutation(flips)]  # (U, J, 3)
         tracks = [track for _, track, _ in pairs]
         chosen = [detections[det] for det in rows]
-        flips = flips ^ self._hit(tracks, canonical, chosen, parts, stamp, code, flips)
+        position = self.correction.cameras.get(camera)
+        flips = flips ^ self._hit(
+            tracks,
+            canonical,
+            chosen,
+            parts,
+            stamp,
+            code,
+            flips,
+            None if position is None else np.asarray(position.translation, dtype=float),
+        )
         orders = parts.permutation(flips)
         return [
             self._labelled(detection, track, order)
@@ -630,6 +765,7 @@ class Tracker:
         time_ns: int,
         camera: int,
         flips: np.ndarray,
+        camera_position: np.ndarray | None = None,
     ) -> np.ndarray:
         """Fold one frame's detections (already in their tracks' labelling) into the tracks.
 
@@ -641,6 +777,7 @@ class Tracker:
             time_ns: the frame's corrected stamp.
             camera: the frame's camera code.
             flips: ``(U, K)`` parts relabelled per detection.
+            camera_position: ``(3,)`` the camera's position in the world, None if unknown.
 
         Returns:
             ``(U, K)`` the parts whose sides a track itself swapped (mirror vote), which the
@@ -682,21 +819,133 @@ class Tracker:
         weights = _joint_weights(detections[0].layout, params.joint_weight_decay)
         velocities, body, determined = _solve_velocities(sums, weights)
 
-        swaps = np.zeros_like(flips)
         for u, track in enumerate(tracks):
             if determined[u]:
                 track.velocities = velocities[u]
                 track.velocity = body[u]
+        swaps = np.zeros_like(flips)
+        frame = _body_frame(detections[0].layout)
+        facing = params.mirror_check and params.facing_check and bool(frame.usable)
+        if facing:
+            turned = self._facing(
+                tracks,
+                canonical,
+                frame,
+                mirror=parts.mirror,
+                time_ns=time_ns,
+                camera_position=camera_position,
+            )
+            swaps[turned] = True
+            swaps ^= self._align(tracks, parts, detections[0].layout)
+        for u, track in enumerate(tracks):
             if not track.confirmed and track.hits >= params.min_hits:
                 self._confirm(track, detections[u].layout, time_ns)
-            if params.mirror_check and params.mirror_vote and track.confirmed:
-                swaps[u] = self._vote(track, parts, camera, time_ns, flips[u])
+            if params.mirror_check and params.mirror_vote and track.confirmed and not facing:
+                swaps[u] ^= self._vote(track, parts, camera, time_ns, flips[u] ^ swaps[u])
         return swaps
+
+    def _world_up(self, trunks: np.ndarray) -> np.ndarray:
+        """``(3,)`` the world's up, a running mean of people's trunks (root -> neck).
+
+        The world frame may be a camera's (y down) or z-up; people stand most of the time,
+        and one bending person must not tilt the front the facing check compares with.
+        """
+        trunks = trunks[np.isfinite(trunks).all(axis=1)]
+        if len(trunks):
+            mean = trunks.mean(axis=0)
+            self._up = mean if self._up is None else self._up + 0.01 * (mean - self._up)
+            self._up = self._up / np.linalg.norm(self._up)
+        return self._up if self._up is not None else np.full(3, np.nan)
+
+    @staticmethod
+    def _align(tracks: list[_Track], parts: _MirrorParts, layout: Layout) -> np.ndarray:
+        """Put each part's left on the shoulders' left; ``(U, K)`` parts swapped per track.
+
+        With the shoulders settled by the facing check, which hip, eye or ear is the left one
+        is geometry: its pair must point the way ShoulderRight -> ShoulderLeft points. This
+        undoes the SDK's leg swaps without counting on a majority of cameras.
+        """
+        reference, pairs, part_ids = _side_pairs(layout, parts)
+        swaps = np.zeros((len(tracks), parts.count), dtype=bool)
+        if reference is None or not len(pairs):
+            return swaps
+        positions = np.stack([t.positions for t in tracks])
+        shoulders = positions[:, reference[0]] - positions[:, reference[1]]  # (U, 3)
+        sides = positions[:, pairs[:, 0]] - positions[:, pairs[:, 1]]  # (U, P, 3)
+        swaps[:, part_ids] = np.einsum("upk,uk->up", sides, shoulders) < 0
+        for track, swap in zip(tracks, swaps, strict=True):
+            if swap.any():
+                track.relabel(parts.permutation(swap))
+        return swaps
+
+    def _facing(
+        self,
+        tracks: list[_Track],
+        canonical: np.ndarray,
+        frame: _BodyFrame,
+        *,
+        mirror: np.ndarray,
+        time_ns: int,
+        camera_position: np.ndarray | None,
+    ) -> np.ndarray:
+        """Weigh one frame's evidence on each track's facing; relabel tracks found reversed.
+
+        For a detection (in its track's labelling) with anatomical forward ``a`` and a track
+        front ``f``: if the track is right, the detection is flipped iff ``a·f < 0``; if the
+        track is mirrored, the opposite, and its front is ``-f``. Each hypothesis' likelihood
+        uses the flip prior for the view the camera would have (back: cos(f, to camera) < -0.5).
+
+        Returns:
+            ``(U,)`` which tracks were relabelled (all their parts swapped).
+
+        """
+        params = self.params
+        positions = np.stack([t.positions for t in tracks])
+        up = np.broadcast_to(self._world_up(frame.trunk(positions)), positions[:, 0].shape)
+        front = frame.front(positions, up)
+        forward = frame.forward(canonical, up)
+        flipped = (forward * front).sum(axis=1) < 0
+        evidence = np.zeros(len(tracks))
+        if camera_position is not None:
+            to_camera = _unit_rows(_flat(camera_position - positions[:, frame.root], up))
+            cosine = (front * to_camera).sum(axis=1)
+            prior_right = np.where(cosine < -0.5, params.flip_prior_back, params.flip_prior)
+            prior_wrong = np.where(-cosine < -0.5, params.flip_prior_back, params.flip_prior)
+            likely_right = np.where(flipped, prior_right, 1.0 - prior_right)
+            likely_wrong = np.where(flipped, 1.0 - prior_wrong, prior_wrong)
+            evidence += np.log(likely_right / likely_wrong)
+        else:  # no camera pose: a flipped-looking detection is simply evidence against
+            evidence += np.where(flipped, -1.0, 1.0) * np.log(
+                (1.0 - params.flip_prior) / params.flip_prior
+            )
+        velocity = np.stack([t.velocity for t in tracks])
+        walking = _flat(velocity, up)
+        speed = np.linalg.norm(walking, axis=1)
+        along = (walking * front).sum(axis=1) / np.maximum(speed, 1e-9)
+        evidence += np.where(speed > params.walking_speed, np.sign(along), 0.0) * (
+            params.walking_evidence
+        )
+        evidence = np.where(np.isfinite(evidence), evidence, 0.0)
+        turned = np.zeros(len(tracks), dtype=bool)
+        for u, track in enumerate(tracks):
+            fade = np.exp(-max(time_ns - track.facing_ns, 0) * _NS / params.facing_memory)
+            track.facing = track.facing * fade + evidence[u]
+            track.facing_ns = time_ns
+            if track.facing < -params.facing_threshold:
+                track.relabel(mirror)
+                track.votes = {cam: (t, ~vote) for cam, (t, vote) in track.votes.items()}
+                track.mirrored = {cam for cam, (_, vote) in track.votes.items() if vote.any()}
+                track.facing = -track.facing
+                turned[u] = True
+        return turned
 
     def _vote(
         self, track: _Track, parts: _MirrorParts, camera: int, time_ns: int, flips: np.ndarray
     ) -> np.ndarray:
-        """Swap a track's sides of the parts that most cameras seeing it now call mirrored."""
+        """Swap a track's sides of the parts that most cameras seeing it now call mirrored.
+
+        The fallback for layouts without the joints the facing check needs.
+        """
         track.votes[camera] = (time_ns, flips)
         if not flips.any():
             track.mirrored.discard(camera)
