@@ -20,7 +20,7 @@ from hiros_core.calibration import Calibration
 from hiros_core.codec import decode_group
 from hiros_core.errors import RecordingError
 from hiros_core.geometry import RigidTransform
-from hiros_core.model import SkeletonGroup, camera_from_frame
+from hiros_core.model import Skeleton, SkeletonGroup, camera_from_frame
 from hiros_core.recording import RecordingReader
 from hiros_eval.body import joint_angle_rmse, limb_length_cv, mpjpe
 from hiros_eval.calibration import CameraAccuracy, compare_calibration
@@ -84,10 +84,15 @@ def read_run(path: str | Path) -> tuple[dict[str, list[SkeletonGroup]], Calibrat
 def align_to_truth(
     groups: Sequence[SkeletonGroup], used: Calibration, true: Calibration
 ) -> list[SkeletonGroup]:
-    """Groups moved from the estimated world and clock into the truth's."""
+    """Groups moved from the estimated world and clock into the truth's.
+
+    Only what the figures read is moved: joint positions and stamps (orientations and
+    velocities are left out, NaN), so a whole run aligns in one matrix product per group.
+    """
     reference = used.reference
     used_ref, true_ref = used.camera(reference), true.camera(reference)
     space: RigidTransform = true_ref.extrinsics @ used_ref.extrinsics.inverse()
+    rotation, translation = space.rotation.as_matrix(), space.translation
 
     def clock(stamp_ns: int) -> int:
         camera_time = (
@@ -99,8 +104,12 @@ def align_to_truth(
     for group in groups:
         skeletons = []
         for skeleton in group.skeletons:
-            moved = space.apply_to_skeleton(skeleton)
+            moved = Skeleton.empty(
+                skeleton.layout, skeleton_id=skeleton.id, src_frame=skeleton.src_frame
+            )
             moved.src_time_ns = clock(skeleton.src_time_ns)
+            moved.marker_present[:] = skeleton.marker_present
+            moved.positions[:] = skeleton.positions @ rotation.T + translation
             skeletons.append(moved)
         aligned.append(SkeletonGroup(clock(group.stamp_ns), true.world_frame, skeletons))
     return aligned

@@ -47,6 +47,8 @@ class RunSummary:
     first_ns: int | None = None
     last_ns: int | None = None
     wall_time: float = 0.0
+    outputs: dict[str, list] | None = None
+    """stage -> its output groups, when ``run_recording(keep_outputs=True)``."""
 
     @property
     def duration(self) -> float:
@@ -91,9 +93,15 @@ def run_recording(
     out: str | Path,
     params: PipelineParams | None = None,
     progress: Callable[[int], None] | None = None,
+    *,
+    keep_outputs: bool = False,
 ) -> RunSummary:
-    """Run the pipeline over ``recording``; write ``out`` (MCAP); return the summary."""
-    summary = RunSummary()
+    """Run the pipeline over ``recording``; write ``out`` (MCAP); return the summary.
+
+    ``keep_outputs`` also keeps every stage's groups in ``summary.outputs`` (what the demo
+    evaluates, without reading the MCAP back).
+    """
+    summary = RunSummary(outputs={stage: [] for stage in STAGES} if keep_outputs else None)
     pipeline = Pipeline(params, calibration)
     started = time.perf_counter()
     reader_drops: Counter[str] = Counter()
@@ -121,6 +129,8 @@ def _write(writer: RecordingWriter, outputs: StageOutputs, summary: RunSummary) 
             continue
         writer.write_group(f"/hiros/{stage}", group)
         summary.published[stage] += 1
+        if summary.outputs is not None:
+            summary.outputs[stage].append(group)
         summary.people[stage].update(int(i) for i in group.ids)
         if stage == "tracker":
             summary.first_ns = group.stamp_ns if summary.first_ns is None else summary.first_ns

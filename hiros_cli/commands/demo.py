@@ -46,11 +46,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     """The four steps with timings, then the summary."""
     from hiros_cli.commands.calibrate import calibrate_recording
-    from hiros_cli.commands.evaluate import evaluate_output
     from hiros_cli.commands.run import load_pipeline_params
     from hiros_cli.progress import progress_bar
     from hiros_core.calibration import save_calibration
     from hiros_eval.report import write_report
+    from hiros_eval.run import evaluate_run
     from hiros_pipeline import run_recording
     from hiros_sim import sample_params, simulate, write_recording
 
@@ -78,14 +78,19 @@ def run(args: argparse.Namespace) -> int:
     timings["calibrate"] = time.perf_counter() - start
 
     start = time.perf_counter()
-    with progress_bar("running the pipeline", None) as advance:
+    with progress_bar(
+        "running the pipeline", sum(map(len, result.camera_groups.values()))
+    ) as advance:
         summary = run_recording(
-            recording, calibration, out / "out.mcap", load_pipeline_params(None), advance
-        )
+            recording, calibration, out / "out.mcap", load_pipeline_params(None), advance,
+            keep_outputs=True,
+        )  # fmt: skip
     timings["run"] = time.perf_counter() - start
 
     start = time.perf_counter()
-    evaluation = evaluate_output(out / "out.mcap", sample)
+    evaluation = evaluate_run(
+        summary.outputs, calibration, result.calibration, result.truth, result.camera_groups
+    )
     report = write_report(evaluation, out / "report", "hiros demo: the bundled sample")
     timings["evaluate"] = time.perf_counter() - start
 
