@@ -213,3 +213,20 @@ def test_parameter_file_matches_the_dataclass():
 
     values = load_config_defaults("merger")
     assert {k: values[k] for k in asdict(MergerParams())} == asdict(MergerParams())
+
+
+def test_a_front_back_flipped_view_counts_less():
+    pose = _person()  # faces +x; feet and nose point +x
+    feet = [AZURE_KINECT.index(n) for n in ("FootLeft", "FootRight", "Nose")]
+    ankles = [AZURE_KINECT.index(n) for n in ("AnkleLeft", "AnkleRight", "Head")]
+    pose[feet] = pose[ankles] + np.array([0.12, 0.0, -0.02])
+    flipped = pose.copy()
+    flipped[:, 0] = 2 * pose[0, 0] - pose[:, 0]  # reflected through the frontal plane
+    params = MergerParams(outlier_scale=10.0, outlier_cutoff=10.0)
+    group = _group([_detection(pose, "k01"), _detection(flipped, "k02")])
+    merged = Merger(params).update(group).skeletons[0]
+    gap = np.abs(merged.positions[feet, 0] - pose[feet, 0]).max()
+    assert gap < 0.25 * np.abs(flipped[feet, 0] - pose[feet, 0]).max()
+    even = Merger(MergerParams(outlier_scale=10.0, outlier_cutoff=10.0, flipped_weight=1.0))
+    midway = even.update(group).skeletons[0]
+    np.testing.assert_allclose(midway.positions, (pose + flipped) / 2, atol=1e-6)

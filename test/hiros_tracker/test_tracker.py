@@ -281,3 +281,34 @@ def test_a_person_appearing_beside_another_does_not_take_its_track(scenes):
 
     assert one_person_per_id(TrackerParams())
     assert not one_person_per_id(TrackerParams(body_id_bonus=0.0))
+
+
+def _legs_swap() -> np.ndarray:
+    legs = np.arange(AZURE_KINECT.n_joints)
+    for part in ("Hip", "Knee", "Ankle", "Foot"):
+        left, right = AZURE_KINECT.index(f"{part}Left"), AZURE_KINECT.index(f"{part}Right")
+        legs[left], legs[right] = right, left
+    return legs
+
+
+def test_legs_swapped_by_most_cameras_keep_their_sides(scenes):
+    legs = _legs_swap()
+
+    def swap(camera, t, person, pose):
+        return pose[legs] if camera in {"k02", "k03"} and 1.0 < t < 2.5 else pose
+
+    scene = scenes.render([scenes.straight((0.0, 0.0), (0.3, 0.1))], duration=3.0, modify=swap)
+    hips = [AZURE_KINECT.index("HipLeft"), AZURE_KINECT.index("HipRight")]
+
+    def worst_hip_error(params):
+        _, outputs = _track(scenes, scene, params)
+        errors = [
+            np.linalg.norm(s.positions[hips] - scene.truth(s.src_time)[0][hips], axis=1).max()
+            for g in outputs
+            for s in g.skeletons
+        ]
+        return max(errors)
+
+    assert worst_hip_error(TrackerParams()) < 0.05
+    # A majority vote per part follows the two swapping cameras.
+    assert worst_hip_error(TrackerParams(facing_check=False)) > 0.15
