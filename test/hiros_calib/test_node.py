@@ -10,10 +10,11 @@ from pathlib import Path
 import pytest
 import yaml
 
-pytestmark = [pytest.mark.ros, pytest.mark.slow]
 HERE = Path(__file__).resolve().parent
 
 
+@pytest.mark.ros
+@pytest.mark.slow
 def test_calib_node_publishes_parameters_tf_and_saves(ros_env, tmp_path: Path) -> None:
     pytest.importorskip("hiros_skeleton_msgs.msg")
     pytest.importorskip("tf2_msgs.msg")
@@ -55,3 +56,31 @@ def test_calib_node_publishes_parameters_tf_and_saves(ros_env, tmp_path: Path) -
     written = yaml.safe_load(saved.read_text())
     assert set(written["cameras"]) == {"cam0", "cam1"}
     assert "Traceback" not in log, log
+
+
+def test_result_parameters_are_flat_typed_values() -> None:
+    pytest.importorskip("tf2_msgs.msg")
+    pytest.importorskip("std_srvs.srv")
+    import numpy as np
+
+    from hiros_calib.node import calibration_parameters
+    from hiros_core.calibration import Calibration, CameraCalibration
+
+    cam = CameraCalibration(
+        frame_id="k02_depth_camera_link",
+        time_offset=0.25,
+        translation=np.array([1.0, 2.0, 3.0]),
+        quality={"inlier_ratio": 0.9, "windows": 6, "joint_residual_m": {"Pelvis": 0.02},
+                 "drift_estimated": True, "status": "recalibrating"},
+    )  # fmt: skip
+    values = calibration_parameters(Calibration("k01", "world", {"k02": cam}))
+    assert values["cameras.k02.time_offset"] == 0.25
+    assert values["cameras.k02.translation"] == [1.0, 2.0, 3.0]
+    assert values["cameras.k02.rotation"] == [0.0, 0.0, 0.0, 1.0]
+    assert values["cameras.k02.frame_id"] == "k02_depth_camera_link"
+    # numbers become doubles so a parameter keeps its type from one result to the next
+    assert values["cameras.k02.quality.windows"] == 6.0
+    assert isinstance(values["cameras.k02.quality.windows"], float)
+    assert values["cameras.k02.quality.joint_residual_m.Pelvis"] == 0.02
+    assert values["cameras.k02.quality.drift_estimated"] is True
+    assert values["cameras.k02.quality.status"] == "recalibrating"
