@@ -8,6 +8,7 @@ interval, and the counts go out on ``/diagnostics`` every second.
 
 from __future__ import annotations
 
+import signal
 import time
 from collections import Counter
 from collections.abc import Callable
@@ -121,9 +122,22 @@ class HirosNode(Node):
         self._diagnostics.publish(array)
 
 
+def _interrupt(signum: int, frame: object) -> None:
+    raise KeyboardInterrupt
+
+
 def run_node(node_factory: Callable[[], Node], args: list[str] | None = None) -> None:
-    """``rclpy.init``, spin until Ctrl-C or shutdown, clean up without a traceback."""
-    rclpy.init(args=args)
+    """``rclpy.init``, spin until Ctrl-C or SIGTERM, clean up without a traceback.
+
+    rclpy's own signal handler would shut the context down before we could run the node's
+    ``on_shutdown`` (the calib node saves its file there, and logs it); so SIGINT and SIGTERM
+    become KeyboardInterrupt here, and the context is shut down last.
+    """
+    from rclpy.signals import SignalHandlerOptions
+
+    rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
+    signal.signal(signal.SIGINT, _interrupt)
+    signal.signal(signal.SIGTERM, _interrupt)
     node = None
     try:
         node = node_factory()
