@@ -296,6 +296,24 @@ def _side_pairs(
     return reference, np.array(pairs, dtype=np.int64).reshape(-1, 2), np.array(part_ids)
 
 
+def _misaligned(positions: np.ndarray, layout: Layout, parts: _MirrorParts) -> np.ndarray:
+    """``(U, K)`` parts whose left/right pair points against the shoulders' of poses ``(U, J, 3)``.
+
+    The shoulders' own part is never flagged; nothing is flagged where a joint is missing.
+    """
+    reference, pairs, part_ids = _side_pairs(layout, parts)
+    flagged = np.zeros((len(positions), parts.count), dtype=bool)
+    if reference is None or not len(pairs):
+        return flagged
+    shoulders = positions[:, reference[0]] - positions[:, reference[1]]  # (U, 3)
+    sides = positions[:, pairs[:, 0]] - positions[:, pairs[:, 1]]  # (U, P, 3)
+    along = np.einsum("upk,uk->up", sides, shoulders)
+    scale = np.linalg.norm(sides, axis=2) * np.linalg.norm(shoulders, axis=1)[:, None]
+    # Clearly reversed only (cos < -0.5): eyes 6 cm apart must not toggle on noise.
+    flagged[:, part_ids] = along < -0.5 * scale
+    return flagged
+
+
 @cache
 def _joint_weights(layout: Layout, decay: float) -> np.ndarray:
     """``(J,)`` cost weight of each joint: ``decay ** depth`` in the layout's tree.
@@ -621,6 +639,12 @@ class Tracker:
         flips = np.stack([f for _, _, f in pairs])  # (U, K)
         rows = np.array([det for det, _, _ in pairs])
         canonical = positions[rows[:, None], parts.permutation(flips)]  # (U, J, 3)
+        if params.mirror_check and params.facing_check:
+            # Which hip, eye or ear is left is geometry once the shoulders are labelled.
+            aligned = _misaligned(canonical, detections[0].layout, parts)
+            if aligned.any():
+                flips = flips ^ aligned
+                canonical = positions[rows[:, None], parts.permutation(flips)]
         tracks = [track for _, track, _ in pairs]
         chosen = [detections[det] for det in rows]
         position = self.correction.cameras.get(camera)
@@ -865,14 +889,7 @@ class Tracker:
         is geometry: its pair must point the way ShoulderRight -> ShoulderLeft points. This
         undoes the SDK's leg swaps without counting on a majority of cameras.
         """
-        reference, pairs, part_ids = _side_pairs(layout, parts)
-        swaps = np.zeros((len(tracks), parts.count), dtype=bool)
-        if reference is None or not len(pairs):
-            return swaps
-        positions = np.stack([t.positions for t in tracks])
-        shoulders = positions[:, reference[0]] - positions[:, reference[1]]  # (U, 3)
-        sides = positions[:, pairs[:, 0]] - positions[:, pairs[:, 1]]  # (U, P, 3)
-        swaps[:, part_ids] = np.einsum("upk,uk->up", sides, shoulders) < 0
+        swaps = _misaligned(np.stack([t.positions for t in tracks]), layout, parts)
         for track, swap in zip(tracks, swaps, strict=True):
             if swap.any():
                 track.relabel(parts.permutation(swap))
