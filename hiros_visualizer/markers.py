@@ -13,11 +13,13 @@ from functools import lru_cache
 import numpy as np
 
 from hiros_core.codec import MarkerArrayData
+from hiros_core.layouts import Layout
 from hiros_core.model import SkeletonGroup
 
 __all__ = ["VisualizerParams", "id_color", "skeleton_markers"]
 
 SPHERE_LIST, LINE_LIST, TEXT_VIEW_FACING = 7, 5, 9
+_KINDS = [SPHERE_LIST, LINE_LIST, TEXT_VIEW_FACING]
 _NO_POINTS = np.empty((0, 3))
 _NO_POINTS.flags.writeable = False
 _NO_COLORS = np.empty((0, 4), dtype=np.float32)
@@ -64,38 +66,47 @@ def skeleton_markers(
     if not skeletons:
         data.points, data.texts = [], []
         return data
-    ids = np.array([s.id for s in skeletons], dtype=np.int64)
-    data.ids[:] = (3 * ids[:, None] + np.arange(3)).ravel()
-    data.types[:] = np.tile([SPHERE_LIST, LINE_LIST, TEXT_VIEW_FACING], len(skeletons))
-    data.colors[:] = np.repeat([_id_color(int(i)) for i in ids.tolist()], 3, axis=0)
-    data.scales[0::3] = params.joint_size
-    data.scales[1::3] = params.link_width
-    data.scales[2::3] = params.label_height
-    points: list[np.ndarray] = []
-    label_at = np.zeros((len(skeletons), 3))
+    ids = [s.id for s in skeletons]
+    data.ids[:] = [3 * i + k for i in ids for k in (0, 1, 2)]
+    data.types[:] = _KINDS * len(skeletons)
+    data.colors[:] = [_id_color(int(i)) for i in ids for _ in (0, 1, 2)]
+    sizes = (params.joint_size, params.link_width, params.label_height) * len(skeletons)
+    data.scales[:] = np.array(sizes)[:, None]
     layout = skeletons[0].layout
     if all(s.layout is layout for s in skeletons):
         groups = [(layout, list(range(len(skeletons))))]
     else:
         groups = [(s.layout, [index]) for index, s in enumerate(skeletons)]
-    drawn: dict[int, tuple[np.ndarray, np.ndarray]] = {}
+    drawn: list[tuple[np.ndarray, np.ndarray]] = [(_NO_POINTS, _NO_POINTS)] * len(skeletons)
     for group_layout, members in groups:
         positions = np.stack([skeletons[i].positions for i in members])  # (P, J, 3)
         present = np.stack([skeletons[i].marker_present for i in members])
         visible = present & np.isfinite(positions).all(axis=2)
-        parents, children = group_layout.link_parents, group_layout.link_children
-        segments = np.stack([positions[:, parents], positions[:, children]], axis=2)  # (P,L,2,3)
-        linked = present[:, children] & present[:, parents] & np.isfinite(segments).all(axis=(2, 3))
+        ends = _link_ends(group_layout)  # parent, child of each link, interleaved
+        segments = positions[:, ends]  # (P, 2L, 3): the line list's points in order
+        both = visible[:, ends]
+        linked = both[:, 0::2] & both[:, 1::2]  # (P, L)
         height = np.where(visible, positions[..., 2], -np.inf)
-        head = height.argmax(axis=1)
-        top = positions[np.arange(len(members)), head] + [0.0, 0.0, 0.25]
-        label_at[members] = np.where(visible.any(axis=1)[:, None], top, 0.0)
+        top = positions[np.arange(len(members)), height.argmax(axis=1)]
+        top += (0.0, 0.0, 0.25)
+        top[~visible.any(axis=1)] = 0.0
+        data.poses[[3 * i + 2 for i in members], :3] = top
+        whole_bodies = visible.all(axis=1).tolist()
+        whole_links = linked.all(axis=1).tolist()
         for row, index in enumerate(members):
-            drawn[index] = (positions[row][visible[row]], segments[row][linked[row]].reshape(-1, 3))
-    for index in range(len(skeletons)):
-        joints, lines = drawn[index]
-        points += [joints, lines, _NO_POINTS]
-    data.poses[2::3, :3] = label_at
-    data.points = points
-    data.texts = [text for i in ids.tolist() for text in ("", "", f"id {i}")]
+            joints = positions[row] if whole_bodies[row] else positions[row][visible[row]]
+            lines = (
+                segments[row]
+                if whole_links[row]
+                else segments[row].reshape(-1, 2, 3)[linked[row]].reshape(-1, 3)
+            )
+            drawn[index] = (joints, lines)
+    data.points = [points for joints, lines in drawn for points in (joints, lines, _NO_POINTS)]
+    data.texts = [text for i in ids for text in ("", "", f"id {i}")]
     return data
+
+
+@lru_cache(maxsize=16)
+def _link_ends(layout: Layout) -> np.ndarray:
+    """``(2L,)`` parent and child joint of each link, interleaved (a line list's order)."""
+    return np.stack([layout.link_parents, layout.link_children], axis=1).ravel()
