@@ -880,7 +880,6 @@ class Tracker:
                 camera_position=camera_position,
             )
             swaps[turned] = True
-            swaps ^= self._align(tracks, parts, detections[0].layout)
         for u, track in enumerate(tracks):
             if not track.confirmed and track.hits >= params.min_hits:
                 self._confirm(track, detections[u].layout, time_ns)
@@ -900,20 +899,6 @@ class Tracker:
             self._up = mean if self._up is None else self._up + 0.01 * (mean - self._up)
             self._up = self._up / np.linalg.norm(self._up)
         return self._up if self._up is not None else np.full(3, np.nan)
-
-    @staticmethod
-    def _align(tracks: list[_Track], parts: _MirrorParts, layout: Layout) -> np.ndarray:
-        """Put each part's left on the shoulders' left; ``(U, K)`` parts swapped per track.
-
-        With the shoulders settled by the facing check, which hip, eye or ear is the left one
-        is geometry: its pair must point the way ShoulderRight -> ShoulderLeft points. This
-        undoes the SDK's leg swaps without counting on a majority of cameras.
-        """
-        swaps = _misaligned(np.stack([t.positions for t in tracks]), layout, parts)
-        for track, swap in zip(tracks, swaps, strict=True):
-            if swap.any():
-                track.relabel(parts.permutation(swap))
-        return swaps
 
     def _facing(
         self,
