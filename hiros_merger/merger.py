@@ -18,6 +18,8 @@ weight each camera by confidence, distance and view; the product form is ours)::
     w = conf^confidence_power            SDK confidence (occluded joints come as LOW)
         × (1 + depth_gain · depth)^-2    depth noise grows ~linearly with distance (variance ²)
         × view(cos θ)                     θ: angle between the body's front and the camera
+        × flipped                         ``flipped_weight`` if the detection's feet and nose
+                                          point backwards (a front/back flip)
         × occlusion                       another person's torso on the camera's ray
         × agreement(c)                    1 / (1 + (e_c / agreement_scale)²), e_c the camera's
                                           recent mean distance to the fused skeletons

@@ -21,9 +21,12 @@ Data flow of ``Tracker.update`` (one call per camera frame; the node calls exact
 Side swaps: the body is split into mirror parts (for the Azure Kinect layout: arms, legs, eyes,
 ears — each a left/right pair of limbs hanging off the midline). For each pair and part the
 cost takes the cheaper of the detection's labelling and its mirror, so a front/back flip
-(everything swapped) or the SDK's leg swap neither breaks the match nor reaches the output:
-detections are relabelled to their track's sides. When most cameras disagree with a track's
-sides (the track was born from a flipped view), the track is relabelled instead.
+(everything swapped) neither breaks the match nor reaches the output: detections are relabelled
+to their track's sides, and each detection's hips, eyes and ears are then put on the side of its
+shoulders (undoing the SDK's leg swaps). Which way the track itself faces is weighed from every
+detection (``facing_check``): a detection whose feet and nose point against the track's front is
+a flip if the track is right, SDKs flip mostly when they see a person's back, and people face
+where they walk; when the evidence turns against the track, the track is relabelled.
 
 Output (Hi-ROS's): one skeleton per camera detection of a confirmed track, ``id`` = track id,
 ``src_frame`` = the camera's frame, ``src_time`` = the corrected stamp, world-frame poses, each
