@@ -262,7 +262,16 @@ def _gauss_newton(
     padding = np.zeros((n_people, n_joints, 3))
     padding[..., 2] = constrained
     padding = padding.reshape(n_people, n_params) + 1e-9
-    diagonal = np.arange(n_params)
+    # Those padded parameters are decoupled (zero rows and columns, zero gradient: their step
+    # is 0), so when every person has the same calibrated links the system is solved without
+    # them: a third smaller, a third as costly to factor, the same steps.
+    real = padding < 1.0
+    same = (real == real[0]).all() and not real[0].all()
+    keep = np.flatnonzero(real[0]) if same else None
+    if keep is not None:
+        shared = shared[:, keep[:, None], keep]
+        padding = padding[:, keep]
+    diagonal = np.arange(shared.shape[1])
     identity = np.eye(3)
     cost = _objective(positions, targets, total)
     for _ in range(refinements):
@@ -274,10 +283,17 @@ def _gauss_newton(
         flat = basis.reshape(n_people, n_params, 3)
         pull = np.einsum("cj,pjk->pck", tree.subtree, total[..., None] * (targets - positions))
         gradient = np.einsum("pcak,pck->pca", basis, pull).reshape(n_people, n_params, 1)
+        if keep is not None:
+            flat, gradient = flat[:, keep], gradient[:, keep]
         normal = shared * (flat @ flat.transpose(0, 2, 1))
         normal[:, diagonal, diagonal] *= 1.0 + 1e-6
         normal[:, diagonal, diagonal] += padding
-        step = np.linalg.solve(normal, gradient).reshape(n_people, n_joints, 3)
+        solved = np.linalg.solve(normal, gradient)
+        if keep is not None:
+            step = np.zeros((n_people, n_params, 1))
+            step[:, keep] = solved
+            solved = step
+        step = solved.reshape(n_people, n_joints, 3)
         candidate = vectors + np.einsum("pca,pcak->pck", step, basis)
         norm = np.linalg.norm(candidate, axis=-1, keepdims=True)
         candidate = np.where(constrained[..., None], candidate * scale[..., None] / norm, candidate)
