@@ -89,6 +89,11 @@ class KinematicTree:
         )
 
 
+def _norm(vectors: np.ndarray) -> np.ndarray:
+    """``np.linalg.norm(vectors, axis=-1)``: the same arithmetic without its wrapper."""
+    return np.sqrt(np.add.reduce(vectors * vectors, axis=-1))
+
+
 def link_lengths(positions: np.ndarray, parents: np.ndarray) -> np.ndarray:
     """``(..., J)`` distance of each joint from its parent; NaN for roots and missing ends."""
     parent_positions = positions[..., np.maximum(parents, 0), :]
@@ -119,20 +124,23 @@ def _initial_vectors(
     default = np.array([0.0, 0.0, -1.0])
     vectors = np.zeros_like(targets)
     positions = np.zeros_like(targets)
+    any_missing = not has_aim.all()  # usually every joint has an aim: skip those branches
     for depth, level in enumerate(tree.levels):
         base = 0.0 if depth == 0 else positions[:, tree.parents[level]]
         vector = aim[:, level] - base
-        missing = ~has_aim[:, level]
-        if fallback_vectors is not None:
-            fallback = fallback_vectors[:, level]
-            usable = missing & np.isfinite(fallback).all(axis=-1)
-            vector[usable] = fallback[usable]
-            missing &= ~usable
-        vector[missing] = default if depth > 0 else 0.0
-        norm = np.linalg.norm(vector, axis=-1, keepdims=True)
+        if any_missing:
+            missing = ~has_aim[:, level]
+            if fallback_vectors is not None:
+                fallback = fallback_vectors[:, level]
+                usable = missing & np.isfinite(fallback).all(axis=-1)
+                vector[usable] = fallback[usable]
+                missing &= ~usable
+            vector[missing] = default if depth > 0 else 0.0
+        norm = _norm(vector)[..., None]
         tiny = (norm < _EPS)[..., 0] & constrained[:, level]
-        vector[tiny] = default
-        norm[tiny] = 1.0
+        if tiny.any():
+            vector[tiny] = default
+            norm[tiny] = 1.0
         on_sphere = lengths[:, level, None] * vector / np.where(norm < _EPS, 1.0, norm)
         vector = np.where(constrained[:, level, None], on_sphere, vector)
         vectors[:, level] = vector
@@ -213,7 +221,7 @@ def _coordinate_sweeps(
             w_sub = subtree_weight[:, level, None]
             old = vectors[:, level]
             pull = np.einsum("cj,pjk->pck", rows, residual) + w_sub * old
-            norm = np.linalg.norm(pull, axis=-1, keepdims=True)
+            norm = _norm(pull)[..., None]
             on_sphere = lengths[:, level, None] * pull / np.where(norm > _EPS, norm, 1.0)
             free = pull / np.where(w_sub > _EPS, w_sub, 1.0)
             new = np.where(constrained[:, level, None], on_sphere, free)
@@ -295,7 +303,7 @@ def _gauss_newton(
             solved = step
         step = solved.reshape(n_people, n_joints, 3)
         candidate = vectors + np.einsum("pca,pcak->pck", step, basis)
-        norm = np.linalg.norm(candidate, axis=-1, keepdims=True)
+        norm = _norm(candidate)[..., None]
         candidate = np.where(constrained[..., None], candidate * scale[..., None] / norm, candidate)
         moved = np.einsum("cj,pck->pjk", tree.subtree, candidate)
         new_cost = _objective(moved, targets, total)
