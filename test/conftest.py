@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import itertools
 import os
+import subprocess
+import sys
 from pathlib import Path
 
 import pytest
@@ -28,3 +30,58 @@ def ros_env(monkeypatch: pytest.MonkeyPatch) -> dict[str, str]:
     monkeypatch.setenv("ROS_DOMAIN_ID", domain)
     monkeypatch.setenv("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
     return dict(os.environ)
+
+
+class RosProcesses:
+    """ROS 2 node processes of one test: started with the test's environment, always stopped.
+
+    ``stop()`` terminates them (a node's SIGTERM handler shuts it down cleanly) and returns
+    everything they printed, so a test can assert that no node raised.
+    """
+
+    def __init__(self, env: dict[str, str]) -> None:
+        self.env = env
+        self.processes: list[subprocess.Popen] = []
+
+    def node(self, module: str, *ros_args: str, function: str = "main") -> subprocess.Popen:
+        """Start ``module.function()`` as a node, with ``--ros-args ros_args`` when given."""
+        extra = ["--ros-args", *ros_args] if ros_args else []
+        code = f"from {module} import {function}; {function}()"
+        return self.command([sys.executable, "-c", code, *extra])
+
+    def command(self, command: list[str]) -> subprocess.Popen:
+        """Start any command as one of the test's processes."""
+        process = subprocess.Popen(
+            command, env=self.env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True
+        )
+        self.processes.append(process)
+        return process
+
+    def client(self, script: Path, *args: str, timeout: float = 120) -> subprocess.CompletedProcess:
+        """Run a client script to completion (its output captured)."""
+        return subprocess.run(
+            [sys.executable, str(script), *args],
+            env=self.env,
+            capture_output=True,
+            text=True,
+            timeout=timeout,
+            check=False,
+        )
+
+    def stop(self) -> str:
+        """Terminate every process still running; their combined output."""
+        outputs = []
+        for process in self.processes:
+            if process.poll() is None:
+                process.terminate()
+            outputs.append(process.communicate(timeout=30)[0] or "")
+        self.processes.clear()
+        return "".join(outputs)
+
+
+@pytest.fixture
+def ros_processes(ros_env: dict[str, str]):
+    """A RosProcesses for the test; whatever is still running is stopped afterwards."""
+    processes = RosProcesses(ros_env)
+    yield processes
+    processes.stop()

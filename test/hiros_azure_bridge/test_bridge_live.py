@@ -3,8 +3,6 @@
 from __future__ import annotations
 
 import importlib.util
-import subprocess
-import sys
 from pathlib import Path
 
 import pytest
@@ -23,35 +21,12 @@ def _client_module():
     return module
 
 
-def test_live_bridge_matches_offline(ros_env):
+def test_live_bridge_matches_offline(ros_processes):
     pytest.importorskip("hiros_skeleton_msgs.msg")
     client_module = _client_module()
-    bridge = subprocess.Popen(
-        [
-            sys.executable,
-            "-c",
-            "from hiros_azure_bridge import main; main()",
-            "--ros-args",
-            "-p",
-            "cameras:=[k01, k02]",
-        ],
-        env=ros_env,
-        stdout=subprocess.PIPE,
-        stderr=subprocess.STDOUT,
-        text=True,
-    )
-    try:
-        client = subprocess.run(
-            [sys.executable, str(HERE / "bridge_client.py")],
-            env=ros_env,
-            capture_output=True,
-            text=True,
-            timeout=120,
-            check=False,
-        )
-    finally:
-        bridge.terminate()
-        bridge_output, _ = bridge.communicate(timeout=30)
+    ros_processes.node("hiros_azure_bridge", "-p", "cameras:=[k01, k02]")
+    client = ros_processes.client(HERE / "bridge_client.py")
+    bridge_output = ros_processes.stop()
     assert client.returncode == 0, client.stderr + bridge_output
     assert "Traceback" not in bridge_output
     live: dict[str, list] = {}

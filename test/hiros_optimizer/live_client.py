@@ -56,11 +56,16 @@ def main() -> int:
         or node.count_publishers("/hiros/filter") == 0
         or not calibrate.service_is_ready()
         or not change_id.service_is_ready()
+        or node.count_subscribers("/hiros/optimizer") == 0  # the filter, between the nodes
     ):
         rclpy.spin_once(node, timeout_sec=0.1)
         if time.monotonic() > deadline:
             print("nodes not discovered", file=sys.stderr)
             return 1
+    settle = time.monotonic() + 1.0  # let the optimizer -> filter link match too
+    while time.monotonic() < settle:
+        rclpy.spin_once(node, timeout_sec=0.1)
+
     def publish_and_wait(index: int) -> None:
         """One frame, then wait for its output: a loaded machine must not lose frames."""
         expected = len(received) + 1

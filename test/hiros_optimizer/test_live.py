@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-import subprocess
-import sys
 from pathlib import Path
 
 import pytest
@@ -12,33 +10,12 @@ pytestmark = [pytest.mark.ros, pytest.mark.slow]
 HERE = Path(__file__).resolve().parent
 
 
-def _node(module: str, env: dict[str, str]) -> subprocess.Popen:
-    return subprocess.Popen(
-        [sys.executable, "-c", f"from {module} import main; main()"],
-        env=env,
-        stdout=subprocess.PIPE,
-        stderr=subprocess.STDOUT,
-        text=True,
-    )
-
-
-def test_optimizer_and_filter_nodes_with_services(ros_env: dict[str, str]) -> None:
+def test_optimizer_and_filter_nodes_with_services(ros_processes) -> None:
     pytest.importorskip("hiros_skeleton_msgs.srv")
-    nodes = [_node("hiros_optimizer.node", ros_env), _node("hiros_filter.node", ros_env)]
-    try:
-        client = subprocess.run(
-            [sys.executable, str(HERE / "live_client.py")],
-            env=ros_env,
-            capture_output=True,
-            text=True,
-            timeout=120,
-            check=False,
-        )
-    finally:
-        outputs = []
-        for node in nodes:
-            node.terminate()
-            outputs.append(node.communicate(timeout=30)[0])
+    ros_processes.node("hiros_optimizer.node")
+    ros_processes.node("hiros_filter.node")
+    client = ros_processes.client(HERE / "live_client.py")
+    outputs = [ros_processes.stop()]
     log = client.stdout + client.stderr + "".join(outputs)
     assert client.returncode == 0, log
     words = client.stdout.split()

@@ -3,7 +3,6 @@ hiros codec on the other; every group must come back exactly."""
 
 from __future__ import annotations
 
-import subprocess
 import sys
 from pathlib import Path
 
@@ -13,27 +12,11 @@ pytestmark = pytest.mark.ros
 HERE = Path(__file__).resolve().parent
 
 
-def test_rclpy_publisher_and_raw_codec_node_round_trip_exactly(ros_env: dict[str, str]) -> None:
+def test_rclpy_publisher_and_raw_codec_node_round_trip_exactly(ros_processes) -> None:
     pytest.importorskip("hiros_skeleton_msgs.msg")
-    echo = subprocess.Popen(
-        [sys.executable, str(HERE / "echo_node.py")],
-        env=ros_env,
-        stdout=subprocess.PIPE,
-        stderr=subprocess.STDOUT,
-        text=True,
-    )
-    try:
-        client = subprocess.run(
-            [sys.executable, str(HERE / "rclpy_client.py")],
-            env=ros_env,
-            capture_output=True,
-            text=True,
-            timeout=90,
-            check=False,
-        )
-    finally:
-        echo.terminate()
-        echo_output, _ = echo.communicate(timeout=30)
+    ros_processes.command([sys.executable, str(HERE / "echo_node.py")])
+    client = ros_processes.client(HERE / "rclpy_client.py", timeout=90)
+    echo_output = ros_processes.stop()
     assert client.returncode == 0, client.stdout + client.stderr + echo_output
     assert "sent 20 received 20 exact 20" in client.stdout
     assert "Traceback" not in echo_output
