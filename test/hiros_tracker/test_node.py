@@ -3,8 +3,6 @@
 from __future__ import annotations
 
 import re
-import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -16,18 +14,11 @@ pytestmark = [pytest.mark.ros, pytest.mark.slow]
 HERE = Path(__file__).resolve().parent
 
 
-def _node(module: str, *params: str, env: dict[str, str]) -> subprocess.Popen:
-    arguments = [arg for p in params for arg in ("-p", p)]
-    return subprocess.Popen(
-        [sys.executable, "-c", f"from {module} import main; main()", "--ros-args", *arguments],
-        env=env,
-        stdout=subprocess.PIPE,
-        stderr=subprocess.STDOUT,
-        text=True,
-    )
+def _params(*params: str) -> list[str]:
+    return [arg for p in params for arg in ("-p", p)]
 
 
-def test_tracker_and_merger_nodes_on_live_topics(ros_env: dict[str, str], tmp_path: Path) -> None:
+def test_tracker_and_merger_nodes_on_live_topics(ros_processes, tmp_path: Path) -> None:
     pytest.importorskip("hiros_skeleton_msgs.msg")
     calibration = Calibration(
         "k01",
@@ -39,30 +30,11 @@ def test_tracker_and_merger_nodes_on_live_topics(ros_env: dict[str, str], tmp_pa
     )
     path = tmp_path / "calibration.yaml"
     save_calibration(calibration, path)
-    nodes = [
-        _node(
-            "hiros_tracker.node",
-            "cameras:=[k01, k02]",
-            f"calibration_file:={path}",
-            "min_hits:=3",
-            env=ros_env,
-        ),
-        _node("hiros_merger.node", f"calibration_file:={path}", env=ros_env),
-    ]
-    try:
-        client = subprocess.run(
-            [sys.executable, str(HERE / "ros_cameras.py")],
-            env=ros_env,
-            capture_output=True,
-            text=True,
-            timeout=120,
-            check=False,
-        )
-    finally:
-        logs = []
-        for node in nodes:
-            node.terminate()
-            logs.append(node.communicate(timeout=30)[0])
+    tracker = _params("cameras:=[k01, k02]", f"calibration_file:={path}", "min_hits:=3")
+    ros_processes.node("hiros_tracker.node", *tracker)
+    ros_processes.node("hiros_merger.node", *_params(f"calibration_file:={path}"))
+    client = ros_processes.client(HERE / "ros_cameras.py")
+    logs = [ros_processes.stop()]
     log = client.stdout + client.stderr + "".join(logs)
     assert client.returncode == 0, log
     summary = re.search(r"ids \[(.*)\] merged (\d+) ids \[(.*)\] frames (.*) error (\S+)", log)
@@ -75,26 +47,12 @@ def test_tracker_and_merger_nodes_on_live_topics(ros_env: dict[str, str], tmp_pa
     assert "Traceback" not in log, log
 
 
-def test_tracker_node_follows_the_calib_node_parameters(ros_env: dict[str, str]) -> None:
+def test_tracker_node_follows_the_calib_node_parameters(ros_processes) -> None:
     pytest.importorskip("hiros_skeleton_msgs.msg")
-    nodes = [
-        _node("hiros_tracker.node", "cameras:=[k01, k02]", "min_hits:=3", env=ros_env),
-        _node("hiros_merger.node", env=ros_env),
-    ]
-    try:
-        client = subprocess.run(
-            [sys.executable, str(HERE / "ros_cameras.py"), "--calib"],
-            env=ros_env,
-            capture_output=True,
-            text=True,
-            timeout=120,
-            check=False,
-        )
-    finally:
-        logs = []
-        for node in nodes:
-            node.terminate()
-            logs.append(node.communicate(timeout=30)[0])
+    ros_processes.node("hiros_tracker.node", *_params("cameras:=[k01, k02]", "min_hits:=3"))
+    ros_processes.node("hiros_merger.node")
+    client = ros_processes.client(HERE / "ros_cameras.py", "--calib")
+    logs = [ros_processes.stop()]
     log = client.stdout + client.stderr + "".join(logs)
     assert client.returncode == 0, log
     assert "camera 'k01' has no calibration" in log, log
