@@ -97,32 +97,10 @@ def write_report(
         _figure(directory / "error_per_joint.png", lambda plt: _error_per_joint(plt, evaluation)),
         _figure(directory / "joint_angles.png", lambda plt: _angle_curves(plt, evaluation)),
     ]
-    stage_rows = [
-        [
-            stage,
-            f"{s.mpjpe * 100:.2f}",
-            f"{s.limb_cv * 100:.2f}",
-            f"{s.angle_rmse.get('mean', float('nan')):.2f}",
-            f"{s.identity.idf1:.3f}",
-            str(s.identity.id_switches),
-            str(s.identity.fragments),
-        ]
-        for stage, s in evaluation.stages.items()
-    ]
-    calibration_rows = [
-        [
-            c,
-            f"{a.time_error_ms:.2f}",
-            f"{a.rotation_error_deg:.3f}",
-            f"{a.translation_error_cm:.2f}",
-        ]
-        for c, a in evaluation.calibration.items()
-    ]
-    camera_rows = [[c, f"{v * 100:.2f}"] for c, v in evaluation.cameras.items()]
-    stage_headers = ["stage", "MPJPE (cm)", "limb CV (%)", "angle RMSE (deg)", "IDF1"]
-    stage_headers += ["ID switches", "fragments"]
-    calibration_headers = ["camera", "time error (ms)", "rotation error (deg)"]
-    calibration_headers += ["translation error (cm)"]
+    sections = "".join(
+        f"<h2>{html.escape(title)}</h2>{_table(headers, rows)}"
+        for title, (headers, rows) in evaluation.tables().items()
+    )
     style = (
         "body{font-family:sans-serif;max-width:1100px;margin:2em auto;color:#222}"
         "table{border-collapse:collapse;margin:1em 0}"
@@ -132,12 +110,7 @@ def write_report(
     page = f"""<!doctype html><html><head><meta charset="utf-8"><title>{html.escape(title)}</title>
 <style>{style}</style></head><body>
 <h1>{html.escape(title)}</h1>
-<h2>Pipeline stages</h2>
-{_table(stage_headers, stage_rows)}
-<h2>Single cameras (true calibration, no tracking)</h2>
-{_table(["camera", "MPJPE (cm)"], camera_rows)}
-<h2>Calibration against the truth</h2>
-{_table(calibration_headers, calibration_rows)}
+{sections}
 <h2>Figures</h2>
 {"".join(images)}
 </body></html>"""

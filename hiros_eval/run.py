@@ -60,6 +60,50 @@ class RunEvaluation:
     cameras: dict[str, float]
     calibration: dict[str, CameraAccuracy]
 
+    def tables(self) -> dict[str, tuple[list[str], list[list[str]]]]:
+        """The figures as text tables (headers, rows), one per kind, for terminal and HTML."""
+        stages = [
+            [
+                stage,
+                f"{s.mpjpe * 100:.2f}",
+                f"{s.limb_cv * 100:.2f}",
+                f"{s.angle_rmse.get('mean', float('nan')):.2f}",
+                f"{s.identity.idf1:.3f}",
+                str(s.identity.id_switches),
+                str(s.identity.fragments),
+            ]
+            for stage, s in self.stages.items()
+        ]
+        cameras = [[camera, f"{value * 100:.2f}"] for camera, value in self.cameras.items()]
+        calibration = [
+            [
+                c,
+                f"{a.time_error_ms:.2f}",
+                f"{a.rotation_error_deg:.3f}",
+                f"{a.translation_error_cm:.2f}",
+            ]
+            for c, a in self.calibration.items()
+        ]
+        return {
+            "pipeline stages against the truth": (
+                [
+                    "stage",
+                    "MPJPE cm",
+                    "limb CV %",
+                    "angle RMSE deg",
+                    "IDF1",
+                    "ID switches",
+                    "fragments",
+                ],
+                stages,
+            ),
+            "single cameras (true calibration, no tracking)": (["camera", "MPJPE cm"], cameras),
+            "calibration used against the truth": (
+                ["camera", "time error ms", "rotation error deg", "translation error cm"],
+                calibration,
+            ),
+        }
+
 
 def read_run(path: str | Path) -> tuple[dict[str, list[SkeletonGroup]], Calibration]:
     """Each stage's groups and the calibration used, from a ``hiros run`` MCAP."""

@@ -47,53 +47,23 @@ def evaluate_output(output: Path, truth_dir: Path):  # noqa: ANN201 - RunEvaluat
     return evaluate_run(outputs, used, true, load_truth(truth_dir), camera_groups)
 
 
-def print_evaluation(console: Console, evaluation) -> None:  # noqa: ANN001
-    """Three tables: stages, single cameras, calibration."""
-    stages = Table(title="pipeline stages against the truth")
-    for column in (
-        "stage",
-        "MPJPE cm",
-        "limb CV %",
-        "angle RMSE deg",
-        "IDF1",
-        "switches",
-        "fragments",
-    ):
-        stages.add_column(column, justify="right")
-    for stage, s in evaluation.stages.items():
-        stages.add_row(
-            stage,
-            f"{s.mpjpe * 100:.2f}",
-            f"{s.limb_cv * 100:.2f}",
-            f"{s.angle_rmse.get('mean', float('nan')):.2f}",
-            f"{s.identity.idf1:.3f}",
-            str(s.identity.id_switches),
-            str(s.identity.fragments),
-        )
-    console.print(stages)
+def print_evaluation(console: Console, evaluation) -> None:  # noqa: ANN001 - RunEvaluation
+    """The evaluation's tables, then the merged-vs-best-camera ratio."""
+    for title, (headers, rows) in evaluation.tables().items():
+        if not rows:
+            continue
+        table = Table(title=title)
+        for header in headers:
+            table.add_column(header, justify="right")
+        for row in rows:
+            table.add_row(*row)
+        console.print(table)
     if evaluation.cameras:
         best = min(evaluation.cameras.values())
-        cameras = Table(title="single cameras (true calibration, no tracking)")
-        cameras.add_column("camera")
-        cameras.add_column("MPJPE cm", justify="right")
-        for camera, value in evaluation.cameras.items():
-            cameras.add_row(camera, f"{value * 100:.2f}")
-        console.print(cameras)
         for stage in ("merger", "filter"):
             if stage in evaluation.stages:
                 ratio = evaluation.stages[stage].mpjpe / best
                 console.print(f"{stage} MPJPE / best single camera: {ratio:.2f}")
-    calibration = Table(title="calibration used against the truth")
-    for column in ("camera", "time error ms", "rotation error deg", "translation error cm"):
-        calibration.add_column(column, justify="right")
-    for camera, a in evaluation.calibration.items():
-        calibration.add_row(
-            camera,
-            f"{a.time_error_ms:.2f}",
-            f"{a.rotation_error_deg:.3f}",
-            f"{a.translation_error_cm:.2f}",
-        )
-    console.print(calibration)
 
 
 def run(args: argparse.Namespace) -> int:
