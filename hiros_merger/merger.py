@@ -37,13 +37,13 @@ Shapes: ``M`` tracks, ``C`` detections per track (padded), ``J`` joints; metres,
 from __future__ import annotations
 
 from collections import Counter
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
 from hiros_core.calibration import Calibration, CameraCalibration
 from hiros_core.layouts import Layout
-from hiros_core.model import Skeleton, SkeletonGroup, camera_from_frame
+from hiros_core.model import STATE_WIDTH, Skeleton, SkeletonGroup, camera_from_frame
 
 __all__ = ["Merger", "MergerParams"]
 
@@ -133,10 +133,11 @@ class _BodyAxes:
     def front(self, positions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Unit up (root -> neck) and front (cross(left, up)) of poses ``(..., J, 3)``."""
         up = _unit(positions[..., self.neck, :] - positions[..., self.root, :])
-        left = positions[..., self.left, :].mean(axis=-2) - positions[..., self.right, :].mean(
-            axis=-2
-        )
-        return up, _unit(np.cross(left, up))
+        # mean of left minus mean of right, as numpy's means compute them
+        left_mean = np.add.reduce(positions[..., self.left, :], axis=-2) / len(self.left)
+        right_mean = np.add.reduce(positions[..., self.right, :], axis=-2) / len(self.right)
+        left = left_mean - right_mean
+        return up, _unit(_cross(left, up))
 
     def forward(self, positions: np.ndarray, up: np.ndarray) -> np.ndarray:
         """Unit anatomical forward (feet and nose, ⟂ up) of poses ``(..., J, 3)``.
@@ -144,12 +145,10 @@ class _BodyAxes:
         It does not depend on the left/right labels, so it tells a front/back flipped
         detection (forward against the body's front) from a correct one.
         """
-        total = np.zeros((*positions.shape[:-2], 3))
-        for start, end in self.pointers:
-            step = positions[..., end, :] - positions[..., start, :]
-            step = _unit(step - (step * up).sum(axis=-1, keepdims=True) * up)
-            total += np.where(np.isfinite(step), step, 0.0)
-        return _unit(total)
+        steps = positions[..., self.pointers[:, 1], :] - positions[..., self.pointers[:, 0], :]
+        up = up[..., None, :]
+        steps = _unit(steps - np.add.reduce(steps * up, axis=-1)[..., None] * up)
+        return _unit(np.add.reduce(np.where(np.isfinite(steps), steps, 0.0), axis=-2))
 
     @property
     def has_front(self) -> bool:
@@ -159,27 +158,28 @@ class _BodyAxes:
 
 @dataclass
 class _Batch:
-    """The detections being fused, padded to ``(M, C, ...)``: M tracks, C cameras at most."""
+    """The detections being fused, padded to ``(M, C, ...)``: M tracks, C cameras at most.
+
+    ``known`` ``(M, C)``: detections whose camera position is known; ``confidences``
+    ``(M, C, J)``: SDK confidences, 1 where unknown (both computed once by ``_stack``).
+    """
 
     markers: np.ndarray  # (M, C, J, 20) rows as received, NaN padding
     positions: np.ndarray  # (M, C, J, 3) brought to the output time
     ages: np.ndarray  # (M, C) seconds from detection to output time
     cameras: np.ndarray  # (M, C, 3) camera positions, NaN when unknown
     camera_names: list[list[str]]  # (M, C), "" for padding
+    known: np.ndarray = field(init=False)
+    confidences: np.ndarray = field(init=False)
 
-    @property
-    def known(self) -> np.ndarray:
-        """``(M, C)`` detections whose camera position is known."""
-        return np.isfinite(self.cameras).all(axis=-1)
-
-    @property
-    def confidences(self) -> np.ndarray:
-        """``(M, C, J)`` SDK confidences, 1 where unknown."""
+    def __post_init__(self) -> None:
+        self.known = np.isfinite(self.cameras).all(axis=-1)
         confidences = self.markers[..., 0]
-        return np.where(np.isfinite(confidences), confidences, 1.0)
+        self.confidences = np.where(np.isfinite(confidences), confidences, 1.0)
 
 
 _AXES: dict[str, _BodyAxes] = {}
+_UNKNOWN_CAMERA = (np.nan, np.nan, np.nan)
 
 
 def _axes(layout: Layout) -> _BodyAxes:
@@ -192,7 +192,19 @@ def _axes(layout: Layout) -> _BodyAxes:
 def _unit(vectors: np.ndarray) -> np.ndarray:
     """Vectors ``(..., 3)`` scaled to unit length; zero or NaN ones become NaN."""
     with np.errstate(invalid="ignore", divide="ignore"):
-        return vectors / np.linalg.norm(vectors, axis=-1, keepdims=True)
+        return vectors / _norm(vectors)[..., None]
+
+
+def _norm(vectors: np.ndarray) -> np.ndarray:
+    """``np.linalg.norm(vectors, axis=-1)``: the same arithmetic without its wrapper."""
+    return np.sqrt(np.add.reduce(vectors * vectors, axis=-1))
+
+
+def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """``np.cross`` of ``(..., 3)`` vectors, written out (numpy's wrapper costs more)."""
+    ax, ay, az = a[..., 0], a[..., 1], a[..., 2]
+    bx, by, bz = b[..., 0], b[..., 1], b[..., 2]
+    return np.stack([ay * bz - az * by, az * bx - ax * bz, ax * by - ay * bx], axis=-1)
 
 
 def _weighted_median(values: np.ndarray, weights: np.ndarray) -> np.ndarray:
@@ -201,11 +213,17 @@ def _weighted_median(values: np.ndarray, weights: np.ndarray) -> np.ndarray:
     Per coordinate: the smallest value whose cumulative weight reaches half the total; NaN
     values carry no weight. Entries with all weights 0 give NaN.
     """
-    weights = np.broadcast_to(weights[..., None], values.shape)
-    weights = np.where(np.isfinite(values), weights, 0.0)
+    weights = np.where(np.isfinite(values), weights[..., None], 0.0)
     order = np.argsort(np.where(weights > 0, values, np.inf), axis=1)
-    sorted_values = np.take_along_axis(values, order, axis=1)
-    cumulative = np.cumsum(np.take_along_axis(weights, order, axis=1), axis=1)
+    # Gathers along axis 1 as flat indices (take_along_axis' wrapper costs more than them).
+    n_tracks, n_cameras = values.shape[:2]
+    inner = values[0, 0].size
+    base = (np.arange(n_tracks) * (n_cameras * inner))[:, None, None, None] + np.arange(
+        inner
+    ).reshape(values.shape[2:])
+    flat = base + order * inner
+    sorted_values = values.reshape(-1)[flat]
+    cumulative = np.cumsum(weights.reshape(-1)[flat], axis=1)
     total = cumulative[:, -1:]
     first = np.argmax(cumulative >= 0.5 * total, axis=1)[:, None]
     median = np.take_along_axis(sorted_values, first, axis=1)[:, 0]
@@ -220,6 +238,23 @@ def _weighted_mean(values: np.ndarray, weights: np.ndarray) -> np.ndarray:
     with np.errstate(invalid="ignore", divide="ignore"):
         mean = (np.where(finite[..., None], values, 0.0) * weights[..., None]).sum(axis=1)
         return mean / total[..., None]
+
+
+def _distance(positions: np.ndarray, fused: np.ndarray) -> np.ndarray:
+    """``(M, C, J)`` distance of each detection's joints to the fused ``(M, J, 3)``.
+
+    ``np.linalg.norm(positions - fused[:, None], axis=-1)`` without its wrapper.
+    """
+    difference = positions - fused[:, None]
+    return np.sqrt(np.add.reduce(difference * difference, axis=-1))
+
+
+def _mean_of_filled(filled: np.ndarray, finite: np.ndarray, weights: np.ndarray) -> np.ndarray:
+    """:func:`_weighted_mean` of values already zero-filled where not ``finite``."""
+    weights = np.where(finite, weights, 0.0)
+    total = weights.sum(axis=1)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return (filled * weights[..., None]).sum(axis=1) / total[..., None]
 
 
 def _quaternion_mean(quaternions: np.ndarray, weights: np.ndarray) -> np.ndarray:
@@ -379,17 +414,20 @@ class Merger:
                 )
         if params.occlusion_radius > 0 and len(track_ids) > 1 and batch.known.any():
             weight = weight * self._occlusion(fused, positions, batch.cameras, batch.known, axes)
+        # The positions do not change between iterations: their mask and zero-filled copy once.
+        finite = np.isfinite(positions).all(axis=-1)
+        filled = np.where(finite[..., None], positions, 0.0)
         for _ in range(params.iterations):
-            residual = np.linalg.norm(positions - fused[:, None], axis=-1)
-            fused = _weighted_mean(positions, self._robust(weight, residual))
-        residual = np.linalg.norm(positions - fused[:, None], axis=-1)
+            residual = _distance(positions, fused)
+            fused = _mean_of_filled(filled, finite, self._robust(weight, residual))
+        residual = _distance(positions, fused)
         final = self._robust(weight, residual)
         self._update_agreement(residual, batch.camera_names)
 
         markers = batch.markers
         confidence = _weighted_mean(
             np.where(final > 0, batch.confidences, np.nan)[..., None], final
-        )
+        )[..., 0]
         velocity = _weighted_mean(markers[..., 8:11], final)
         orientations = markers[..., 4:8]
         orientation = (
@@ -397,22 +435,31 @@ class Merger:
             if np.isfinite(orientations).all(axis=-1).any()
             else None
         )
-        out = []
-        for m, track_id in enumerate(track_ids):
-            skeleton = Skeleton.empty(
-                layout, skeleton_id=track_id, src_time_ns=out_ns, src_frame=self._world_frame
-            )
-            present = np.isfinite(fused[m]).all(axis=-1)
-            skeleton.marker_present[:] = present
-            skeleton.positions[present] = fused[m][present]
-            skeleton.confidences[present] = confidence[m, :, 0][present]
-            skeleton.velocities[present] = velocity[m][present]
-            if orientation is not None:
-                skeleton.orientations[present] = orientation[m][present]
-            if present.any():
-                skeleton.confidence = float(np.nanmean(skeleton.confidences[present]))
-            skeleton.update_links()
-            out.append(skeleton)
+        # Every track's output rows at once; a joint is present where its fused position is.
+        present = np.isfinite(fused).all(axis=-1)  # (M, J)
+        rows = np.full((*present.shape, STATE_WIDTH), np.nan)
+        keep = present[..., None]
+        rows[..., 0] = np.where(present, confidence, np.nan)
+        rows[..., 1:4] = np.where(keep, fused, np.nan)
+        rows[..., 8:11] = np.where(keep, velocity, np.nan)
+        if orientation is not None:
+            rows[..., 4:8] = np.where(keep, orientation, np.nan)
+        out = Skeleton.many_from_rows(
+            rows,
+            present,
+            layout,
+            skeleton_ids=track_ids,
+            src_time_ns=out_ns,
+            src_frame=self._world_frame,
+        )
+        whole = present.all(axis=1)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            means = np.nanmean(rows[..., 0], axis=1) if whole.any() else whole
+        for m, skeleton in enumerate(out):
+            if whole[m]:
+                skeleton.confidence = float(means[m])
+            elif present[m].any():
+                skeleton.confidence = float(np.nanmean(rows[m, present[m], 0]))
         return out
 
     def _robust(self, weight: np.ndarray, residual: np.ndarray) -> np.ndarray:
@@ -429,17 +476,18 @@ class Merger:
         """Pad the detections into ``(M, C, ...)`` arrays, brought to the output time."""
         params = self.params
         rows = {track_id: m for m, track_id in enumerate(track_ids)}
-        slots = np.zeros(len(entries), dtype=np.int64)
         counts = dict.fromkeys(track_ids, 0)
-        for n, (track_id, _, _) in enumerate(entries):
-            slots[n] = counts[track_id]
+        slot_list: list[int] = []
+        for track_id, _, _ in entries:
+            slot_list.append(counts[track_id])
             counts[track_id] += 1
-        rows_of = np.array([rows[track_id] for track_id, _, _ in entries])
+        row_list = [rows[track_id] for track_id, _, _ in entries]
+        rows_of, slots = np.array(row_list), np.array(slot_list)
         shape = (len(track_ids), max(counts.values()))
         markers = np.full((*shape, entries[0][2].layout.n_joints, 20), np.nan)
-        markers[rows_of, slots] = np.stack(
-            [np.where(s.marker_present[:, None], s.markers, np.nan) for _, _, s in entries]
-        )
+        received = np.stack([s.markers for _, _, s in entries])
+        present = np.stack([s.marker_present for _, _, s in entries])
+        markers[rows_of, slots] = np.where(present[..., None], received, np.nan)
         ages = np.zeros(shape)
         ages[rows_of, slots] = [(out_ns - s.src_time_ns) * _NS for _, _, s in entries]
         positions = markers[..., 1:4]
@@ -450,11 +498,12 @@ class Merger:
                 positions + np.where(np.isfinite(velocities), velocities, 0.0) * dt[..., None, None]
             )
         cameras = np.full((*shape, 3), np.nan)
+        cameras[rows_of, slots] = [
+            self._camera_positions.get(camera, _UNKNOWN_CAMERA) for _, camera, _ in entries
+        ]
         names = [[""] * shape[1] for _ in range(shape[0])]
-        for (_, camera, _), m, c in zip(entries, rows_of, slots, strict=True):
+        for (_, camera, _), m, c in zip(entries, row_list, slot_list, strict=True):
             names[m][c] = camera
-            if camera in self._camera_positions:
-                cameras[m, c] = self._camera_positions[camera]
         return _Batch(markers, positions, ages, cameras, names)
 
     def _prior_weights(self, batch: _Batch) -> np.ndarray:
@@ -463,14 +512,15 @@ class Merger:
         weight = np.maximum(batch.confidences, params.confidence_floor) ** params.confidence_power
         weight = np.where(np.isfinite(batch.positions).all(axis=-1), weight, 0.0)
         weight = weight / (1.0 + (batch.ages / params.staleness_scale) ** 2)[..., None]
-        agreement = np.ones(batch.ages.shape)
-        for m, names in enumerate(batch.camera_names):
-            for c, name in enumerate(names):
-                error = self.agreement.get(name)
-                if error is not None:
-                    agreement[m, c] = 1.0 / (1.0 + (error / params.agreement_scale) ** 2)
+        scale = params.agreement_scale
+        factors = {
+            name: 1.0 / (1.0 + (error / scale) ** 2) for name, error in self.agreement.items()
+        }
+        agreement = np.array(
+            [[factors.get(name, 1.0) for name in names] for names in batch.camera_names]
+        )
         weight = weight * agreement[..., None]
-        depth = np.linalg.norm(batch.positions - batch.cameras[:, :, None], axis=-1)
+        depth = _norm(batch.positions - batch.cameras[:, :, None])
         depth_weight = (1.0 + params.depth_gain * depth) ** -2
         return np.where(batch.known[..., None], weight * depth_weight, weight)
 
@@ -485,7 +535,7 @@ class Merger:
         """``(M, C)`` weight of each camera's view: 1 from the front, down to the back."""
         params = self.params
         to_camera = cameras - fused[:, None, axes.root]
-        to_camera /= np.linalg.norm(to_camera, axis=-1, keepdims=True)
+        to_camera /= _norm(to_camera)[..., None]
         cosine = np.einsum("mk,mck->mc", front, to_camera)
         view = np.maximum(params.view_weight_min, ((1.0 + cosine) / 2.0) ** params.view_power)
         return np.where(known & np.isfinite(view), view, 1.0)
@@ -508,17 +558,26 @@ class Merger:
         points = fused[:, axes.torso].reshape(-1, 3)  # (Q, 3), Q = M × torso joints
         owner = np.repeat(np.arange(n_tracks), len(axes.torso))
         ray = positions - cameras[:, :, None]  # (M, C, J, 3)
-        length = np.linalg.norm(ray, axis=-1)
+        length = _norm(ray)
         direction = ray / length[..., None]
         rel = points[None, None] - cameras[:, :, None]  # (M, C, Q, 3)
         along = np.einsum("mcjk,mcqk->mcjq", direction, rel)  # (M, C, J, Q)
-        closest = along[..., None] * direction[:, :, :, None]  # (M, C, J, Q, 3)
-        across = np.linalg.norm(rel[:, :, None] - closest, axis=-1)
+        radius = params.occlusion_radius
         with np.errstate(invalid="ignore"):
+            # Squared distance of each torso point to each ray, |rel|² - along², decides
+            # "within the radius" except within 1e-9 m² of it, where the distance is computed
+            # as the point minus its projection (the exact form) for those pairs only.
+            across_sq = np.add.reduce(rel * rel, axis=-1)[:, :, None, :] - along * along
+            close = across_sq < radius * radius
+            unsure = np.abs(across_sq - radius * radius) < 1e-9
+            if unsure.any():
+                m, c, j, q = np.nonzero(unsure)
+                closest = along[m, c, j, q][:, None] * direction[m, c, j]
+                close[m, c, j, q] = _norm(rel[m, c, q] - closest) < radius
             blocking = (
-                (across < params.occlusion_radius)
+                close
                 & (along > 0)
-                & (along < length[..., None] - params.occlusion_radius)
+                & (along < length[..., None] - radius)
                 & (owner != np.arange(n_tracks)[:, None, None, None])
             )
         occluded = blocking.any(axis=-1) & known[..., None]
@@ -532,12 +591,13 @@ class Merger:
         mean = np.where(finite, np.minimum(residual, 0.5), 0.0).sum(-1) / np.maximum(
             finite.sum(-1), 1
         )
-        for m, names in enumerate(camera_names):
-            for c, name in enumerate(names):
-                if name and finite[m, c].any():
-                    per_camera.setdefault(name, []).append(float(mean[m, c]))
+        seen = finite.any(axis=-1).tolist()
+        for names, row, seen_row in zip(camera_names, mean.tolist(), seen, strict=True):
+            for name, value, any_seen in zip(names, row, seen_row, strict=True):
+                if name and any_seen:
+                    per_camera.setdefault(name, []).append(value)
         for name, errors in per_camera.items():
-            value = float(np.mean(errors))
+            value = float(np.mean(errors)) if len(errors) > 1 else errors[0]
             previous = self.agreement.get(name)
             self.agreement[name] = (
                 value if previous is None else previous + alpha * (value - previous)
