@@ -98,12 +98,6 @@ class CameraCorrection:
         return SkeletonGroup(camera.to_reference_ns(group.stamp_ns), self.world_frame, skeletons)
 
 
-_GROUP_OF_COLUMN = np.repeat(np.arange(7), [1, 3, 4, 3, 3, 3, 3])
-"""Field of each of the 20 floats of a row: confidence, position, quaternion, 4 vectors."""
-_GROUPS = np.zeros((7, 20))
-_GROUPS[_GROUP_OF_COLUMN, np.arange(20)] = 1.0
-
-
 def _row_transform(extrinsics: RigidTransform) -> tuple[np.ndarray, np.ndarray]:
     """``(20, 20)`` matrix and ``(20,)`` offset moving a whole marker/link row at once.
 
@@ -122,30 +116,31 @@ def _row_transform(extrinsics: RigidTransform) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _moved(skeletons: list[Skeleton], transform: tuple[np.ndarray, np.ndarray]) -> list[Skeleton]:
-    """New skeletons moved by a ``_row_transform``, all rows of a frame in one product.
+    """New skeletons moved by a ``_row_transform``, all rows of a frame at once.
 
     The result equals ``RigidTransform.apply_to_skeleton`` on each skeleton (a test checks it):
-    a field with any NaN stays all NaN, quaternions are normalised first. Doing a whole frame
-    as one ``(20, 20) @ (20, N)`` product, column-wise, keeps the per-frame cost small and flat
-    in the number of people, which is what the tracker's time budget needs. The new
+    a field with any NaN stays all NaN, quaternions are normalised first. Each field of every
+    row of the frame (markers and links of all people) is one small product — a NaN
+    coordinate makes its whole field NaN by itself — and fields that are NaN in every row
+    (drivers without orientations or velocities) are skipped: a few numpy calls per frame,
+    flat in the number of people, which is what the tracker's time budget needs. The new
     skeletons' rows are views into one array owned by them alone.
     """
     if not skeletons:
         return []
     matrix, offset = transform
-    columns = np.concatenate([part for s in skeletons for part in (s.markers, s.links)]).T
-    q = columns[4:8]
-    norm = np.sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3])
-    with np.errstate(invalid="ignore", divide="ignore"):
-        columns = np.concatenate([columns[:4], q / norm, columns[8:]])
-    unknown = np.isnan(columns)
-    unknown = (_GROUPS @ unknown > 0)[_GROUP_OF_COLUMN]
-    moved_columns = matrix @ np.where(unknown, 0.0, columns) + offset[:, None]
-    moved_columns[unknown] = np.nan
-    rows = np.ascontiguousarray(moved_columns.T)
+    rotation, quaternion_product = matrix[1:4, 1:4], matrix[4:8, 4:8]
+    rows = np.concatenate([part for s in skeletons for part in (s.markers, s.links)])
+    known = (~np.isnan(rows)).any(axis=0).tolist()  # per column: any row with a value
+    rows[:, 1:4] = rows[:, 1:4] @ rotation.T + offset[1:4]
+    if any(known[4:8]):
+        rows[:, 4:8] = _unit(rows[:, 4:8]) @ quaternion_product.T
+    if any(known[8:20]):
+        rows[:, 8:20] = (rows[:, 8:20].reshape(-1, 4, 3) @ rotation.T).reshape(-1, 12)
     boxes = np.stack([s.bounding_box for s in skeletons])
-    boxes[:, 0:3] = boxes[:, 0:3] @ matrix[1:4, 1:4].T + offset[1:4]
-    boxes[:, 3:7] = _unit(boxes[:, 3:7]) @ matrix[4:8, 4:8].T
+    if not np.isnan(boxes[:, :7]).all():
+        boxes[:, 0:3] = boxes[:, 0:3] @ rotation.T + offset[1:4]
+        boxes[:, 3:7] = _unit(boxes[:, 3:7]) @ quaternion_product.T
     moved = []
     start = 0
     for skeleton, box in zip(skeletons, boxes, strict=True):
