@@ -15,6 +15,7 @@ child) are refused with ``CodecError`` rather than silently altered.
 
 from __future__ import annotations
 
+import struct
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -39,6 +40,8 @@ _MAX_DENSE_ID = 4096  # dense rows by id: larger ids would allocate absurd array
 _TIME = np.dtype([("sec", "<i4"), ("nanosec", "<u4")])
 _HEAD = np.dtype([("id", "<i4"), ("sec", "<i4"), ("nanosec", "<u4")])
 _MAXES = np.dtype([("max_markers", "<u4"), ("max_links", "<u4")])
+_HEAD_STRUCT = struct.Struct("<iiI")
+_MAXES_STRUCT = struct.Struct("<II")
 _ITA = np.dtype([("id", "<i4"), ("type", "<i4"), ("action", "<i4")])
 _ROW_BYTES = STATE_WIDTH * 8
 _BOX_FLOATS = 1 + BOX_WIDTH  # skeleton confidence + bounding box
@@ -160,19 +163,22 @@ def _encode_skeleton(skeleton: Skeleton, payload_offset: int) -> bytes:
     plan = _SKELETON_PLANS.get(key) or _SKELETON_PLANS.put(
         key, _build_skeleton_plan(skeleton, phase), phase
     )
-    head = np.empty(1, dtype=_HEAD)
-    head["id"] = _checked([skeleton.id], "<i4", "SkeletonGroup skeleton id")
-    time = _split_ns(np.array([skeleton.src_time_ns]), "SkeletonGroup")
-    head["sec"], head["nanosec"] = time["sec"], time["nanosec"]
-    maxes = np.empty(1, dtype=_MAXES)
-    maxes["max_markers"] = _checked([skeleton.max_markers], "<u4", "SkeletonGroup max_markers")
-    maxes["max_links"] = _checked([skeleton.max_links], "<u4", "SkeletonGroup max_links")
+    sec, nanosec = divmod(skeleton.src_time_ns, _NS)
+    try:  # plain struct packing: a third of the time of numpy records for four numbers
+        head = _HEAD_STRUCT.pack(skeleton.id, sec, nanosec)
+        maxes = _MAXES_STRUCT.pack(skeleton.max_markers, skeleton.max_links)
+    except struct.error:
+        msg = (
+            f"SkeletonGroup: skeleton id {skeleton.id}, stamp {skeleton.src_time_ns} ns or "
+            f"max_markers/max_links {skeleton.max_markers}/{skeleton.max_links} out of range"
+        )
+        raise CodecError(msg) from None
     box = np.empty(_BOX_FLOATS)
     box[0], box[1:] = skeleton.confidence, skeleton.bounding_box
     return plan.encode(
         {
-            "head": head,
-            "maxes": maxes,
+            "head": np.frombuffer(head, np.uint8),
+            "maxes": np.frombuffer(maxes, np.uint8),
             "box": box,
             "markers": skeleton.markers[skeleton.marker_present],
             "links": skeleton.links[skeleton.link_present],
@@ -575,12 +581,13 @@ def _gather_texts(plan: Plan, raw: np.ndarray, shape: _MarkerShape) -> list[str]
     texts = [""] * len(shape.frame_ids)
     for kind, indices in shape.text_slots.items():
         rows = plan.gather(raw, kind, np.uint8)
-        for index, row in zip(indices.tolist(), rows, strict=True):
-            try:
-                texts[index] = row.tobytes().decode("utf-8")
-            except UnicodeDecodeError:
-                msg = f"cannot decode MarkerArray: the text of marker {index} is not UTF-8"
-                raise CodecError(msg) from None
+        try:  # all texts of one length in one call: fixed-width byte strings, decoded together
+            decoded = np.char.decode(rows.view(f"S{rows.shape[1]}").ravel(), "utf-8").tolist()
+        except UnicodeDecodeError:
+            msg = "cannot decode MarkerArray: a marker text is not UTF-8"
+            raise CodecError(msg) from None
+        for index, text in zip(indices.tolist(), decoded, strict=True):
+            texts[index] = text
     return texts
 
 
