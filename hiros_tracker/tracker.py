@@ -178,6 +178,11 @@ class _MirrorParts:
         flipped[:, sided] = combos[:, self.part[sided]].astype(bool)
         return np.where(flipped, self.mirror, np.arange(len(self.part)))
 
+    @cached_property
+    def both_orders(self) -> np.ndarray:
+        """``(2, J)`` the joints as given and mirrored (indexes both labellings at once)."""
+        return np.stack([np.arange(len(self.part)), self.mirror])
+
     def permutation(self, flips: np.ndarray) -> np.ndarray:
         """``(..., J)`` joint order relabelling the parts flagged in ``flips`` ``(..., K)``."""
         return self._table[flips.astype(np.int64) @ (1 << np.arange(self.count))]
@@ -376,21 +381,25 @@ def _pair_costs(
         ``(T, D)`` costs in metres and ``(T, D, K)`` flags of the parts taken mirrored.
 
     """
-    distance = _norms(predicted[:, None] - detections[None])  # (T, D, J)
     if parts is None:
+        distance = _norms(predicted[:, None] - detections[None])  # (T, D, J)
         flips = np.zeros((*distance.shape[:2], 0), dtype=bool)
     else:
-        mirrored = _norms(predicted[:, None] - detections[None][:, :, parts.mirror])
-        shared_d, shared_m = np.isfinite(distance), np.isfinite(mirrored)
-        sum_d = np.where(shared_d, distance, 0.0) @ parts.onehot  # (T, D, K)
-        sum_m = np.where(shared_m, mirrored, 0.0) @ parts.onehot
-        count_d, count_m = shared_d @ parts.onehot, shared_m @ parts.onehot
+        # Both labellings at once, [as given, mirrored] -> (2, T, D, J); the sums keep the
+        # (D, J) @ (J, K) products per track of the separate computation (same roundings).
+        labellings = detections[:, parts.both_orders].swapaxes(0, 1)[:, None]  # (2,1,D,J,3)
+        both = _norms(predicted[None, :, None] - labellings)
+        shared = np.isfinite(both)
+        sums = np.where(shared, both, 0.0) @ parts.onehot  # (2, T, D, K)
+        counts = shared @ parts.onehot
         with np.errstate(invalid="ignore", divide="ignore"):
-            flips = (count_m > 0) & (sum_m / count_m + margin < sum_d / np.maximum(count_d, 1))
-        sided = parts.part >= 0
-        joint_flips = np.zeros(distance.shape, dtype=bool)
-        joint_flips[..., sided] = flips[..., parts.part[sided]]
-        distance = np.where(joint_flips, mirrored, distance)
+            flips = (counts[1] > 0) & (
+                sums[1] / counts[1] + margin < sums[0] / np.maximum(counts[0], 1)
+            )
+        # part -1 (midline) reads the appended False column
+        joint_flips = np.concatenate([flips, np.zeros((*flips.shape[:2], 1), dtype=bool)], 2)
+        # (np.take keeps C order: the products below then round as the separate form did)
+        distance = np.where(np.take(joint_flips, parts.part, axis=2), both[1], both[0])
     shared = np.isfinite(distance)
     count = shared.sum(axis=2)
     with np.errstate(invalid="ignore", divide="ignore"):
