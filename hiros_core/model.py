@@ -387,13 +387,13 @@ class SkeletonGroup:
         """``(P, J, 3)`` stacked joint positions; all skeletons must share one layout size."""
         if not self.skeletons:
             return np.empty((0, 0, 3))
-        return np.stack([s.positions for s in self.skeletons])
+        return np.array([s.positions for s in self.skeletons])
 
     def confidences(self) -> np.ndarray:
         """``(P, J)`` stacked joint confidences."""
         if not self.skeletons:
             return np.empty((0, 0))
-        return np.stack([s.confidences for s in self.skeletons])
+        return np.array([s.confidences for s in self.skeletons])
 
     def copy(self) -> SkeletonGroup:
         """A deep copy."""

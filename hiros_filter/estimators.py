@@ -131,7 +131,7 @@ class KalmanBank:
         index = _block(slots)
         step = dt[:, None, None]
         half_square = (0.5 * dt * dt)[:, None, None]
-        Q = np.stack([_process_noise(round(float(s), 6), self.q) for s in dt])
+        Q = np.array([_process_noise(round(float(s), 6), self.q) for s in dt])
         x = self.x[index]  # a view when the slots are one block
         x[:, 0] += step * x[:, 1] + half_square * x[:, 2]
         x[:, 1] += step * x[:, 2]

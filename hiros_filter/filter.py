@@ -259,8 +259,8 @@ class Filter:
     def _start(self, tracks: _Tracks, skeletons: list[Skeleton]) -> None:
         """New (or restarting) tracks: every estimator at rest on the measurement."""
         rows = np.array([tracks.slot(s.id) for s in skeletons])
-        present = np.stack([s.marker_present for s in skeletons])
-        positions = np.stack([s.positions for s in skeletons])
+        present = np.array([s.marker_present for s in skeletons])
+        positions = np.array([s.positions for s in skeletons])
         positions = np.where(present[..., None], positions, np.nan)
         tracks.time_ns[rows] = [s.src_time_ns for s in skeletons]
         tracks.joint_time_ns[rows] = np.where(present, tracks.time_ns[rows, None], _NEVER)
@@ -270,7 +270,7 @@ class Filter:
         slot_index, joints = np.nonzero(present)
         tracks.kalman.reset(rows[slot_index], joints, positions[slot_index, joints])
         tracks.quaternions[rows] = np.nan
-        markers = np.stack([s.markers for s in skeletons])
+        markers = np.array([s.markers for s in skeletons])
         self._smooth_orientations(tracks, rows, markers, present, dt=None)
         markers[..., 8:11][present] = 0.0
         markers[..., 14:17][present] = 0.0
@@ -287,8 +287,8 @@ class Filter:
         rows = np.array([tracks.slots[s.id] for s in skeletons])
         stamps = np.array([s.src_time_ns for s in skeletons], dtype=np.int64)
         dt = (stamps - tracks.time_ns[rows]) * 1e-9
-        markers = np.stack([s.markers for s in skeletons])  # (n, J, 20): the output rows
-        present = np.stack([s.marker_present for s in skeletons])
+        markers = np.array([s.markers for s in skeletons])  # (n, J, 20): the output rows
+        present = np.array([s.marker_present for s in skeletons])
         measured = markers[..., 1:4]
         max_gap_ns = round(self.params.max_gap * 1e9)
         joint_time_ns = tracks.joint_time_ns[rows]

@@ -485,8 +485,8 @@ class Merger:
         rows_of, slots = np.array(row_list), np.array(slot_list)
         shape = (len(track_ids), max(counts.values()))
         markers = np.full((*shape, entries[0][2].layout.n_joints, 20), np.nan)
-        received = np.stack([s.markers for _, _, s in entries])
-        present = np.stack([s.marker_present for _, _, s in entries])
+        received = np.array([s.markers for _, _, s in entries])
+        present = np.array([s.marker_present for _, _, s in entries])
         markers[rows_of, slots] = np.where(present[..., None], received, np.nan)
         ages = np.zeros(shape)
         ages[rows_of, slots] = [(out_ns - s.src_time_ns) * _NS for _, _, s in entries]

@@ -360,8 +360,8 @@ class Optimizer:
         """
         layout = items[0][1].layout
         skeletons = [skeleton for _, skeleton, _ in items]
-        present = np.stack([skeleton.marker_present for skeleton in skeletons])
-        measured = np.stack([skeleton.positions for skeleton in skeletons])
+        present = np.array([skeleton.marker_present for skeleton in skeletons])
+        measured = np.array([skeleton.positions for skeleton in skeletons])
         weights = _stacked_weights(skeletons, present)
         positions = np.where((weights > 0)[..., None], measured, np.nan)
         lengths = link_lengths(positions, self._tree(layout).parents)
@@ -413,7 +413,7 @@ class Optimizer:
     def _accept(self, layout: Layout, full: list[tuple[int, _Track]]) -> None:
         """Accept the calibration of each full window that is steady enough."""
         params = self.params
-        windows = np.stack([track.window for _, track in full])  # (R, J, N)
+        windows = np.array([track.window for _, track in full])  # (R, J, N)
         size = windows.shape[2]
         count = size - np.isnan(windows).sum(axis=2)  # (R, J) frames each link was measured in
         seen = count / size >= params.min_link_presence
@@ -448,10 +448,10 @@ class Optimizer:
         layout = items[0][1].layout
         tree = self._tree(layout)
         n_people, n_joints = len(items), layout.n_joints
-        measured = np.stack([skeleton.positions for _, skeleton, _ in items])
+        measured = np.array([skeleton.positions for _, skeleton, _ in items])
         floor = self.params.confidence_floor
-        weights = np.stack([_weights(skeleton, floor) for _, skeleton, _ in items])
-        lengths = np.stack([track.calibration.lengths for _, _, track in items])
+        weights = np.array([_weights(skeleton, floor) for _, skeleton, _ in items])
+        lengths = np.array([track.calibration.lengths for _, _, track in items])
         prior = np.full((n_people, n_joints, 3), np.nan)
         fallback = np.full((n_people, n_joints, 3), np.nan)
         for row, (_, skeleton, track) in enumerate(items):
@@ -524,7 +524,7 @@ def _nanmedian_last(values: np.ndarray, count: np.ndarray) -> np.ndarray:
 
 def _stacked_weights(skeletons: list[Skeleton], present: np.ndarray) -> np.ndarray:
     """``(P, J)`` :func:`_weights` of several skeletons of one layout (floor 0)."""
-    confidence = np.stack([skeleton.confidences for skeleton in skeletons])
+    confidence = np.array([skeleton.confidences for skeleton in skeletons])
     confidence = np.where(np.isfinite(confidence), confidence, 1.0)
     return np.where(present, np.clip(confidence, 0.0, None), 0.0)
 

@@ -137,7 +137,7 @@ def _moved(skeletons: list[Skeleton], transform: tuple[np.ndarray, np.ndarray]) 
         rows[:, 4:8] = _unit(rows[:, 4:8]) @ quaternion_product.T
     if any(known[8:20]):
         rows[:, 8:20] = (rows[:, 8:20].reshape(-1, 4, 3) @ rotation.T).reshape(-1, 12)
-    boxes = np.stack([s.bounding_box for s in skeletons])
+    boxes = np.array([s.bounding_box for s in skeletons])
     if not np.isnan(boxes[:, :7]).all():
         boxes[:, 0:3] = boxes[:, 0:3] @ rotation.T + offset[1:4]
         boxes[:, 3:7] = _unit(boxes[:, 3:7]) @ quaternion_product.T

@@ -640,10 +640,10 @@ class Tracker:
         params = self.params
         parts = _mirror_parts(detections[0].layout)
         stamp = detections[0].src_time_ns
-        positions = np.stack([d.positions for d in detections])  # (D, J, 3)
-        usable = np.stack([d.marker_present for d in detections])
+        positions = np.array([d.positions for d in detections])  # (D, J, 3)
+        usable = np.array([d.marker_present for d in detections])
         if params.min_confidence > 0:
-            usable &= ~(np.stack([d.confidences for d in detections]) < params.min_confidence)
+            usable &= ~(np.array([d.confidences for d in detections]) < params.min_confidence)
         positions = np.where(usable[..., None], positions, np.nan)
 
         no_flip = np.zeros(parts.count, dtype=bool)
@@ -668,7 +668,7 @@ class Tracker:
                 self.drops["too few joints"] += 1
         if not pairs:
             return []
-        flips = np.stack([f for _, _, f in pairs])  # (U, K)
+        flips = np.array([f for _, _, f in pairs])  # (U, K)
         rows = np.array([det for det, _, _ in pairs])
         canonical = positions[rows[:, None], parts.permutation(flips)]  # (U, J, 3)
         if params.mirror_check and params.facing_check:
@@ -735,7 +735,7 @@ class Tracker:
         """Optimal assignment of ``free`` detections to ``tracks``: (detection, track, flips)."""
         params = self.params
         parts = _mirror_parts(detections[0].layout)
-        predicted = np.stack([t.predict(stamp, params.max_prediction) for t in tracks])
+        predicted = np.array([t.predict(stamp, params.max_prediction) for t in tracks])
         cost, flips = _pair_costs(
             predicted,
             positions[free],
@@ -794,12 +794,12 @@ class Tracker:
         pick = np.arange(len(detections))[None, :, None]
         cost = np.zeros(flips.shape[:2])
         if params.velocity_weight > 0:
-            det_v = np.stack([d.velocities for d in detections])[pick, order]  # (T, D, J, 3)
-            track_v = np.stack([t.velocities for t in tracks])[:, None]
+            det_v = np.array([d.velocities for d in detections])[pick, order]  # (T, D, J, 3)
+            track_v = np.array([t.velocities for t in tracks])[:, None]
             cost += params.velocity_weight * _nan_mean(np.linalg.norm(det_v - track_v, axis=3))
         if params.orientation_weight > 0:
-            det_q = np.stack([d.orientations for d in detections])[pick, order]
-            track_q = np.stack([t.orientations for t in tracks])[:, None]
+            det_q = np.array([d.orientations for d in detections])[pick, order]
+            track_q = np.array([t.orientations for t in tracks])[:, None]
             dot = np.abs((det_q * track_q).sum(axis=3))
             angle = 2.0 * np.arccos(np.clip(dot, 0.0, 1.0))
             cost += params.orientation_weight * _nan_mean(angle)
@@ -844,8 +844,8 @@ class Tracker:
         previous = np.array([t.time_ns for t in tracks])
         now = np.maximum(previous, time_ns)
         dt = np.clip((now - previous) * _NS, -params.max_prediction, params.max_prediction)
-        positions = np.stack([t.positions for t in tracks])
-        predicted = positions + np.stack([t.velocity for t in tracks])[:, None] * dt[:, None, None]
+        positions = np.array([t.positions for t in tracks])
+        predicted = positions + np.array([t.velocity for t in tracks])[:, None] * dt[:, None, None]
         alpha = np.array([params.position_smoothing if t.hits else 1.0 for t in tracks])
         measured = np.isfinite(canonical).all(axis=2)[..., None]
         updated = np.where(
@@ -934,7 +934,7 @@ class Tracker:
 
         """
         params = self.params
-        positions = np.stack([t.positions for t in tracks])
+        positions = np.array([t.positions for t in tracks])
         up = np.broadcast_to(self._world_up(frame.trunk(positions)), positions[:, 0].shape)
         front = frame.front(positions, up)
         forward = frame.forward(canonical, up)
@@ -952,7 +952,7 @@ class Tracker:
             evidence += np.where(flipped, -1.0, 1.0) * np.log(
                 (1.0 - params.flip_prior) / params.flip_prior
             )
-        velocity = np.stack([t.velocity for t in tracks])
+        velocity = np.array([t.velocity for t in tracks])
         walking = _flat(velocity, up)
         speed = np.linalg.norm(walking, axis=1)
         along = (walking * front).sum(axis=1) / np.maximum(speed, 1e-9)
@@ -1007,7 +1007,7 @@ class Tracker:
             return
         confirmed = [t for t in self._tracks if t.confirmed]
         if confirmed:
-            predicted = np.stack([t.predict(time_ns, params.max_prediction) for t in confirmed])
+            predicted = np.array([t.predict(time_ns, params.max_prediction) for t in confirmed])
             weights = _joint_weights(layout, params.joint_weight_decay)
             distance, _ = _pair_costs(
                 predicted,

@@ -79,8 +79,8 @@ def skeleton_markers(
         groups = [(s.layout, [index]) for index, s in enumerate(skeletons)]
     drawn: list[tuple[np.ndarray, np.ndarray]] = [(_NO_POINTS, _NO_POINTS)] * len(skeletons)
     for group_layout, members in groups:
-        positions = np.stack([skeletons[i].positions for i in members])  # (P, J, 3)
-        present = np.stack([skeletons[i].marker_present for i in members])
+        positions = np.array([skeletons[i].positions for i in members])  # (P, J, 3)
+        present = np.array([skeletons[i].marker_present for i in members])
         visible = present & np.isfinite(positions).all(axis=2)
         ends = _link_ends(group_layout)  # parent, child of each link, interleaved
         segments = positions[:, ends]  # (P, 2L, 3): the line list's points in order
