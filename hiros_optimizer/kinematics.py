@@ -44,7 +44,9 @@ class KinematicTree:
         parents: ``(J,)`` parent of each joint, ``-1`` for roots.
         levels: joint indices grouped by depth; ``levels[0]`` holds the roots.
         subtree: ``(J, J)`` float, ``subtree[c, j] = 1`` when ``j`` is ``c`` or below it.
-        level_subtrees: ``subtree`` rows of each level, ready for ``einsum``.
+        level_subtrees: ``subtree`` rows of each level (who is below each of its joints).
+        level_below: the transposes of ``level_subtrees``, contiguous (moves subtrees).
+        subtree_t: ``subtree.T``, contiguous (link vectors -> positions by one product).
         has_parent: ``(J,)`` True for joints that end a link.
         parent_of: ``(J, J)`` float, ``parent_of[c, p] = 1`` when ``p`` is ``c``'s parent, so
             ``flags @ parent_of`` moves per-link flags (by child) to the parents.
@@ -55,6 +57,8 @@ class KinematicTree:
     levels: tuple[np.ndarray, ...]
     subtree: np.ndarray
     level_subtrees: tuple[np.ndarray, ...]
+    level_below: tuple[np.ndarray, ...]
+    subtree_t: np.ndarray
     has_parent: np.ndarray
     parent_of: np.ndarray
 
@@ -84,6 +88,8 @@ class KinematicTree:
             levels=levels,
             subtree=subtree,
             level_subtrees=tuple(subtree[level] for level in levels),
+            level_below=tuple(np.ascontiguousarray(subtree[level].T) for level in levels),
+            subtree_t=np.ascontiguousarray(subtree.T),
             has_parent=parents >= 0,
             parent_of=parent_of,
         )
@@ -116,7 +122,7 @@ def _initial_vectors(
     the fallback vector (last frame), else points straight down.
     """
     below = weights @ tree.subtree.T  # (P, J) weight at and below each joint
-    centroid = np.einsum("cj,pjk->pck", tree.subtree, weights[..., None] * targets)
+    centroid = tree.subtree @ (weights[..., None] * targets)
     aim = np.divide(centroid, below[..., None], out=targets.copy(), where=below[..., None] > 0)
     aim = np.where((weights > 0)[..., None], targets, aim)
     has_aim = below > 0
@@ -194,7 +200,7 @@ def fit_fixed_lengths(
     )
 
     vectors = _initial_vectors(tree, targets, total, lengths, fallback_vectors)
-    positions = np.einsum("cj,pck->pjk", tree.subtree, vectors)
+    positions = tree.subtree_t @ vectors
     problem = (tree, targets, total, lengths)
     positions, vectors = _coordinate_sweeps(
         *problem, positions=positions, vectors=vectors, sweeps=sweeps
@@ -216,11 +222,13 @@ def _coordinate_sweeps(
     subtree_weight = total @ tree.subtree.T  # (P, J): weight below (and at) each joint
     constrained = np.isfinite(lengths)
     for _ in range(sweeps):
-        for level, rows in zip(tree.levels, tree.level_subtrees, strict=True):
+        for level, rows, below in zip(
+            tree.levels, tree.level_subtrees, tree.level_below, strict=True
+        ):
             residual = total[..., None] * (targets - positions)
             w_sub = subtree_weight[:, level, None]
             old = vectors[:, level]
-            pull = np.einsum("cj,pjk->pck", rows, residual) + w_sub * old
+            pull = rows @ residual + w_sub * old
             norm = _norm(pull)[..., None]
             on_sphere = lengths[:, level, None] * pull / np.where(norm > _EPS, norm, 1.0)
             free = pull / np.where(w_sub > _EPS, w_sub, 1.0)
@@ -228,7 +236,7 @@ def _coordinate_sweeps(
             # No weight anywhere below this link: nothing to fit, keep the previous vector.
             new = np.where((w_sub > _EPS) & (norm > _EPS), new, old)
             vectors[:, level] = new
-            positions += np.einsum("cj,pck->pjk", rows, new - old)
+            positions += below @ (new - old)
     return positions, vectors
 
 
@@ -237,9 +245,18 @@ def _tangent_basis(directions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     helper = np.where(
         (np.abs(directions[..., 0]) < 0.9)[..., None], np.array([1.0, 0, 0]), np.array([0, 1.0, 0])
     )
-    first = np.cross(directions, helper)
-    first /= np.linalg.norm(first, axis=-1, keepdims=True)
-    return first, np.cross(directions, first)
+    first = _cross(directions, helper)
+    first /= _norm(first)[..., None]
+    return first, _cross(directions, first)
+
+
+def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """``np.cross`` of ``(..., 3)`` vectors, the same products without its axis handling."""
+    out = np.empty(np.broadcast_shapes(a.shape, b.shape))
+    out[..., 0] = a[..., 1] * b[..., 2] - a[..., 2] * b[..., 1]
+    out[..., 1] = a[..., 2] * b[..., 0] - a[..., 0] * b[..., 2]
+    out[..., 2] = a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]
+    return out
 
 
 def _objective(positions: np.ndarray, targets: np.ndarray, total: np.ndarray) -> np.ndarray:
@@ -263,8 +280,8 @@ def _gauss_newton(
     n_params = 3 * n_joints
     constrained = np.isfinite(lengths)
     scale = np.where(constrained, lengths, 1.0)
-    shared = np.einsum("cj,pj,dj->pcd", tree.subtree, total, tree.subtree)
-    shared = np.repeat(np.repeat(shared, 3, axis=1), 3, axis=2)
+    shared = (tree.subtree * total[:, None, :]) @ tree.subtree_t
+    joint_of = np.arange(n_params) // 3  # parameter -> its link (3 per link)
     # A calibrated link has only 2 tangent parameters: its third (zero) column gets a unit
     # diagonal so the system stays regular; a tiny Levenberg term covers weightless subtrees.
     padding = np.zeros((n_people, n_joints, 3))
@@ -277,9 +294,10 @@ def _gauss_newton(
     same = (real == real[0]).all() and not real[0].all()
     keep = np.flatnonzero(real[0]) if same else None
     if keep is not None:
-        shared = shared[:, keep[:, None], keep]
+        joint_of = joint_of[keep]
         padding = padding[:, keep]
-    diagonal = np.arange(shared.shape[1])
+    shared = shared[:, joint_of[:, None], joint_of]  # the link weights of every parameter pair
+    diagonal = np.arange(len(joint_of))
     identity = np.eye(3)
     cost = _objective(positions, targets, total)
     for _ in range(refinements):
@@ -289,8 +307,8 @@ def _gauss_newton(
         )
         basis = np.where(constrained[..., None, None], basis, identity)  # (P, J, 3 params, 3 xyz)
         flat = basis.reshape(n_people, n_params, 3)
-        pull = np.einsum("cj,pjk->pck", tree.subtree, total[..., None] * (targets - positions))
-        gradient = np.einsum("pcak,pck->pca", basis, pull).reshape(n_people, n_params, 1)
+        pull = tree.subtree @ (total[..., None] * (targets - positions))
+        gradient = (basis * pull[:, :, None, :]).sum(axis=-1).reshape(n_people, n_params, 1)
         if keep is not None:
             flat, gradient = flat[:, keep], gradient[:, keep]
         normal = shared * (flat @ flat.transpose(0, 2, 1))
@@ -302,10 +320,10 @@ def _gauss_newton(
             step[:, keep] = solved
             solved = step
         step = solved.reshape(n_people, n_joints, 3)
-        candidate = vectors + np.einsum("pca,pcak->pck", step, basis)
+        candidate = vectors + (step[..., None] * basis).sum(axis=-2)
         norm = _norm(candidate)[..., None]
         candidate = np.where(constrained[..., None], candidate * scale[..., None] / norm, candidate)
-        moved = np.einsum("cj,pck->pjk", tree.subtree, candidate)
+        moved = tree.subtree_t @ candidate
         new_cost = _objective(moved, targets, total)
         better = (new_cost < cost) & np.isfinite(new_cost)
         vectors = np.where(better[:, None, None], candidate, vectors)
