@@ -60,6 +60,9 @@ class _Channels:
     first: tuple[np.ndarray, np.ndarray]  # joint index pairs of each channel's first distance
     second: tuple[np.ndarray, np.ndarray]  # and of its mirror image
     take_max: np.ndarray  # (C,) True: channel is max(first, second); False: min
+    pairs: tuple[np.ndarray, np.ndarray]  # (D,) the distinct joint pairs whose distances count
+    first_pair: np.ndarray  # (C,) index into ``pairs`` of each channel's first distance
+    second_pair: np.ndarray  # (C,) and of its mirror image
 
 
 @cache
@@ -69,7 +72,8 @@ def _channels(layout: Layout, joints: tuple[int, ...], mirror_invariant: bool) -
     mirror = np.array([local[int(layout.mirror[j])] for j in joints_arr])
     i, j = np.triu_indices(len(joints), k=1)
     if not mirror_invariant:
-        return _Channels((i, j), (i, j), np.zeros(len(i), dtype=bool))
+        pair = (joints_arr[i], joints_arr[j])
+        return _with_pairs(pair, pair, np.zeros(len(i), dtype=bool))
     mi, mj = np.minimum(mirror[i], mirror[j]), np.maximum(mirror[i], mirror[j])
     # each unordered orbit {c, mirror(c)} gives two channels (min and max) or one when c is
     # its own mirror image; the pair (i, j) <= (mi, mj) in lexicographic order keeps one copy
@@ -83,10 +87,24 @@ def _channels(layout: Layout, joints: tuple[int, ...], mirror_invariant: bool) -
     take_max = np.concatenate(
         [np.zeros(self_mirror.sum(), bool), np.zeros(lead.sum(), bool), np.ones(lead.sum(), bool)]
     )
-    return _Channels(
+    return _with_pairs(
         (joints_arr[first_i], joints_arr[first_j]),
         (joints_arr[second_i], joints_arr[second_j]),
         take_max,
+    )
+
+
+def _with_pairs(
+    first: tuple[np.ndarray, np.ndarray],
+    second: tuple[np.ndarray, np.ndarray],
+    take_max: np.ndarray,
+) -> _Channels:
+    """The tables plus the distinct joint pairs, so each distance is computed once per frame."""
+    codes = np.concatenate([first[0] * 4096 + first[1], second[0] * 4096 + second[1]])
+    unique, inverse = np.unique(codes, return_inverse=True)
+    n = len(first[0])
+    return _Channels(
+        first, second, take_max, (unique // 4096, unique % 4096), inverse[:n], inverse[n:]
     )
 
 
@@ -146,12 +164,12 @@ def pose_signature(
     """The inter-joint distance signature of a track over the given joints."""
     tables = _channels(track.layout, tuple(int(j) for j in joints), mirror_invariant)
     pos, w = track.positions, track.weights
-    d1 = np.linalg.norm(pos[:, tables.first[0]] - pos[:, tables.first[1]], axis=2)
-    d2 = np.linalg.norm(pos[:, tables.second[0]] - pos[:, tables.second[1]], axis=2)
+    # each distinct joint pair's distance and weight once, then gathered into the channels
+    delta = pos[:, tables.pairs[0]] - pos[:, tables.pairs[1]]
+    distance = np.sqrt(np.einsum("tdk,tdk->td", delta, delta))
+    pair_weight = w[:, tables.pairs[0]] * w[:, tables.pairs[1]]
+    d1, d2 = distance[:, tables.first_pair], distance[:, tables.second_pair]
     values = np.where(tables.take_max, (d1 - d2) ** 2 / _SQUARE_SCALE, 0.5 * (d1 + d2))
-    weights = np.minimum(
-        w[:, tables.first[0]] * w[:, tables.first[1]],
-        w[:, tables.second[0]] * w[:, tables.second[1]],
-    )
+    weights = np.minimum(pair_weight[:, tables.first_pair], pair_weight[:, tables.second_pair])
     weights = np.where(np.isfinite(values), weights, 0.0)
     return PoseSignature(track, values, weights)

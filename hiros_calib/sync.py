@@ -31,6 +31,7 @@ from __future__ import annotations
 import itertools
 import math
 from dataclasses import dataclass, field
+from functools import cached_property
 from typing import Any
 
 import numpy as np
@@ -213,22 +214,11 @@ class _Curve:
             return self.sab / np.sqrt(self.saa * self.sbb)
 
 
-def _correlate(a: _GridSignal, b: _GridSignal, nfft: int, cache: dict[int, Any]) -> _Curve:
+def _correlate(a: _GridSignal, b: _GridSignal, nfft: int, work: _TrackWork) -> _Curve:
     """All-lag sums for ``tau = (a.k0 - b.k0 + k) * step``: a[n] against b[n - k]."""
-
-    def spectra(signal: _GridSignal) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        key = id(signal)
-        if key not in cache:
-            cache[key] = (
-                rfft(signal.values, n=nfft, axis=0),
-                rfft(signal.present, n=nfft),
-                rfft(signal.energy, n=nfft),
-            )
-        return cache[key]
-
-    fa, pa, ea = spectra(a)
-    fb, pb, eb = spectra(b)
-    sab = irfft((fa * np.conj(fb)).sum(axis=1), n=nfft)
+    fa, pa, ea = work.spectra(a, nfft)
+    fb, pb, eb = work.spectra(b, nfft)
+    sab = irfft(np.einsum("fc,fc->f", fa, np.conj(fb)), n=nfft)
     saa = irfft(ea * np.conj(pb), n=nfft)
     sbb = irfft(pa * np.conj(eb), n=nfft)
     count = irfft(pa * np.conj(pb), n=nfft)
@@ -307,7 +297,7 @@ class _Spline:
 
     ``values`` is evaluated at arbitrary (shifted) times; ``weights`` are tabulated every
     ``step`` from ``start`` and looked up by nearest sample, which is plenty for weights and
-    much cheaper than interpolating them at every trial lag.
+    much cheaper than interpolating them at every trial lag (see :meth:`weights_from`).
     """
 
     start: float
@@ -327,9 +317,22 @@ class _Spline:
         grid = np.arange(times[0], times[-1], step)
         return cls(float(times[0]), float(times[-1]), step, spline, _resample(times, weights, grid))
 
-    def weights_at(self, t: np.ndarray) -> np.ndarray:
-        index = np.clip(np.round((t - self.start) / self.step).astype(np.int64), 0, None)
-        return self.weights[np.minimum(index, len(self.weights) - 1)]
+    def weights_from(self, t0: float, count: int) -> np.ndarray:
+        """Weights at ``t0 + k * step`` for ``k < count`` (nearest sample, clamped at the ends).
+
+        The trial instants share the tabulation's step, so this is a slice, not a gather.
+        """
+        first = round((t0 - self.start) / self.step)
+        if first >= 0 and first + count <= len(self.weights):
+            return self.weights[first : first + count]
+        index = np.clip(np.arange(first, first + count), 0, len(self.weights) - 1)
+        return self.weights[index]
+
+    @cached_property
+    def tabulated(self) -> tuple[np.ndarray, np.ndarray]:
+        """``(N,)`` the weight grid's times and ``(N, C)`` the values there."""
+        times = self.start + np.arange(len(self.weights)) * self.step
+        return times, self.values(times)
 
 
 @dataclass
@@ -344,8 +347,8 @@ class _RefinePair:
 
     @classmethod
     def build(cls, a: _Spline, b: _Spline) -> _RefinePair:
-        times = a.start + np.arange(len(a.weights)) * a.step
-        return cls(a, b, times, a.values(times), a.weights)
+        times, values = a.tabulated
+        return cls(a, b, times, values, a.weights)
 
     def sums(self, tau: float, span: tuple[float, float]) -> tuple[float, float, float]:
         """Weighted covariance and variances (summed over channels) with b shifted by ``tau``.
@@ -359,13 +362,16 @@ class _RefinePair:
         if i1 - i0 < 4:
             return 0.0, 0.0, 0.0
         t = self.times[i0:i1]
-        w = self.weights[i0:i1] * self.b.weights_at(t - tau)
+        w = self.weights[i0:i1] * self.b.weights_from(float(t[0]) - tau, i1 - i0)
         va, vb = self.values[i0:i1], self.b.values(t - tau)
+        # sum w (a - mean_a)(b - mean_b) = sum w a b - (sum w a)(sum w b) / sum w, per channel
         total = np.maximum(w.sum(axis=0), 1e-12)
-        mean_a = (w * va).sum(axis=0) / total
-        mean_b = (w * vb).sum(axis=0) / total
-        da, db = va - mean_a, vb - mean_b
-        return float((w * da * db).sum()), float((w * da * da).sum()), float((w * db * db).sum())
+        wa, wb = w * va, w * vb
+        sum_a, sum_b = wa.sum(axis=0), wb.sum(axis=0)
+        sab = np.einsum("nc,nc->c", wa, vb) - sum_a * sum_b / total
+        saa = np.einsum("nc,nc->c", wa, va) - sum_a * sum_a / total
+        sbb = np.einsum("nc,nc->c", wb, vb) - sum_b * sum_b / total
+        return float(sab.sum()), float(saa.sum()), float(sbb.sum())
 
     def overlap(self, tau: float, span: tuple[float, float]) -> float:
         """Seconds of common data with b shifted by ``tau`` inside ``span``."""
@@ -402,6 +408,65 @@ def _refine(
     return float(result.x), float(-result.fun)
 
 
+# --------------------------------------------------------------------------- shared work
+
+
+class _TrackWork:
+    """Per-track results that every camera pair of the track's camera reuses.
+
+    With N cameras each camera is in N - 1 pairs; its tracks' signatures, grid signals,
+    spectra and splines are computed once. Keys are object ids of inputs the cache keeps
+    alive (tracks are kept with their signature), so an id is never reused for another
+    object while the cache exists.
+    """
+
+    def __init__(self, params: SyncParams, nfft: int = 0) -> None:
+        self.params = params
+        self.nfft = nfft
+        self._signature: dict[int, tuple[BodyTrack, PoseSignature]] = {}
+        self._motion: dict[int, float] = {}
+        self._grid: dict[int, _GridSignal | None] = {}
+        self._spectra: dict[tuple[int, int], tuple[np.ndarray, ...]] = {}
+        self._spline: dict[int, _Spline] = {}
+
+    def signatures(self, tracks: list[BodyTrack]) -> list[PoseSignature]:
+        out = []
+        for track in tracks:
+            if id(track) not in self._signature:
+                joints = select_joints(track.layout, self.params.joints)
+                signature = pose_signature(
+                    track, joints, mirror_invariant=self.params.mirror_invariant
+                )
+                self._signature[id(track)] = (track, signature)
+            out.append(self._signature[id(track)][1])
+        return out
+
+    def motion(self, signature: PoseSignature) -> float:
+        if id(signature) not in self._motion:
+            self._motion[id(signature)] = signature.motion()
+        return self._motion[id(signature)]
+
+    def grid(self, signature: PoseSignature) -> _GridSignal | None:
+        if id(signature) not in self._grid:
+            self._grid[id(signature)] = _grid_signal(signature, self.params.grid_step)
+        return self._grid[id(signature)]
+
+    def spectra(self, signal: _GridSignal, nfft: int) -> tuple[np.ndarray, ...]:
+        key = (id(signal), nfft)
+        if key not in self._spectra:
+            self._spectra[key] = (
+                rfft(signal.values, n=nfft, axis=0),
+                rfft(signal.present, n=nfft),
+                rfft(signal.energy, n=nfft),
+            )
+        return self._spectra[key]
+
+    def spline(self, signature: PoseSignature) -> _Spline:
+        if id(signature) not in self._spline:
+            self._spline[id(signature)] = _Spline.build(signature, self.params.refine_step)
+        return self._spline[id(signature)]
+
+
 # --------------------------------------------------------------------------- pair estimate
 
 
@@ -417,13 +482,15 @@ def estimate_pair_offset(
     camera_a: str = "a",
     camera_b: str = "b",
     prior: float | None = None,
+    work: _TrackWork | None = None,
 ) -> PairOffset:
     """The clock lag ``tau = t_a - t_b`` between two cameras from their body tracks.
 
     ``prior`` is the lag the message arrival times suggest (s); the search is then limited to
-    ``prior ± prior_window``, else to ``± max_offset`` (everything when that is 0).
+    ``prior ± prior_window``, else to ``± max_offset`` (everything when that is 0). ``work``
+    shares per-track results between the pairs of one :func:`synchronise` call.
     """
-    step = params.grid_step
+    work = work if work is not None else _TrackWork(params)
     if prior is not None:
         search: tuple[float, float] | None = (
             prior - params.prior_window,
@@ -433,11 +500,11 @@ def estimate_pair_offset(
         search = (-params.max_offset, params.max_offset)
     else:
         search = None
-    sig_a, sig_b = (_signatures(tracks, params) for tracks in (tracks_a, tracks_b))
+    sig_a, sig_b = work.signatures(tracks_a), work.signatures(tracks_b)
     if not sig_a or not sig_b:
         return _refused(camera_a, camera_b, "a camera saw no body track")
-    moving_a = [i for i, s in enumerate(sig_a) if s.motion() >= params.min_motion]
-    moving_b = [j for j, s in enumerate(sig_b) if s.motion() >= params.min_motion]
+    moving_a = [i for i, s in enumerate(sig_a) if work.motion(s) >= params.min_motion]
+    moving_b = [j for j, s in enumerate(sig_b) if work.motion(s) >= params.min_motion]
     if not moving_a or not moving_b:
         still = camera_a if not moving_a else camera_b
         return _refused(
@@ -455,19 +522,18 @@ def estimate_pair_offset(
             f"too short: the longest moving track lasts {min(span_a, span_b):.1f} s, "
             f"{params.min_overlap:.1f} s are needed",
         )
-    grid_a = {i: _grid_signal(sig_a[i], step) for i in moving_a}
-    grid_b = {j: _grid_signal(sig_b[j], step) for j in moving_b}
+    grid_a = {i: work.grid(sig_a[i]) for i in moving_a}
+    grid_b = {j: work.grid(sig_b[j]) for j in moving_b}
     grid_a = {i: g for i, g in grid_a.items() if g is not None}
     grid_b = {j: g for j, g in grid_b.items() if g is not None}
     length = max(len(g.present) for g in grid_a.values()) + max(
         len(g.present) for g in grid_b.values()
     )
-    nfft = next_fast_len(length)
-    cache: dict[int, Any] = {}
+    nfft = work.nfft if work.nfft >= length else next_fast_len(length)
     candidates: list[_Candidate] = []
     for i, ga in grid_a.items():
         for j, gb in grid_b.items():
-            curve = _correlate(ga, gb, nfft, cache)
+            curve = _correlate(ga, gb, nfft, work)
             found = _peak(curve, params, search)
             if found is not None:
                 candidates.append(_Candidate(i, j, curve, *found))
@@ -501,15 +567,8 @@ def estimate_pair_offset(
         sig_a=sig_a,
         sig_b=sig_b,
         params=params,
+        work=work,
     )
-
-
-def _signatures(tracks: list[BodyTrack], params: SyncParams) -> list[PoseSignature]:
-    out = []
-    for track in tracks:
-        joints = select_joints(track.layout, params.joints)
-        out.append(pose_signature(track, joints, mirror_invariant=params.mirror_invariant))
-    return out
 
 
 def _consensus(good: list[_Candidate], params: SyncParams) -> list[_Candidate]:
@@ -563,6 +622,7 @@ def _finish(
     sig_a: list[PoseSignature],
     sig_b: list[PoseSignature],
     params: SyncParams,
+    work: _TrackWork,
 ) -> PairOffset:
     step = params.grid_step
     first, pooled = _pooled_curve(used)
@@ -571,13 +631,10 @@ def _finish(
     lo, hi = max(0, centre - half), min(len(pooled), centre + half + 1)
     local = int(np.nanargmax(pooled[lo:hi])) + lo
     tau_parabola = (first + _parabolic(pooled, local)) * step
-    splines: dict[tuple[str, int], _Spline] = {}
-    pairs = []
-    for c in used:
-        for side, index, signatures in (("a", c.index_a, sig_a), ("b", c.index_b, sig_b)):
-            if (side, index) not in splines:
-                splines[side, index] = _Spline.build(signatures[index], params.refine_step)
-        pairs.append(_RefinePair.build(splines["a", c.index_a], splines["b", c.index_b]))
+    pairs = [
+        _RefinePair.build(work.spline(sig_a[c.index_a]), work.spline(sig_b[c.index_b]))
+        for c in used
+    ]
     tau, corr = _refine(tau_parabola, 2 * step, pairs)
     windows = _windows(tau, pairs, params)
     quality = {
@@ -781,13 +838,21 @@ def synchronise(
     """
     cameras = list(tracks)
     arrival = arrival_offsets or {}
+    step = params.grid_step
+    longest = max(
+        (math.floor(t.end / step) - math.ceil(t.start / step) + 1 for ts in tracks.values()
+         for t in ts),
+        default=0,
+    )  # fmt: skip
+    # one FFT length for every pair, so each track's spectra serve all its camera's pairs
+    work = _TrackWork(params, next_fast_len(2 * longest))
     pairs = []
     for k, a in enumerate(cameras):
         for b in cameras[k + 1 :]:
             prior = arrival[b] - arrival[a] if a in arrival and b in arrival else None
             pairs.append(
                 estimate_pair_offset(
-                    tracks[a], tracks[b], params, camera_a=a, camera_b=b, prior=prior
+                    tracks[a], tracks[b], params, camera_a=a, camera_b=b, prior=prior, work=work
                 )
             )
     return solve_clocks(cameras, reference, pairs, clock_epochs(tracks), params), pairs
