@@ -38,7 +38,7 @@ import numpy as np
 
 from hiros_core.errors import ConfigError
 from hiros_core.layouts import Layout, get_layout
-from hiros_core.model import Skeleton, SkeletonGroup, ns_to_sec
+from hiros_core.model import Skeleton, SkeletonGroup, link_rows, ns_to_sec
 from hiros_optimizer.kinematics import KinematicTree, fit_fixed_lengths, link_lengths
 
 __all__ = ["Optimizer", "OptimizerParams", "PersonCalibration"]
@@ -381,11 +381,16 @@ class Optimizer:
             self._accept(layout, full)
 
     def _remember_all(
-        self, tracks: list[_Track], skeletons: list[Skeleton], positions: np.ndarray
+        self,
+        tracks: list[_Track],
+        skeletons: list[Skeleton],
+        positions: np.ndarray,
+        vectors: np.ndarray | None = None,
     ) -> None:
-        """:meth:`_remember` (without link vectors) of several tracks at once.
+        """:meth:`_remember` of several tracks at once.
 
-        ``positions`` ``(P, J, 3)`` are the skeletons' positions, NaN where absent.
+        ``positions`` ``(P, J, 3)`` are the skeletons' positions, NaN where absent;
+        ``vectors`` ``(P, J, 3)`` their fitted link vectors (None while learning).
         """
         previous = np.full_like(positions, np.nan)
         dt = np.zeros(len(tracks))
@@ -407,7 +412,7 @@ class Optimizer:
                     track.velocities = velocities[row]
                 # A joint missing this frame keeps its last position (the prediction survives).
                 track.positions = kept[row]
-            track.vectors = None
+            track.vectors = None if vectors is None else vectors[row]
             track.time_ns = skeleton.src_time_ns
 
     def _accept(self, layout: Layout, full: list[tuple[int, _Track]]) -> None:
@@ -448,13 +453,16 @@ class Optimizer:
         layout = items[0][1].layout
         tree = self._tree(layout)
         n_people, n_joints = len(items), layout.n_joints
-        measured = np.array([skeleton.positions for _, skeleton, _ in items])
-        floor = self.params.confidence_floor
-        weights = np.array([_weights(skeleton, floor) for _, skeleton, _ in items])
-        lengths = np.array([track.calibration.lengths for _, _, track in items])
+        skeletons = [skeleton for _, skeleton, _ in items]
+        tracks = [track for _, _, track in items]
+        markers = np.array([skeleton.markers for skeleton in skeletons])  # the output rows
+        present = np.array([skeleton.marker_present for skeleton in skeletons])
+        measured = markers[..., 1:4].copy()
+        weights = _stacked_weights(skeletons, present, self.params.confidence_floor)
+        lengths = np.array([track.calibration.lengths for track in tracks])
         prior = np.full((n_people, n_joints, 3), np.nan)
         fallback = np.full((n_people, n_joints, 3), np.nan)
-        for row, (_, skeleton, track) in enumerate(items):
+        for row, (skeleton, track) in enumerate(zip(skeletons, tracks, strict=True)):
             if track.positions is not None:
                 dt = max(ns_to_sec(skeleton.src_time_ns - track.time_ns), 0.0)
                 velocity = 0.0 if track.velocities is None else track.velocities
@@ -472,11 +480,16 @@ class Optimizer:
             sweeps=self.params.sweeps,
             refinements=self.params.refinements,
         )
-        for row, (_, skeleton, track) in enumerate(items):
-            present = skeleton.marker_present
-            skeleton.positions[present] = positions[row, present]
-            skeleton.update_links()
-            self._remember(track, skeleton, vectors[row])
+        # Present joints take the fit; links of everyone at once; the skeletons (the stage's
+        # own copies) take the new rows.
+        np.copyto(markers[..., 1:4], positions, where=present[..., None])
+        links, link_present = link_rows(markers, present, layout)
+        for row, skeleton in enumerate(skeletons):
+            skeleton.markers, skeleton.links = markers[row], links[row]
+            skeleton.link_present = link_present[row]
+        self._remember_all(
+            tracks, skeletons, np.where(present[..., None], markers[..., 1:4], np.nan), vectors
+        )
 
     def _outlier_factors(
         self, tree: KinematicTree, measured: np.ndarray, lengths: np.ndarray, prior: np.ndarray
@@ -489,21 +502,6 @@ class Optimizer:
             distance = np.linalg.norm(measured - prior, axis=-1)
             factor = np.minimum(1.0, (self.params.outlier_distance / distance) ** 2)
         return np.where(suspect & np.isfinite(factor), factor, 1.0)
-
-    def _remember(self, track: _Track, skeleton: Skeleton, vectors: np.ndarray | None) -> None:
-        positions = np.where(skeleton.marker_present[:, None], skeleton.positions, np.nan)
-        dt = 0.0 if track.time_ns is None else ns_to_sec(skeleton.src_time_ns - track.time_ns)
-        if track.positions is not None and dt >= _MIN_VELOCITY_DT:
-            velocities = (positions - track.positions) / dt
-            track.velocities = np.where(np.isfinite(velocities), velocities, 0.0)
-        elif track.positions is None:
-            track.velocities = None
-        # A joint missing this frame keeps its last position so the prediction survives gaps.
-        if track.positions is not None:
-            positions = np.where(np.isfinite(positions), positions, track.positions)
-        track.positions = positions
-        track.vectors = vectors
-        track.time_ns = skeleton.src_time_ns
 
 
 def _nanmedian_last(values: np.ndarray, count: np.ndarray) -> np.ndarray:
@@ -522,14 +520,10 @@ def _nanmedian_last(values: np.ndarray, count: np.ndarray) -> np.ndarray:
     return np.where(count > 0, (low + high) / 2, np.nan)
 
 
-def _stacked_weights(skeletons: list[Skeleton], present: np.ndarray) -> np.ndarray:
-    """``(P, J)`` :func:`_weights` of several skeletons of one layout (floor 0)."""
+def _stacked_weights(
+    skeletons: list[Skeleton], present: np.ndarray, floor: float = 0.0
+) -> np.ndarray:
+    """``(P, J)`` :func:`_weights` of several skeletons of one layout."""
     confidence = np.array([skeleton.confidences for skeleton in skeletons])
     confidence = np.where(np.isfinite(confidence), confidence, 1.0)
-    return np.where(present, np.clip(confidence, 0.0, None), 0.0)
-
-
-def _weights(skeleton: Skeleton, floor: float = 0.0) -> np.ndarray:
-    """``(J,)`` weights: the confidence (1 when unknown) but at least ``floor``; 0 if absent."""
-    confidence = np.where(np.isfinite(skeleton.confidences), skeleton.confidences, 1.0)
-    return np.where(skeleton.marker_present, np.clip(confidence, floor, None), 0.0)
+    return np.where(present, np.clip(confidence, floor, None), 0.0)
