@@ -250,13 +250,13 @@ def _tangent_basis(directions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return first, _cross(directions, first)
 
 
+_NEXT = np.array([1, 2, 0])
+_AFTER = np.array([2, 0, 1])
+
+
 def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """``np.cross`` of ``(..., 3)`` vectors, the same products without its axis handling."""
-    out = np.empty(np.broadcast_shapes(a.shape, b.shape))
-    out[..., 0] = a[..., 1] * b[..., 2] - a[..., 2] * b[..., 1]
-    out[..., 1] = a[..., 2] * b[..., 0] - a[..., 0] * b[..., 2]
-    out[..., 2] = a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]
-    return out
+    """``np.cross`` of ``(..., 3)`` vectors: the same products, as four gathers."""
+    return a[..., _NEXT] * b[..., _AFTER] - a[..., _AFTER] * b[..., _NEXT]
 
 
 def _objective(positions: np.ndarray, targets: np.ndarray, total: np.ndarray) -> np.ndarray:
@@ -302,10 +302,10 @@ def _gauss_newton(
     cost = _objective(positions, targets, total)
     for _ in range(refinements):
         first, second = _tangent_basis(vectors / scale[..., None])
-        basis = np.stack(
-            [first * scale[..., None], second * scale[..., None], np.zeros_like(first)], axis=-2
-        )
-        basis = np.where(constrained[..., None, None], basis, identity)  # (P, J, 3 params, 3 xyz)
+        basis = np.zeros((*first.shape[:-1], 3, 3))  # (P, J, 3 params, 3 xyz)
+        basis[..., 0, :] = first * scale[..., None]
+        basis[..., 1, :] = second * scale[..., None]
+        basis = np.where(constrained[..., None, None], basis, identity)
         flat = basis.reshape(n_people, n_params, 3)
         pull = tree.subtree @ (total[..., None] * (targets - positions))
         gradient = (basis * pull[:, :, None, :]).sum(axis=-1).reshape(n_people, n_params, 1)
