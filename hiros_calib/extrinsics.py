@@ -16,8 +16,9 @@ For each camera pair:
    spread the sample), from different frames.
 4. **Per-frame mirror choice.** With that pose, each frame keeps the straight or the
    left/right-swapped correspondence of the full joint set, whichever fits better.
-5. **Robust refinement** of all correspondences with ``scipy.optimize.least_squares``
-   (``soft_l1`` or ``huber`` loss).
+5. **Robust refinement** of all correspondences: Gauss-Newton with iteratively reweighted
+   least squares on the robust loss (``soft_l1``, ``huber``, ``cauchy`` or ``linear``) of
+   each 3D residual, analytic Jacobians (:func:`_robust_solve`).
 
 All cameras are then refined jointly (:func:`solve_poses`): every pair's correspondences in
 one least-squares problem over all camera poses (reference fixed), so loops close.
@@ -31,7 +32,6 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
-from scipy.optimize import least_squares
 from scipy.spatial.transform import Rotation
 
 from hiros_calib.signature import DEFAULT_JOINTS, pose_signature, select_joints
@@ -63,6 +63,8 @@ class ExtrinsicsParams:
     """Largest median signature difference (m) for two tracks to be the same person."""
     min_common_time: float = 2.0
     """Two tracks must be seen together this long (s) to be paired (short ghosts are not)."""
+    association_frames: int = 300
+    """Common instants (evenly subsampled) over which two tracks' signatures are compared."""
     pose_joints: list[str] = field(default_factory=list)
     """Joints used as correspondences; empty = every joint of the layout (more joints
     average out more of the SDK's fixed per-joint errors)."""
@@ -78,6 +80,8 @@ class ExtrinsicsParams:
     SDK that took the back for the front moves every limb)."""
     ransac_iterations: int = 400
     """Minimal samples tried per camera pair."""
+    ransac_checks: int = 1000
+    """Correspondences (random) each RANSAC sample is scored on."""
     loss: str = "soft_l1"
     """Robust loss of the refinement (``soft_l1``, ``huber``, ``cauchy`` or ``linear``)."""
     loss_scale: float = 0.0
@@ -89,6 +93,10 @@ class ExtrinsicsParams:
     """Samples' worth of pull towards 0 on each joint offset, so short tracks stay sane."""
     max_correspondences: int = 6000
     """Joint correspondences per camera pair kept for the refinements (evenly subsampled)."""
+    max_frames: int = 1000
+    """Frames (body pairs at one instant) per camera pair kept for the pose, evenly
+    subsampled: the SDK's errors are correlated over several frames (about 0.2 s), so at 30 Hz
+    neighbouring frames add little information and a minute of three people is plenty."""
     min_correspondences: int = 30
     """Fewer usable correspondences than this and the pair gives no pose."""
     seed: int = 0
@@ -164,6 +172,19 @@ class Correspondences:
     def n_frames(self) -> int:
         """Number of frames F."""
         return len(self.points_a)
+
+    def take(self, frames: np.ndarray) -> Correspondences:
+        """The correspondences of the given frames (indices, in order)."""
+        return Correspondences(
+            self.points_a[frames],
+            self.points_b[frames],
+            self.weights[frames],
+            self.mirror,
+            self.joint_names,
+            self.groups,
+            self.times[frames],
+            self.bodies[frames],
+        )
 
     @staticmethod
     def concatenate(items: list[Correspondences]) -> Correspondences:
@@ -260,9 +281,12 @@ def associate(
         sig_a = pose_signature(ta, joints)
         for j, tb in enumerate(tracks_b):
             t_b = np.asarray(clock_b.from_reference(clock_a.to_reference(ta.times)))
-            common = (t_b >= tb.start) & (t_b <= tb.end)
-            if common.sum() < 10 or np.ptp(t_b[common]) < params.min_common_time:
+            common = np.flatnonzero((t_b >= tb.start) & (t_b <= tb.end))
+            if len(common) < 10 or t_b[common[-1]] - t_b[common[0]] < params.min_common_time:
                 continue
+            start, end = float(t_b[common[0]]), float(t_b[common[-1]])
+            # a median over a few hundred instants tells people apart as well as all of them
+            common = common[_subsample(len(common), params.association_frames)]
             part_b = BodyTrack(tb.camera, tb.body_id, tb.layout, *_at(tb, t_b[common], params))
             sig_b = pose_signature(part_b, joints)
             w = sig_a.weights[common] * sig_b.weights
@@ -274,7 +298,6 @@ def associate(
                 continue
             mismatch = float(np.median(per_frame))
             if mismatch <= params.max_signature_mismatch:
-                start, end = float(t_b[common][0]), float(t_b[common][-1])
                 scored.append((mismatch, i, j, start, end))
     scored.sort()
     taken_a: dict[int, list[tuple[float, float]]] = {}
@@ -372,7 +395,7 @@ def _ransac(
         np.cross(sample_b[:, 1] - sample_b[:, 0], sample_b[:, 2] - sample_b[:, 0]), axis=1
     )
     rotation, translation = _kabsch_batch(sample_a, sample_b, None)
-    check = rng.choice(n, size=min(n, 3000), replace=False)
+    check = rng.choice(n, size=min(n, params.ransac_checks), replace=False)
     moved = np.einsum("hij,nj->hni", rotation, points_b[check]) + translation[:, None]
     residual = np.linalg.norm(moved - points_a[check][None], axis=2)
     score = ((residual < params.inlier_threshold) * weights[check][None]).sum(axis=1)
@@ -419,10 +442,25 @@ def _choose_view(
 
 def _weighted_median_rows(values: np.ndarray, weights: np.ndarray) -> np.ndarray:
     """Median of each row over entries with positive weight (inf for an empty row)."""
-    masked = np.where(weights > 0, values, np.nan)
-    with np.errstate(all="ignore"):
-        out = np.nanmedian(masked, axis=1) if masked.size else np.empty(0)
+    out = _median_rows(values, weights > 0)
     return np.where(np.isfinite(out), out, np.inf)
+
+
+def _median_rows(values: np.ndarray, valid: np.ndarray) -> np.ndarray:
+    """Median of each row of ``(R, K)`` over its ``valid`` entries (NaN for an empty row).
+
+    One sort of the whole table instead of ``np.nanmedian``, which is many times slower on
+    short rows.
+    """
+    if values.size == 0:
+        return np.full(len(values), np.nan)
+    ordered = np.sort(np.where(valid, values, np.inf), axis=1)
+    count = valid.sum(axis=1)
+    rows = np.arange(len(values))
+    low = ordered[rows, np.maximum(count - 1, 0) // 2]
+    high = ordered[rows, np.maximum(count // 2, 0) - (count == 0)]
+    with np.errstate(invalid="ignore"):
+        return np.where(count > 0, 0.5 * (low + high), np.nan)
 
 
 def _flatten(
@@ -441,6 +479,99 @@ def _subsample(count: int, limit: int) -> np.ndarray:
     return np.linspace(0, count - 1, limit).round().astype(np.int64)
 
 
+def _loss_weights(z: np.ndarray, loss: str) -> np.ndarray:
+    """IRLS weight ``rho'(z)`` of a residual with squared scaled norm ``z = |r|^2 / s^2``."""
+    if loss == "soft_l1":
+        return 1.0 / np.sqrt(1.0 + z)
+    if loss == "huber":
+        return np.where(z <= 1.0, 1.0, 1.0 / np.sqrt(np.maximum(z, 1.0)))
+    if loss == "cauchy":
+        return 1.0 / (1.0 + z)
+    if loss == "linear":
+        return np.ones_like(z)
+    msg = f"unknown loss {loss!r}: use soft_l1, huber, cauchy or linear"
+    raise ValueError(msg)
+
+
+def _skew_columns(points: np.ndarray) -> np.ndarray:
+    """``(N, 3, 3)`` matrices ``[p]_x`` (cross product with each point)."""
+    out = np.zeros((len(points), 3, 3))
+    out[:, 0, 1], out[:, 0, 2] = -points[:, 2], points[:, 1]
+    out[:, 1, 0], out[:, 1, 2] = points[:, 2], -points[:, 0]
+    out[:, 2, 0], out[:, 2, 1] = -points[:, 1], points[:, 0]
+    return out
+
+
+@dataclass
+class _Terms:
+    """One set of correspondences ``T_a p_a - T_b p_b - offset`` of the robust solve."""
+
+    camera_a: str
+    camera_b: str
+    points_a: np.ndarray
+    points_b: np.ndarray
+    weights: np.ndarray
+    offsets: np.ndarray  # (N, 3) world frame, 0 when not modelled
+
+
+def _robust_solve(
+    poses: dict[str, RigidTransform],
+    unknown: list[str],
+    terms: list[_Terms],
+    *,
+    loss: str,
+    scale: float,
+    iterations: int = 100,
+    tolerance: float = 1e-10,
+) -> dict[str, RigidTransform]:
+    """Poses of the ``unknown`` cameras minimising ``sum w rho(|T_a p_a - T_b p_b - d|^2/s^2)``.
+
+    Gauss-Newton with iteratively reweighted least squares: each step solves the weighted
+    normal equations of the linearised residuals (analytic Jacobian, rotations perturbed on
+    the left, ``R <- exp(w) R``), the weights being the loss's influence at the current
+    residuals. The loss acts on each 3D residual's length, so the estimate does not depend
+    on how the world axes are oriented. A few small dense ``6U x 6U`` solves replace a generic
+    solver's finite-difference Jacobians of the whole residual vector.
+    """
+    poses = dict(poses)
+    column = {camera: 6 * k for k, camera in enumerate(unknown)}
+    size = 6 * len(unknown)
+    if not size:
+        return poses
+    for _ in range(iterations):
+        hessian = np.zeros((size, size))
+        gradient = np.zeros(size)
+        for t in terms:
+            moved_a = poses[t.camera_a].rotation.apply(t.points_a)
+            moved_b = poses[t.camera_b].rotation.apply(t.points_b)
+            residual = (
+                moved_a + poses[t.camera_a].translation
+                - moved_b - poses[t.camera_b].translation - t.offsets
+            )  # fmt: skip
+            z = np.einsum("ni,ni->n", residual, residual) / scale**2
+            w = t.weights * _loss_weights(z, loss)
+            jacobian = np.zeros((len(residual), 3, size))
+            for camera, moved, sign in ((t.camera_a, moved_a, 1.0), (t.camera_b, moved_b, -1.0)):
+                if camera in column:
+                    k = column[camera]
+                    jacobian[:, :, k : k + 3] = -sign * _skew_columns(moved)
+                    jacobian[:, :, k + 3 : k + 6] = sign * np.eye(3)
+            flat = jacobian.reshape(-1, size)
+            weight = np.repeat(w, 3)
+            hessian += flat.T @ (flat * weight[:, None])
+            gradient += flat.T @ (weight * residual.ravel())
+        step = -np.linalg.solve(hessian + 1e-12 * np.eye(size), gradient)
+        for camera, k in column.items():
+            pose = poses[camera]
+            poses[camera] = RigidTransform(
+                Rotation.from_rotvec(step[k : k + 3]) * pose.rotation,
+                pose.translation + step[k + 3 : k + 6],
+            )
+        if np.abs(step).max() < tolerance:
+            break
+    return poses
+
+
 def _refine_pair(
     points_a: np.ndarray,
     points_b: np.ndarray,
@@ -451,15 +582,9 @@ def _refine_pair(
     params: ExtrinsicsParams,
 ) -> RigidTransform:
     """Robust least-squares refinement of one b -> a pose (loss flattening at ``scale`` m)."""
-    root = np.sqrt(weights)[:, None]
-
-    def residuals(x: np.ndarray) -> np.ndarray:
-        moved = Rotation.from_rotvec(x[:3]).apply(points_b) + x[3:]
-        return ((moved - points_a) * root).ravel()
-
-    x0 = np.concatenate([pose.rotation.as_rotvec(), pose.translation])
-    result = least_squares(residuals, x0, loss=params.loss, f_scale=scale)
-    return RigidTransform(Rotation.from_rotvec(result.x[:3]), result.x[3:])
+    terms = [_Terms("a", "b", points_a, points_b, weights, np.zeros_like(points_a))]
+    start = {"a": RigidTransform.identity(), "b": pose}
+    return _robust_solve(start, ["b"], terms, loss=params.loss, scale=scale)["b"]
 
 
 def estimate_pair_pose(
@@ -476,7 +601,7 @@ def estimate_pair_pose(
             camera_b,
             reason="the two cameras never see the same person at the same time",
         )
-    c = correspondences
+    c = correspondences.take(_subsample(correspondences.n_frames, params.max_frames))
     rng = np.random.default_rng(params.seed)
     inv_a, inv_b, inv_w, inv_groups, _ = _invariant_points(c)
     if len(inv_a) < params.min_correspondences:
@@ -515,10 +640,11 @@ def estimate_pair_pose(
     good_frames[frame[keep]] = True
     # inverse-variance weights per joint: the SDK places some joints far less well
     residual = np.linalg.norm(pose.apply(points_b) - points_a, axis=1)
-    table = np.full((c.n_frames, len(c.mirror)), np.nan)
-    table[frame[keep], joint[keep]] = residual[keep]
-    with np.errstate(all="ignore"):
-        joint_scale = np.nanmedian(table, axis=0) / 1.54
+    table = np.zeros((len(c.mirror), c.n_frames))
+    valid = np.zeros(table.shape, dtype=bool)
+    table[joint[keep], frame[keep]] = residual[keep]
+    valid[joint[keep], frame[keep]] = True
+    joint_scale = _median_rows(table, valid) / 1.54
     joint_factor = np.where(
         np.isfinite(joint_scale), (scale / np.maximum(joint_scale, 1e-4)) ** 2, 0.0
     )
@@ -561,11 +687,13 @@ def _trusted(
     the median of all frames are left out whole.
     """
     residual = np.linalg.norm(pose.apply(points_b) - points_a, axis=1)
-    table = np.full((n_frames, int(joint.max()) + 1 if joint.size else 1), np.nan)
+    table = np.zeros((n_frames, int(joint.max()) + 1 if joint.size else 1))
+    valid = np.zeros(table.shape, dtype=bool)
     table[frame, joint] = residual
+    valid[frame, joint] = True
+    per_frame = _median_rows(table, valid)
     with np.errstate(all="ignore"):
-        per_frame = np.nanmedian(table, axis=1) if residual.size else np.full(n_frames, np.nan)
-    typical = float(np.nanmedian(per_frame))
+        typical = float(np.nanmedian(per_frame))
     good_frame = per_frame <= params.frame_outlier_ratio * typical
     in_good = good_frame[frame]
     scale = float(np.median(residual[in_good])) / 1.54 if in_good.any() else typical
@@ -629,23 +757,34 @@ class _Block:
     label: np.ndarray
     offsets: np.ndarray
 
-    def difference(self, x: np.ndarray, pose_of: Any) -> np.ndarray:
+    def difference(self, poses: dict[str, RigidTransform]) -> np.ndarray:
         """``(N, 3)`` T_a p_a - T_b p_b - offset, world frame."""
-        rot_a, t_a = pose_of(x, self.pair.camera_a)
-        rot_b, t_b = pose_of(x, self.pair.camera_b)
-        moved = rot_a.apply(self.points_a) + t_a - rot_b.apply(self.points_b) - t_b
-        return moved - self.offsets[self.label]
+        pose_a, pose_b = poses[self.pair.camera_a], poses[self.pair.camera_b]
+        return pose_a.apply(self.points_a) - pose_b.apply(self.points_b) - self.offsets[self.label]
 
-    def update_offsets(self, x: np.ndarray, pose_of: Any, scale: float, shrink: float) -> None:
+    def terms(self) -> _Terms:
+        """The block as terms of :func:`_robust_solve` (offsets at their current values)."""
+        return _Terms(
+            self.pair.camera_a,
+            self.pair.camera_b,
+            self.points_a,
+            self.points_b,
+            self.weights,
+            self.offsets[self.label],
+        )
+
+    def update_offsets(
+        self, poses: dict[str, RigidTransform], scale: float, shrink: float, loss: str
+    ) -> None:
         """Robust per-label mean residual, shrunk towards 0 and centred (weighted mean 0).
 
         Centring keeps the offsets from absorbing the translation: only how the SDKs
         disagree from joint to joint and person to person is modelled, not their average.
         """
         self.offsets[:] = 0.0
-        residual = self.difference(x, pose_of)
+        residual = self.difference(poses)
         norm2 = (residual**2).sum(axis=1) / scale**2
-        weight = self.weights / np.sqrt(1.0 + norm2)  # soft_l1 influence
+        weight = self.weights * _loss_weights(norm2, loss)
         count = np.bincount(self.label, weight, len(self.offsets))
         sums = np.stack(
             [np.bincount(self.label, weight * residual[:, k], len(self.offsets)) for k in range(3)],
@@ -690,21 +829,7 @@ def solve_poses(
         for p in pairs
         if p.ok and p.correspondences and p.camera_a in initial and p.camera_b in initial
     ]
-    index = {c: k for k, c in enumerate(unknown)}
-
-    def pose_of(x: np.ndarray, camera: str) -> tuple[Rotation, np.ndarray]:
-        if camera not in index:
-            return Rotation.identity(), np.zeros(3)
-        k = 6 * index[camera]
-        return Rotation.from_rotvec(x[k : k + 3]), x[k + 3 : k + 6]
-
-    def residuals(x: np.ndarray) -> np.ndarray:
-        rows = [b.difference(x, pose_of) * np.sqrt(b.weights)[:, None] for b in blocks]
-        return np.concatenate(rows).ravel()
-
-    x = np.concatenate(
-        [np.r_[initial[c].rotation.as_rotvec(), initial[c].translation] for c in unknown]
-    ) if unknown else np.zeros(0)  # fmt: skip
+    poses = {c: initial[c] for c in cameras if c in initial}
     scale = params.loss_scale or float(
         np.median([b.pair.quality["scale_m"] for b in blocks]) if blocks else 0.05
     )
@@ -712,13 +837,14 @@ def solve_poses(
         for round_index in range(params.joint_offset_rounds + 1):
             if round_index:
                 for block in blocks:
-                    block.update_offsets(x, pose_of, scale, params.offset_shrinkage)
-            x = least_squares(residuals, x, loss=params.loss, f_scale=scale).x
-    for camera in [c for c in cameras if c in initial]:
-        rotation, translation = pose_of(x, camera)
+                    block.update_offsets(poses, scale, params.offset_shrinkage, params.loss)
+            poses = _robust_solve(
+                poses, unknown, [b.terms() for b in blocks], loss=params.loss, scale=scale
+            )
+    for camera, transform in poses.items():
         pose = out[camera]
-        pose.status, pose.transform = "ok", RigidTransform(rotation, np.asarray(translation))
-        pose.quality = _pose_quality(camera, blocks, x, pose_of, params)
+        pose.status, pose.transform = "ok", transform
+        pose.quality = _pose_quality(camera, blocks, poses, params)
     return out
 
 
@@ -744,8 +870,7 @@ def _block(pair: PairPose, params: ExtrinsicsParams) -> _Block:
 def _pose_quality(
     camera: str,
     blocks: list[_Block],
-    x: np.ndarray,
-    pose_of: Any,
+    poses: dict[str, RigidTransform],
     params: ExtrinsicsParams,
 ) -> dict[str, Any]:
     """Residual figures of one camera over the pairs it belongs to, per joint too."""
@@ -753,7 +878,7 @@ def _pose_quality(
     if not mine:
         return {}
     names = mine[0].pair.correspondences.joint_names if mine[0].pair.correspondences else ()
-    residual = np.concatenate([np.linalg.norm(b.difference(x, pose_of), axis=1) for b in mine])
+    residual = np.concatenate([np.linalg.norm(b.difference(poses), axis=1) for b in mine])
     joint = np.concatenate([b.joint for b in mine])
     offsets = np.concatenate([np.linalg.norm(b.offsets, axis=1) for b in mine])
     scale = float(np.median(residual)) / 1.54

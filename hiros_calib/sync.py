@@ -227,10 +227,10 @@ def _correlate(a: _GridSignal, b: _GridSignal, nfft: int, work: _TrackWork) -> _
     order = np.r_[nfft - (nb - 1) : nfft, 0:na]
     return _Curve(
         a.k0 - b.k0 - (nb - 1),
-        sab[order],
-        np.maximum(saa[order], 0),
-        np.maximum(sbb[order], 0),
-        np.round(count[order]),
+        sab[order].astype(float),
+        np.maximum(saa[order], 0).astype(float),
+        np.maximum(sbb[order], 0).astype(float),
+        np.round(count[order]).astype(float),
     )
 
 
@@ -454,10 +454,11 @@ class _TrackWork:
     def spectra(self, signal: _GridSignal, nfft: int) -> tuple[np.ndarray, ...]:
         key = (id(signal), nfft)
         if key not in self._spectra:
+            # single precision is plenty to find the coarse peak, and twice as fast
             self._spectra[key] = (
-                rfft(signal.values, n=nfft, axis=0),
-                rfft(signal.present, n=nfft),
-                rfft(signal.energy, n=nfft),
+                rfft(signal.values.astype(np.float32), n=nfft, axis=0),
+                rfft(signal.present.astype(np.float32), n=nfft),
+                rfft(signal.energy.astype(np.float32), n=nfft),
             )
         return self._spectra[key]
 
@@ -635,8 +636,15 @@ def _finish(
         _RefinePair.build(work.spline(sig_a[c.index_a]), work.spline(sig_b[c.index_b]))
         for c in used
     ]
-    tau, corr = _refine(tau_parabola, 2 * step, pairs)
-    windows = _windows(tau, pairs, params)
+    # the clocks are solved from the window lags alone, so the whole-overlap lag is their
+    # weighted mean; a continuous search over the whole overlap is only needed when no
+    # window is usable (it then says why the pair gives no measurement)
+    windows = _windows(tau_parabola, pairs, params)
+    if len(windows):
+        tau = float(np.average(windows[:, 1], weights=windows[:, 2]))
+        corr = _pooled_correlation(tau, pairs, (-math.inf, math.inf))
+    else:
+        tau, corr = _refine(tau_parabola, 2 * step, pairs)
     quality = {
         "peak": round(float(np.nanmax(pooled[lo:hi])), 4),
         "refined_correlation": round(corr, 4),
