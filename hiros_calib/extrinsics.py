@@ -493,13 +493,23 @@ def _loss_weights(z: np.ndarray, loss: str) -> np.ndarray:
     raise ValueError(msg)
 
 
-def _skew_columns(points: np.ndarray) -> np.ndarray:
-    """``(N, 3, 3)`` matrices ``[p]_x`` (cross product with each point)."""
-    out = np.zeros((len(points), 3, 3))
-    out[:, 0, 1], out[:, 0, 2] = -points[:, 2], points[:, 1]
-    out[:, 1, 0], out[:, 1, 2] = points[:, 2], -points[:, 0]
-    out[:, 2, 0], out[:, 2, 1] = -points[:, 1], points[:, 0]
-    return out
+def _normal_block(w: np.ndarray, q: np.ndarray, other: np.ndarray) -> np.ndarray:
+    """``sum w J^T J'`` for Jacobians ``J = [-[q]_x, I]``, ``J' = [-[q']_x, I]`` (6 x 6).
+
+    Written with weighted moments of the points, so nothing of size ``N x 3 x 6`` is built.
+    """
+    moment = np.einsum("n,ni,nj->ij", w, other, q)  # sum w q' q^T
+    block = np.empty((6, 6))
+    block[:3, :3] = np.trace(moment) * np.eye(3) - moment
+    block[:3, 3:] = _skew(np.einsum("n,ni->i", w, q))
+    block[3:, :3] = -_skew(np.einsum("n,ni->i", w, other))
+    block[3:, 3:] = w.sum() * np.eye(3)
+    return block
+
+
+def _skew(v: np.ndarray) -> np.ndarray:
+    """The matrix ``[v]_x`` of the cross product with ``v``."""
+    return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
 
 
 @dataclass
@@ -522,7 +532,7 @@ def _robust_solve(
     loss: str,
     scale: float,
     iterations: int = 100,
-    tolerance: float = 1e-10,
+    tolerance: float = 1e-8,
 ) -> dict[str, RigidTransform]:
     """Poses of the ``unknown`` cameras minimising ``sum w rho(|T_a p_a - T_b p_b - d|^2/s^2)``.
 
@@ -550,16 +560,19 @@ def _robust_solve(
             )  # fmt: skip
             z = np.einsum("ni,ni->n", residual, residual) / scale**2
             w = t.weights * _loss_weights(z, loss)
-            jacobian = np.zeros((len(residual), 3, size))
-            for camera, moved, sign in ((t.camera_a, moved_a, 1.0), (t.camera_b, moved_b, -1.0)):
-                if camera in column:
-                    k = column[camera]
-                    jacobian[:, :, k : k + 3] = -sign * _skew_columns(moved)
-                    jacobian[:, :, k + 3 : k + 6] = sign * np.eye(3)
-            flat = jacobian.reshape(-1, size)
-            weight = np.repeat(w, 3)
-            hessian += flat.T @ (flat * weight[:, None])
-            gradient += flat.T @ (weight * residual.ravel())
+            # normal equations of the unknown cameras' (rotation, translation) perturbations
+            moving = [
+                (column[camera], moved, sign)
+                for camera, moved, sign in ((t.camera_a, moved_a, 1.0), (t.camera_b, moved_b, -1.0))
+                if camera in column
+            ]
+            for k, moved, sign in moving:
+                gradient[k : k + 3] += sign * np.einsum("n,ni->i", w, np.cross(moved, residual))
+                gradient[k + 3 : k + 6] += sign * np.einsum("n,ni->i", w, residual)
+                for m, other, other_sign in moving:
+                    hessian[k : k + 6, m : m + 6] += (
+                        sign * other_sign * _normal_block(w, moved, other)
+                    )
         step = -np.linalg.solve(hessian + 1e-12 * np.eye(size), gradient)
         for camera, k in column.items():
             pose = poses[camera]

@@ -176,7 +176,9 @@ def _resample(times: np.ndarray, values: np.ndarray, grid: np.ndarray) -> np.nda
     """Linear interpolation of ``(T, C)`` samples at ``grid`` (inside the sample span)."""
     idx = np.clip(np.searchsorted(times, grid, side="right") - 1, 0, len(times) - 2)
     frac = ((grid - times[idx]) / (times[idx + 1] - times[idx]))[:, None]
-    return values[idx] * (1 - frac) + values[idx + 1] * frac
+    frac = frac.astype(values.dtype, copy=False)  # keep single precision single
+    low = values[idx]
+    return low + (values[idx + 1] - low) * frac
 
 
 def _grid_signal(signature: PoseSignature, step: float) -> _GridSignal | None:
@@ -189,9 +191,10 @@ def _grid_signal(signature: PoseSignature, step: float) -> _GridSignal | None:
     total = weights.sum(axis=0)
     with np.errstate(invalid="ignore", divide="ignore"):
         mean = np.where(total > 0, np.nansum(signature.values * weights, axis=0) / total, 0.0)
-    centred = np.where(weights > 0, signature.values - mean, 0.0)
+    # single precision: these only feed the coarse FFT correlation
+    centred = np.where(weights > 0, signature.values - mean, 0.0).astype(np.float32)
     values = _resample(times, centred, grid)
-    w = _resample(times, weights, grid)
+    w = _resample(times, weights.astype(np.float32), grid)
     derivative = np.gradient(values, step, axis=0) * w
     return _GridSignal(k0, derivative, np.ones(len(grid)), (derivative**2).sum(axis=1))
 
@@ -456,7 +459,7 @@ class _TrackWork:
         if key not in self._spectra:
             # single precision is plenty to find the coarse peak, and twice as fast
             self._spectra[key] = (
-                rfft(signal.values.astype(np.float32), n=nfft, axis=0),
+                rfft(signal.values, n=nfft, axis=0),
                 rfft(signal.present.astype(np.float32), n=nfft),
                 rfft(signal.energy.astype(np.float32), n=nfft),
             )
@@ -642,7 +645,8 @@ def _finish(
     windows = _windows(tau_parabola, pairs, params)
     if len(windows):
         tau = float(np.average(windows[:, 1], weights=windows[:, 2]))
-        corr = _pooled_correlation(tau, pairs, (-math.inf, math.inf))
+        overlap = windows[:, 2] / windows[:, 3] ** 2
+        corr = float(np.average(windows[:, 3], weights=overlap))
     else:
         tau, corr = _refine(tau_parabola, 2 * step, pairs)
     quality = {

@@ -115,7 +115,8 @@ def extract_tracks(
 
     """
     drops = drops if drops is not None else Counter()
-    samples: dict[int, list[tuple[float, np.ndarray, np.ndarray, np.ndarray]]] = {}
+    # per body id: stamps, marker rows (J, 20) and presence masks, stacked once per body
+    samples: dict[int, tuple[list[int], list[np.ndarray], list[np.ndarray]]] = {}
     layout: Layout | None = None
     for group in groups:
         for skeleton in group.skeletons:
@@ -124,28 +125,28 @@ def extract_tracks(
             if skeleton.layout.n_joints != layout.n_joints:
                 drops["other_layout"] += 1
                 continue
-            if not skeleton.marker_present.any():
-                drops["no_joints"] += 1
-                continue
             stamp_ns = skeleton.src_time_ns if skeleton.src_time_ns > 0 else group.stamp_ns
-            samples.setdefault(skeleton.id, []).append(
-                (
-                    stamp_ns * 1e-9,
-                    skeleton.positions,
-                    skeleton.confidences,
-                    skeleton.marker_present,
-                )
-            )
+            body = samples.get(skeleton.id)
+            if body is None:
+                body = samples[skeleton.id] = ([], [], [])
+            body[0].append(stamp_ns)
+            body[1].append(skeleton.markers)
+            body[2].append(skeleton.marker_present)
     if layout is None:
         return []
     tracks: list[BodyTrack] = []
-    for body_id, rows in samples.items():
-        times = np.array([r[0] for r in rows])
+    for body_id, (stamps, marker_rows, present_rows) in samples.items():
+        markers, present = np.stack(marker_rows), np.stack(present_rows)
+        some = present.any(axis=1)
+        drops["no_joints"] += int((~some).sum())
+        if not some.any():
+            continue
+        times = np.array(stamps, dtype=np.int64)[some] * 1e-9
+        markers, present = markers[some], present[some]
         order = np.argsort(times, kind="stable")
-        times = times[order]
-        positions = np.stack([rows[i][1] for i in order])
-        confidences = np.stack([rows[i][2] for i in order])
-        present = np.stack([rows[i][3] for i in order]) & np.isfinite(positions).all(axis=2)
+        times, markers, present = times[order], markers[order], present[order]
+        positions, confidences = markers[..., 1:4], markers[..., 0]
+        present = present & np.isfinite(positions).all(axis=2)
         repeated = np.concatenate([[False], np.diff(times) <= 0])
         drops["repeated_stamp"] += int(repeated.sum())
         keep = ~repeated
