@@ -76,6 +76,8 @@ def _live_run(scene: Path, commands: list[list[str]], env: dict[str, str], out: 
                 "--delay",
                 "10",
                 "--no-clock",
+                "--rate",
+                "0.5",  # half speed: five node processes share two cores with the player
             ],
             env=env,
             capture_output=True,
