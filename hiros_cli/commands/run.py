@@ -36,6 +36,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--out", type=Path, required=True, help="output .mcap (must not exist)")
     parser.add_argument("--params", type=Path, help="pipeline parameter file (default: config/)")
     parser.add_argument("--force", action="store_true", help="overwrite --out if it exists")
+    parser.add_argument(
+        "--merge-rate",
+        type=float,
+        default=30.0,
+        help="merger output rate in Hz offline (default 30; 0: on every camera frame, as live)",
+    )
 
 
 def load_pipeline_params(path: Path | None):  # noqa: ANN201 - PipelineParams, imported lazily
@@ -83,6 +89,7 @@ def run(args: argparse.Namespace) -> int:
     if args.out.exists() and args.force:
         args.out.unlink()
     params = load_pipeline_params(args.params)
+    params.merger.output_rate = args.merge_rate
     calibration = resolve_calibration(args.calibration, args.recording, args.out, console)
     with progress_bar(f"hiros run {args.recording.name}", message_count(args.recording)) as advance:
         summary = run_recording(args.recording, calibration, args.out, params, advance)
