@@ -11,11 +11,12 @@ Method (Eichler et al., Sensors 2022, section 3.2, extended):
 3. Consensus: curves whose peak is high and sharp (robust z-score of the peak over the
    curve, the role of Eichler's coefficient of variation) vote for their peak lag, the best
    ``best_fraction`` choose the winning lag and every good curve near it joins.
-4. Sub-frame refinement: a parabola through the pooled curve's peak, then the lag that
-   maximises the pooled correlation of the cubic-spline interpolated signatures, searched as
-   a continuous variable, so 30 Hz streams give millisecond offsets. Both signatures are
-   evaluated on one fine grid, so neither stream's sample instants are favoured.
-5. Drift: the same continuous refinement in sliding windows gives the lag over time.
+4. Sub-frame refinement: a parabola through the pooled curve's peak, then, in sliding
+   windows, the lag that maximises the pooled correlation of the cubic-spline interpolated
+   signatures, searched as a continuous variable, so 30 Hz streams give millisecond offsets.
+   Both signatures are evaluated on one fine grid, so neither stream's sample instants are
+   favoured. The pair's lag is the windows' weighted mean.
+5. Drift: the windows give the lag over time.
 6. N cameras: :func:`solve_clocks` fits one offset (and drift) per camera to all pairwise
    window measurements by robust least squares, reference camera fixed, so the offsets are
    globally consistent (loops close).
