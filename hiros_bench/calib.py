@@ -18,8 +18,9 @@ and every message a jitter (|N(0, 5 ms)|) before either method sees them. The er
 the arrival times alone give is printed too ("arrival").
 
 Setups: ``default`` (the simulator's clocks: drifts of ~30 ppm, 0.56 % frame drops) and
-``drops+drift`` (1 % frame drops, 200 ppm drift spread). Targets: time median <= 3 ms and
-95th percentile <= 10 ms, rotation <= 0.25°, translation <= 1 cm.
+``drops+drift`` (1 % frame drops, 200 ppm drift spread), ten seeds each (two with
+``quick``). Targets: time median <= 3 ms and 95th percentile <= 10 ms, rotation <= 0.25°,
+translation <= 1 cm.
 """
 
 from __future__ import annotations
@@ -152,7 +153,9 @@ def _stats(values: list[float]) -> tuple[float, float]:
 
 def run(console, seeds: Sequence[int] | None = None, quick: bool = False) -> list[str]:  # noqa: ANN001 - rich Console
     """Run every setup over the seeds, print the table and return its lines."""
-    seeds = tuple(seeds) if seeds is not None else ((0, 1) if quick else (0, 1, 2, 3, 4))
+    # ten seeds (twenty camera poses per setup): pose errors spread about as much as they
+    # are large, so five seeds cannot tell a 10 % change from chance
+    seeds = tuple(seeds) if seeds is not None else ((0, 1) if quick else tuple(range(10)))
     duration = 30.0 if quick else 60.0
     lines = [
         f"calibration accuracy: 3 cameras (k01-k02 180° apart), {duration:.0f} s, "
