@@ -11,12 +11,11 @@ Method (Eichler et al., Sensors 2022, section 3.2, extended):
 3. Consensus: curves whose peak is high and sharp (robust z-score of the peak over the
    curve, the role of Eichler's coefficient of variation) vote for their peak lag, the best
    ``best_fraction`` choose the winning lag and every good curve near it joins.
-4. Sub-frame refinement: a parabola through the pooled curve's peak, then, in sliding
-   windows, the lag that maximises the pooled correlation of the cubic-spline interpolated
-   signatures, searched as a continuous variable, so 30 Hz streams give millisecond offsets.
-   Both signatures are evaluated on one fine grid, so neither stream's sample instants are
-   favoured. The pair's lag is the windows' weighted mean.
-5. Drift: the windows give the lag over time.
+4. Sub-frame refinement: a parabola through the pooled curve's peak, then the lag that
+   maximises the pooled correlation of the cubic-spline interpolated signatures, searched as
+   a continuous variable, so 30 Hz streams give millisecond offsets. Both signatures are
+   evaluated on one fine grid, so neither stream's sample instants are favoured.
+5. Drift: the same continuous refinement in sliding windows gives the lag over time.
 6. N cameras: :func:`solve_clocks` fits one offset (and drift) per camera to all pairwise
    window measurements by robust least squares, reference camera fixed, so the offsets are
    globally consistent (loops close).
@@ -300,8 +299,8 @@ class _Spline:
     """A track's mean-free signature as a cubic spline, with weights on a grid.
 
     ``values`` is evaluated at arbitrary (shifted) times; ``weights`` are tabulated every
-    ``step`` from ``start`` and looked up by nearest sample, which is plenty for weights and
-    much cheaper than interpolating them at every trial lag (see :meth:`weights_from`).
+    ``step`` from ``start`` and interpolated linearly, which is plenty for weights and much
+    cheaper than a spline at every trial lag (see :meth:`weights_from`).
     """
 
     start: float
@@ -322,15 +321,25 @@ class _Spline:
         return cls(float(times[0]), float(times[-1]), step, spline, _resample(times, weights, grid))
 
     def weights_from(self, t0: float, count: int) -> np.ndarray:
-        """Weights at ``t0 + k * step`` for ``k < count`` (nearest sample, clamped at the ends).
+        """Weights at ``t0 + k * step`` for ``k < count``, linearly interpolated (clamped).
 
-        The trial instants share the tabulation's step, so this is a slice, not a gather.
+        The trial instants share the tabulation's step, so every row has the same fraction
+        between two tabulated rows: two slices and one blend. Interpolating (rather than
+        taking the nearest row) keeps the correlation a smooth function of the lag; with
+        nearest rows it jumps every ``step`` and the lag search can stop on a jump.
         """
-        first = round((t0 - self.start) / self.step)
-        if first >= 0 and first + count <= len(self.weights):
-            return self.weights[first : first + count]
-        index = np.clip(np.arange(first, first + count), 0, len(self.weights) - 1)
-        return self.weights[index]
+        position = (t0 - self.start) / self.step
+        first = math.floor(position)
+        fraction = position - first
+        last = len(self.weights) - 1
+        if first >= 0 and first + count + 1 <= last + 1:
+            low = self.weights[first : first + count]
+            high = self.weights[first + 1 : first + count + 1]
+        else:
+            index = np.arange(first, first + count)
+            low = self.weights[np.clip(index, 0, last)]
+            high = self.weights[np.clip(index + 1, 0, last)]
+        return low + fraction * (high - low)
 
     @cached_property
     def tabulated(self) -> tuple[np.ndarray, np.ndarray]:
@@ -640,16 +649,11 @@ def _finish(
         _RefinePair.build(work.spline(sig_a[c.index_a]), work.spline(sig_b[c.index_b]))
         for c in used
     ]
-    # the clocks are solved from the window lags alone, so the whole-overlap lag is their
-    # weighted mean; a continuous search over the whole overlap is only needed when no
-    # window is usable (it then says why the pair gives no measurement)
-    windows = _windows(tau_parabola, pairs, params)
-    if len(windows):
-        tau = float(np.average(windows[:, 1], weights=windows[:, 2]))
-        overlap = windows[:, 2] / windows[:, 3] ** 2
-        corr = float(np.average(windows[:, 3], weights=overlap))
-    else:
-        tau, corr = _refine(tau_parabola, 2 * step, pairs)
+    # the whole-overlap search picks the correlation peak's lobe; the windows then search
+    # around it (on real recordings the correlation can have side lobes a window alone
+    # might settle on)
+    tau, corr = _refine(tau_parabola, 2 * step, pairs)
+    windows = _windows(tau, pairs, params)
     quality = {
         "peak": round(float(np.nanmax(pooled[lo:hi])), 4),
         "refined_correlation": round(corr, 4),
