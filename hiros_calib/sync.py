@@ -299,8 +299,8 @@ class _Spline:
     """A track's mean-free signature as a cubic spline, with weights on a grid.
 
     ``values`` is evaluated at arbitrary (shifted) times; ``weights`` are tabulated every
-    ``step`` from ``start`` and interpolated linearly, which is plenty for weights and much
-    cheaper than a spline at every trial lag (see :meth:`weights_from`).
+    ``step`` from ``start`` and looked up by nearest sample, which is plenty for weights and
+    much cheaper than interpolating them at every trial lag (see :meth:`weights_from`).
     """
 
     start: float
@@ -321,25 +321,15 @@ class _Spline:
         return cls(float(times[0]), float(times[-1]), step, spline, _resample(times, weights, grid))
 
     def weights_from(self, t0: float, count: int) -> np.ndarray:
-        """Weights at ``t0 + k * step`` for ``k < count``, linearly interpolated (clamped).
+        """Weights at ``t0 + k * step`` for ``k < count`` (nearest sample, clamped at the ends).
 
-        The trial instants share the tabulation's step, so every row has the same fraction
-        between two tabulated rows: two slices and one blend. Interpolating (rather than
-        taking the nearest row) keeps the correlation a smooth function of the lag; with
-        nearest rows it jumps every ``step`` and the lag search can stop on a jump.
+        The trial instants share the tabulation's step, so this is a slice, not a gather.
         """
-        position = (t0 - self.start) / self.step
-        first = math.floor(position)
-        fraction = position - first
-        last = len(self.weights) - 1
-        if first >= 0 and first + count + 1 <= last + 1:
-            low = self.weights[first : first + count]
-            high = self.weights[first + 1 : first + count + 1]
-        else:
-            index = np.arange(first, first + count)
-            low = self.weights[np.clip(index, 0, last)]
-            high = self.weights[np.clip(index + 1, 0, last)]
-        return low + fraction * (high - low)
+        first = round((t0 - self.start) / self.step)
+        if first >= 0 and first + count <= len(self.weights):
+            return self.weights[first : first + count]
+        index = np.clip(np.arange(first, first + count), 0, len(self.weights) - 1)
+        return self.weights[index]
 
     @cached_property
     def tabulated(self) -> tuple[np.ndarray, np.ndarray]:
