@@ -166,6 +166,17 @@ class Player:
             played += 1
         return played
 
+    def flush(self, timeout: float = 2.0) -> None:
+        """Wait until every subscriber acknowledged what was published (reliable QoS).
+
+        Without this the process may tear its writers down while the last samples are still
+        in flight, and a subscriber would miss the end of the replay.
+        """
+        from rclpy.duration import Duration
+
+        for publisher in self.publishers.values():
+            publisher.wait_for_all_acked(Duration(seconds=timeout))
+
 
 def _log_time(message: RecordedMessage) -> int:
     return message.log_time_ns
@@ -200,6 +211,7 @@ def run(args: argparse.Namespace) -> int:
                     node.get_logger().warning(problem)
             if not args.loop or played == 0:
                 break
+        player.flush()
     except KeyboardInterrupt:
         pass
     finally:
