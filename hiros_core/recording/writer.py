@@ -19,6 +19,7 @@ from typing import IO
 import yaml
 
 from hiros_core.errors import RecordingError
+from hiros_core.recording.mcap_out import COMPRESSIONS, ZSTD_LEVEL, McapWriter
 from hiros_core.recording.msgdefs import message_definition, normalize_msgtype
 
 __all__ = [
@@ -46,9 +47,11 @@ class RecordingWriter:
 
     Args:
         path: ``*.mcap`` for one file, anything else for a rosbag2 folder (created).
-        compression: ``zstd`` (default), ``lz4`` or ``none`` for the MCAP chunks.
+        compression: ``zstd`` (default, at a fast level), ``lz4`` or ``none`` for the MCAP
+            chunks; chunks are compressed and written by a helper thread (``mcap_out``).
         chunk_size: bytes per chunk before compression; a reader holds about one chunk per
             topic in memory.
+        level: zstd level (default ``mcap_out.ZSTD_LEVEL``; negative is faster and larger).
 
     Raises:
         RecordingError: the path exists already or cannot be written.
@@ -61,10 +64,13 @@ class RecordingWriter:
     """
 
     def __init__(
-        self, path: str | Path, *, compression: str = "zstd", chunk_size: int = 1 << 20
+        self,
+        path: str | Path,
+        *,
+        compression: str = "zstd",
+        chunk_size: int = 4 << 20,
+        level: int = ZSTD_LEVEL,
     ) -> None:
-        from mcap.writer import CompressionType, Writer
-
         self.path = Path(path)
         if self.path.exists():
             msg = f"{self.path} exists already; choose a new recording path"
@@ -74,11 +80,9 @@ class RecordingWriter:
         if self.path.suffix != ".mcap":
             self.folder = self.path
             file_path = self.path / f"{self.path.name}_0.mcap"
-        try:
-            kind = CompressionType[compression.upper()]
-        except KeyError:
+        if compression.lower() not in COMPRESSIONS:
             msg = f"unknown MCAP compression {compression!r}: use zstd, lz4 or none"
-            raise RecordingError(msg) from None
+            raise RecordingError(msg)
         try:
             file_path.parent.mkdir(parents=True, exist_ok=True)
             self._stream: IO[bytes] = file_path.open("xb")
@@ -86,7 +90,9 @@ class RecordingWriter:
             msg = f"cannot create recording {file_path}: {exc}"
             raise RecordingError(msg) from exc
         self.file_path = file_path
-        self._writer = Writer(self._stream, chunk_size=chunk_size, compression=kind)
+        self._writer = McapWriter(
+            self._stream, chunk_size=chunk_size, compression=compression.lower(), level=level
+        )
         self._writer.start(profile="ros2", library="hiros")
         self._schemas: dict[str, int] = {}
         self._channels: dict[tuple[str, str], int] = {}
@@ -168,8 +174,13 @@ class RecordingWriter:
         if self.closed:
             return
         self.closed = True
-        self._writer.finish()
-        self._stream.close()
+        try:
+            self._writer.finish()
+        except BaseException:
+            self._writer.abort()
+            raise
+        finally:
+            self._stream.close()
         if self.folder is not None:
             (self.folder / "metadata.yaml").write_text(self._metadata())
 
