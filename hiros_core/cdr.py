@@ -26,6 +26,30 @@ from hiros_core.errors import CodecError
 
 ENCAPSULATION = b"\x00\x01\x00\x00"  # CDR_LE, options 0
 HEADER_SIZE = len(ENCAPSULATION)
+LEAD = 8 - HEADER_SIZE
+"""Spare bytes before a message in an aligned buffer: its payload then starts 8-aligned."""
+_WORD = np.dtype("<u8")
+_UNITS = (8, 4, 2, 1)
+
+
+def aligned_copy(data: bytes | bytearray | memoryview) -> np.ndarray:
+    """The message in a new uint8 buffer laid out for ``Plan.matches_aligned``/``gather_aligned``.
+
+    ``LEAD`` spare bytes, the message, padding to whole 8-byte words (spare and padding bytes
+    are left uninitialised: plans never read them). Message byte ``i`` is ``buffer[LEAD + i]``;
+    the payload is 8-byte aligned in memory, so every CDR value sits at a multiple of its
+    size and numpy gathers whole values (one index per float, not eight per float), on
+    aligned memory, and compares whole words.
+    """
+    raw = np.frombuffer(data, dtype=np.uint8)
+    buffer = np.empty(_padded(raw.size), dtype=np.uint8)
+    buffer[LEAD : LEAD + raw.size] = raw
+    return buffer
+
+
+def _padded(size: int) -> int:
+    return (LEAD + size + 7) // 8 * 8
+
 
 _U32 = struct.Struct("<I")
 _I32 = struct.Struct("<i")
@@ -142,6 +166,14 @@ class Plan:
     spans: dict[str, tuple[int, int]] = field(init=False, repr=False)
     """slot kind -> its byte range in ``all_indices`` order, for ``gather_all``."""
     all_indices: np.ndarray = field(init=False, repr=False)
+    words: np.ndarray = field(init=False, repr=False)
+    """The template as 8-byte words of an aligned buffer (``aligned_copy`` layout)."""
+    mask: np.ndarray = field(init=False, repr=False)
+    """Words with all bits set on the constant bytes, for ``matches_aligned``."""
+    units: dict[str, tuple[str, np.ndarray]] = field(init=False, repr=False)
+    """slot kind -> ``(k, width / unit)`` element positions in an aligned buffer viewed as
+    unsigned ints of the largest size (8, 4, 2 or 1 bytes) dividing the slots' offsets and
+    width, for ``gather_aligned``."""
 
     def __post_init__(self) -> None:
         indices = {
@@ -159,6 +191,20 @@ class Plan:
         object.__setattr__(
             self, "all_indices", np.concatenate(flat) if flat else np.empty(0, dtype=np.intp)
         )
+        words = np.zeros(_padded(self.template.size), dtype=np.uint8)
+        words[LEAD : LEAD + self.template.size] = self.template
+        mask = np.zeros_like(words)
+        mask[self.constant + LEAD] = 0xFF
+        object.__setattr__(self, "words", words.view(_WORD))
+        object.__setattr__(self, "mask", mask.view(_WORD))
+        units = {}
+        for kind, offsets in self.slots.items():
+            if not offsets.size:
+                continue
+            width, starts = self.widths[kind], offsets + LEAD
+            unit = next(u for u in _UNITS if width % u == 0 and not (starts % u).any())
+            units[kind] = (f"<u{unit}", (starts[:, None] + np.arange(0, width, unit)) // unit)
+        object.__setattr__(self, "units", units)
 
     def encode(self, values: dict[str, np.ndarray]) -> bytes:
         """Fill each slot kind with ``values[kind]`` (any dtype, ``k`` rows of ``width`` bytes)."""
@@ -189,6 +235,23 @@ class Plan:
         return start + self.template.size <= data.size and np.array_equal(
             data[start + self.constant], self.template[self.constant]
         )
+
+    def matches_aligned(self, buffer: np.ndarray, size: int) -> bool:
+        """True when the ``size``-byte message in ``buffer`` (``aligned_copy``) has this shape."""
+        if size != self.template.size:
+            return False
+        differ = np.bitwise_xor(buffer.view(_WORD), self.words)
+        differ &= self.mask
+        return not differ.any()
+
+    def gather_aligned(self, buffer: np.ndarray, kind: str, dtype: np.dtype | str) -> np.ndarray:
+        """``gather`` from an ``aligned_copy`` buffer: whole values, not bytes, are indexed."""
+        found = self.units.get(kind)
+        if found is None:
+            dtype = np.dtype(dtype)
+            return np.zeros((0, self.widths.get(kind, dtype.itemsize)), dtype=np.uint8).view(dtype)
+        unit, index = found
+        return buffer.view(unit)[index].view(dtype)
 
     def gather(
         self, data: np.ndarray, kind: str, dtype: np.dtype | str, start: int = 0
@@ -334,5 +397,12 @@ class PlanCache:
         """A cached plan whose constant bytes match ``data``, if any."""
         for plan in self.by_size.get(data.size, ()):
             if plan.matches(data):
+                return plan
+        return None
+
+    def find_aligned(self, buffer: np.ndarray, size: int) -> Plan | None:
+        """``find`` for a ``size``-byte message in an ``aligned_copy`` buffer."""
+        for plan in self.by_size.get(size, ()):
+            if plan.matches_aligned(buffer, size):
                 return plan
         return None

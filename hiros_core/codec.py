@@ -20,7 +20,15 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from hiros_core.cdr import HEADER_SIZE, BlockPlans, CdrReader, Plan, PlanBuilder, PlanCache
+from hiros_core.cdr import (
+    HEADER_SIZE,
+    BlockPlans,
+    CdrReader,
+    Plan,
+    PlanBuilder,
+    PlanCache,
+    aligned_copy,
+)
 from hiros_core.errors import CodecError, LayoutError
 from hiros_core.layouts import AZURE_KINECT, KINECT_V2, Layout
 from hiros_core.model import BOX_WIDTH, STATE_WIDTH, Skeleton, SkeletonGroup
@@ -646,20 +654,21 @@ def encode_marker_array(data: MarkerArrayData) -> bytes:
 
 def decode_marker_array(data: bytes | bytearray | memoryview) -> MarkerArrayData:
     """Columns of a ``visualization_msgs/MarkerArray`` from CDR bytes; CodecError on bad bytes."""
-    raw = np.frombuffer(data, dtype=np.uint8)
-    plan = _MARKER_PLANS.find(raw)
+    size = len(memoryview(data).cast("B"))
+    buffer = aligned_copy(data)
+    plan = _MARKER_PLANS.find_aligned(buffer, size)
     if plan is None:
         markers = _parse_marker_array(data)
         texts = _text_bytes(markers.texts)
         _MARKER_PLANS.put(_marker_key(markers, texts), _build_marker_plan(markers, texts))
         return markers
     shape: _MarkerShape = plan.meta  # type: ignore[assignment]
-    ita = plan.gather(raw, "ita", _ITA).ravel()
-    pose_scale = plan.gather(raw, "pose_scale", "<f8").reshape(-1, 10)
-    points = plan.gather(raw, "points", "<f8").reshape(-1, 3)
-    point_colors = plan.gather(raw, "point_colors", "<f4").reshape(-1, 4)
+    ita = plan.gather_aligned(buffer, "ita", _ITA).ravel()
+    pose_scale = plan.gather_aligned(buffer, "pose_scale", "<f8")
+    points = plan.gather_aligned(buffer, "points", "<f8").reshape(-1, 3)
+    point_colors = plan.gather_aligned(buffer, "point_colors", "<f4").reshape(-1, 4)
     return MarkerArrayData(
-        stamps_ns=_join_ns(plan.gather(raw, "stamp", _TIME).ravel()),
+        stamps_ns=_join_ns(plan.gather_aligned(buffer, "stamp", _TIME).ravel()),
         frame_ids=list(shape.frame_ids),
         namespaces=list(shape.namespaces),
         ids=ita["id"].copy(),
@@ -667,14 +676,16 @@ def decode_marker_array(data: bytes | bytearray | memoryview) -> MarkerArrayData
         actions=ita["action"].copy(),
         poses=pose_scale[:, :7].copy(),
         scales=pose_scale[:, 7:].copy(),
-        colors=plan.gather(raw, "color", "<f4").reshape(-1, 4).copy(),
-        lifetimes_ns=_join_ns(plan.gather(raw, "lifetime", _TIME).ravel()),
-        frame_locked=plan.gather(raw, "locked", np.uint8).ravel().astype(bool),
+        colors=plan.gather_aligned(buffer, "color", "<f4"),
+        lifetimes_ns=_join_ns(plan.gather_aligned(buffer, "lifetime", _TIME).ravel()),
+        frame_locked=plan.gather_aligned(buffer, "locked", np.uint8).ravel().astype(bool),
         points=_split_rows(points, shape.point_counts),
         point_colors=_split_rows(point_colors, shape.color_counts),
-        texts=_gather_texts(plan, raw, shape),
+        texts=_gather_texts(plan, buffer, shape),
         attachments=list(shape.attachments),
-        mesh_use_embedded_materials=plan.gather(raw, "embedded", np.uint8).ravel().astype(bool),
+        mesh_use_embedded_materials=(
+            plan.gather_aligned(buffer, "embedded", np.uint8).ravel().astype(bool)
+        ),
     )
 
 
@@ -687,15 +698,23 @@ def _split_rows(rows: np.ndarray, counts: np.ndarray) -> list[np.ndarray]:
     return np.split(rows, np.cumsum(counts)[:-1])
 
 
-def _gather_texts(plan: Plan, raw: np.ndarray, shape: _MarkerShape) -> list[str]:
+def _gather_texts(plan: Plan, buffer: np.ndarray, shape: _MarkerShape) -> list[str]:
     texts = [""] * len(shape.frame_ids)
     for kind, indices in shape.text_slots.items():
-        rows = plan.gather(raw, kind, np.uint8)
-        try:  # all texts of one length in one call: fixed-width byte strings, decoded together
-            decoded = np.char.decode(rows.view(f"S{rows.shape[1]}").ravel(), "utf-8").tolist()
-        except UnicodeDecodeError:
-            msg = "cannot decode MarkerArray: a marker text is not UTF-8"
-            raise CodecError(msg) from None
+        rows = plan.gather_aligned(buffer, kind, np.uint8)
+        width = rows.shape[1]
+        if rows.all() and rows.max() < 0x80:
+            # ASCII without NULs (confidence digits, labels): one decode, cut every ``width``
+            joined = rows.tobytes().decode("ascii")
+            decoded = list(joined) if width == 1 else [
+                joined[i : i + width] for i in range(0, len(joined), width)
+            ]  # fmt: skip
+        else:
+            try:  # fixed-width byte strings, decoded together
+                decoded = np.char.decode(rows.view(f"S{width}").ravel(), "utf-8").tolist()
+            except UnicodeDecodeError:
+                msg = "cannot decode MarkerArray: a marker text is not UTF-8"
+                raise CodecError(msg) from None
         for index, text in zip(indices.tolist(), decoded, strict=True):
             texts[index] = text
     return texts
