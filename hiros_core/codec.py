@@ -664,7 +664,7 @@ def decode_marker_array(data: bytes | bytearray | memoryview) -> MarkerArrayData
         return markers
     shape: _MarkerShape = plan.meta  # type: ignore[assignment]
     ita = plan.gather_aligned(buffer, "ita", _ITA).ravel()
-    pose_scale = plan.gather_aligned(buffer, "pose_scale", "<f8")
+    pose_scale = plan.gather_aligned(buffer, "pose_scale", "<f8").reshape(-1, 10)
     points = plan.gather_aligned(buffer, "points", "<f8").reshape(-1, 3)
     point_colors = plan.gather_aligned(buffer, "point_colors", "<f4").reshape(-1, 4)
     return MarkerArrayData(
@@ -676,7 +676,7 @@ def decode_marker_array(data: bytes | bytearray | memoryview) -> MarkerArrayData
         actions=ita["action"].copy(),
         poses=pose_scale[:, :7].copy(),
         scales=pose_scale[:, 7:].copy(),
-        colors=plan.gather_aligned(buffer, "color", "<f4"),
+        colors=plan.gather_aligned(buffer, "color", "<f4").reshape(-1, 4),
         lifetimes_ns=_join_ns(plan.gather_aligned(buffer, "lifetime", _TIME).ravel()),
         frame_locked=plan.gather_aligned(buffer, "locked", np.uint8).ravel().astype(bool),
         points=_split_rows(points, shape.point_counts),
