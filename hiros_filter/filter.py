@@ -35,6 +35,8 @@ from hiros_core.errors import ConfigError
 from hiros_core.layouts import Layout
 from hiros_core.model import Skeleton, SkeletonGroup, link_rows
 from hiros_filter.estimators import ButterworthBank, KalmanBank, rotation_vectors, slerp
+from hiros_filter.lengths import LengthKeeper, held_links
+from hiros_optimizer.kinematics import KinematicTree
 
 __all__ = ["Filter", "FilterParams"]
 
@@ -65,6 +67,9 @@ class FilterParams:
         orientation_cutoff_frequency: Hz of the orientation smoothing.
         max_gap: seconds a track or joint may be unseen before it restarts.
         track_timeout: seconds after which an unseen track's state is freed.
+        keep_link_lengths: links whose input length does not change from frame to frame (the
+            optimizer's calibrated links) keep that length in the output, with velocities and
+            accelerations that agree with it (:mod:`hiros_filter.lengths`).
 
     """
 
@@ -79,6 +84,7 @@ class FilterParams:
     orientation_cutoff_frequency: float = 6.0
     max_gap: float = 0.5
     track_timeout: float = 5.0
+    keep_link_lengths: bool = True
 
     def __post_init__(self) -> None:
         if self.filter not in _FILTERS:
@@ -110,6 +116,8 @@ class _Tracks:
         self.joint_time_ns = np.full((capacity, self.n_joints), _NEVER, dtype=np.int64)
         self.last_input = np.full((capacity, self.n_joints, 3), np.nan)
         self.last_output = np.full((capacity, self.n_joints, 3), np.nan)
+        self.last_lengths = np.full((capacity, self.n_joints), np.nan)  # input link lengths
+        self.keeper = LengthKeeper(KinematicTree.from_layout(layout))
         self.quaternions = np.full((capacity, self.n_joints, 4), np.nan)
         self.angular_velocities = np.full((capacity, self.n_joints, 3), np.nan)
         self.angular_accelerations = np.full((capacity, self.n_joints, 3), np.nan)
@@ -143,6 +151,7 @@ class _Tracks:
             ("joint_time_ns", _NEVER),
             ("last_input", np.nan),
             ("last_output", np.nan),
+            ("last_lengths", np.nan),
             ("quaternions", np.nan),
             ("angular_velocities", np.nan),
             ("angular_accelerations", np.nan),
@@ -266,6 +275,7 @@ class Filter:
         tracks.joint_time_ns[rows] = np.where(present, tracks.time_ns[rows, None], _NEVER)
         tracks.last_input[rows] = positions
         tracks.last_output[rows] = positions
+        tracks.last_lengths[rows] = tracks.keeper.lengths(positions)
         tracks.designed_for[rows] = 0.0  # low-pass state restarts from last_output when used
         slot_index, joints = np.nonzero(present)
         tracks.kalman.reset(rows[slot_index], joints, positions[slot_index, joints])
@@ -311,12 +321,21 @@ class Filter:
             low_pass_input = np.where(present[..., None], measured, state[:, :, 0])
             low_pass_input[lost] = np.nan
             smoothed = self._low_pass(tracks, rows, low_pass_input, restart, dt)
+        velocities, accelerations = state[:, :, 1], state[:, :, 2]
+        if self.params.keep_link_lengths:
+            lengths = tracks.keeper.lengths(np.where(present[..., None], measured, np.nan))
+            held = held_links(lengths, tracks.last_lengths[rows])
+            tracks.last_lengths[rows] = lengths
+            if held.any():
+                smoothed, velocities, accelerations = tracks.keeper.project(
+                    (smoothed, velocities, accelerations), lengths, held, present
+                )
         tracks.time_ns[rows] = stamps
         self._smooth_orientations(tracks, rows, markers, present, dt)
         mask = present[..., None]
         np.copyto(markers[..., 1:4], smoothed, where=mask)
-        np.copyto(markers[..., 8:11], state[:, :, 1], where=mask)
-        np.copyto(markers[..., 14:17], state[:, :, 2], where=mask)
+        np.copyto(markers[..., 8:11], velocities, where=mask)
+        np.copyto(markers[..., 14:17], accelerations, where=mask)
         links, link_present = link_rows(markers, present, tracks.layout)
         return [
             Skeleton(s.id, s.src_time_ns, s.src_frame, s.layout, markers[n], links[n],
