@@ -39,6 +39,7 @@ from __future__ import annotations
 
 import heapq
 import itertools
+import math
 from collections import Counter, deque
 from dataclasses import dataclass
 from functools import cache, cached_property
@@ -49,6 +50,7 @@ from scipy.optimize import linear_sum_assignment
 from hiros_core.calibration import Calibration, CameraCalibration
 from hiros_core.layouts import Layout
 from hiros_core.model import Skeleton, SkeletonGroup
+from hiros_tracker import kernels
 from hiros_tracker.correction import CameraCorrection
 
 __all__ = ["Tracker", "TrackerParams"]
@@ -56,6 +58,8 @@ __all__ = ["Tracker", "TrackerParams"]
 _NS = 1e-9
 _INFEASIBLE = 1e9
 """Cost given to gated-out pairs so that the solver still sees a full matrix."""
+_NO_CAMERA = np.zeros(3)
+"""Placeholder camera position for the facing kernel when the camera's pose is unknown."""
 
 
 @dataclass
@@ -178,11 +182,6 @@ class _MirrorParts:
         flipped[:, sided] = combos[:, self.part[sided]].astype(bool)
         return np.where(flipped, self.mirror, np.arange(len(self.part)))
 
-    @cached_property
-    def both_orders(self) -> np.ndarray:
-        """``(2, J)`` the joints as given and mirrored (indexes both labellings at once)."""
-        return np.stack([np.arange(len(self.part)), self.mirror])
-
     def permutation(self, flips: np.ndarray) -> np.ndarray:
         """``(..., J)`` joint order relabelling the parts flagged in ``flips`` ``(..., K)``."""
         return self._table[flips.astype(np.int64) @ (1 << np.arange(self.count))]
@@ -212,10 +211,10 @@ def _mirror_parts(layout: Layout) -> _MirrorParts:
 class _BodyFrame:
     """Joints giving a body's up, its left and its anatomical forward (feet, nose).
 
-    ``front`` (from the left/right labels) and ``forward`` (from where the feet and the nose
-    point, whatever their labels) agree on a correctly labelled, unflipped detection; a
-    front/back flip (reflected body, swapped labels) reverses ``forward`` against the true
-    front, a side swap reverses ``front``.
+    The front (from the left/right labels) and the forward (from where the feet and the nose
+    point, whatever their labels; both computed in ``kernels.facing_evidence``) agree on a
+    correctly labelled, unflipped detection; a front/back flip (reflected body, swapped
+    labels) reverses the forward against the true front, a side swap reverses the front.
     """
 
     root: int
@@ -230,53 +229,10 @@ class _BodyFrame:
         """Whether the layout names enough joints."""
         return self.neck >= 0 and len(self.left) == 2 and (len(self.feet) or len(self.head))
 
-    def trunk(self, positions: np.ndarray) -> np.ndarray:
-        """``(U, 3)`` unit root -> neck of poses (the up of a person standing)."""
-        return _unit_rows(positions[:, self.neck] - positions[:, self.root])
-
-    def front(self, positions: np.ndarray, up: np.ndarray) -> np.ndarray:
-        """``(U, 3)`` unit front, cross(left, up), of poses ``(U, J, 3)`` given the up."""
-        left = positions[:, self.left].sum(axis=1) - positions[:, self.right].sum(axis=1)
-        return _unit_rows(_cross(left, up))
-
     @cached_property
     def pointers(self) -> np.ndarray:
         """``(k, 2)`` joint pairs pointing forward: ankle -> foot, head -> nose."""
         return np.concatenate([self.feet, self.head.reshape(-1, 2)]).astype(np.int64)
-
-    def forward(self, positions: np.ndarray, up: np.ndarray) -> np.ndarray:
-        """``(U, 3)`` unit anatomical forward: feet and nose directions, ⟂ up, summed."""
-        steps = positions[:, self.pointers[:, 1]] - positions[:, self.pointers[:, 0]]
-        steps = _unit_rows(_flat(steps, up[:, None]))  # (U, k, 3)
-        return _unit_rows(np.where(np.isfinite(steps), steps, 0.0).sum(axis=1))
-
-
-def _norms(vectors: np.ndarray) -> np.ndarray:
-    """Euclidean norms over the last axis (without ``np.linalg.norm``'s overhead)."""
-    return np.sqrt((vectors * vectors).sum(axis=-1))
-
-
-def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Row-wise cross product of ``(..., 3)`` arrays (cheaper than ``np.cross`` on few rows)."""
-    return np.stack(
-        [
-            a[..., 1] * b[..., 2] - a[..., 2] * b[..., 1],
-            a[..., 2] * b[..., 0] - a[..., 0] * b[..., 2],
-            a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0],
-        ],
-        axis=-1,
-    )
-
-
-def _unit_rows(vectors: np.ndarray) -> np.ndarray:
-    """Rows scaled to unit length; zero or NaN rows become NaN."""
-    with np.errstate(invalid="ignore", divide="ignore"):
-        return vectors / np.sqrt((vectors * vectors).sum(axis=-1, keepdims=True))
-
-
-def _flat(vectors: np.ndarray, up: np.ndarray) -> np.ndarray:
-    """Rows with their component along ``up`` removed."""
-    return vectors - (vectors * up).sum(axis=-1, keepdims=True) * up
 
 
 @cache
@@ -324,22 +280,23 @@ def _side_pairs(
     return reference, np.array(pairs, dtype=np.int64).reshape(-1, 2), np.array(part_ids)
 
 
-def _misaligned(positions: np.ndarray, layout: Layout, parts: _MirrorParts) -> np.ndarray:
-    """``(U, K)`` parts whose left/right pair points against the shoulders' of poses ``(U, J, 3)``.
-
-    The shoulders' own part is never flagged; nothing is flagged where a joint is missing.
-    """
+@cache
+def _side_arrays(layout: Layout, parts: _MirrorParts) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``_side_pairs`` as arrays for the kernels: ``(2,)`` shoulders (or empty), pairs, parts."""
     reference, pairs, part_ids = _side_pairs(layout, parts)
-    flagged = np.zeros((len(positions), parts.count), dtype=bool)
-    if reference is None or not len(pairs):
-        return flagged
-    shoulders = positions[:, reference[0]] - positions[:, reference[1]]  # (U, 3)
-    sides = positions[:, pairs[:, 0]] - positions[:, pairs[:, 1]]  # (U, P, 3)
-    along = np.einsum("upk,uk->up", sides, shoulders)
-    scale = np.sqrt((sides * sides).sum(axis=2) * (shoulders * shoulders).sum(axis=1)[:, None])
-    # Clearly reversed only (cos < -0.5): eyes 6 cm apart must not toggle on noise.
-    flagged[:, part_ids] = along < -0.5 * scale
-    return flagged
+    shoulders = np.array(reference if reference is not None else (), dtype=np.int64)
+    return shoulders, pairs.astype(np.int64), part_ids.astype(np.int64).reshape(-1)
+
+
+@dataclass(frozen=True, eq=False)
+class _LayoutInfo:
+    """What the tracker derives from a layout, looked up once per frame."""
+
+    layout: Layout
+    parts: _MirrorParts
+    weights: np.ndarray  # (J,) cost weights (_joint_weights)
+    frame: _BodyFrame
+    sides: tuple[np.ndarray, np.ndarray, np.ndarray]  # _side_arrays
 
 
 @cache
@@ -358,56 +315,6 @@ def _joint_weights(layout: Layout, decay: float) -> np.ndarray:
     return decay**depth
 
 
-def _pair_costs(
-    predicted: np.ndarray,
-    detections: np.ndarray,
-    weights: np.ndarray,
-    parts: _MirrorParts | None,
-    *,
-    min_joints: int,
-    margin: float,
-) -> tuple[np.ndarray, np.ndarray]:
-    """Weighted mean joint distance of every (track, detection) pair, sides chosen per part.
-
-    Args:
-        predicted: ``(T, J, 3)`` track poses at the detections' time.
-        detections: ``(D, J, 3)``, NaN for joints left out.
-        weights: ``(J,)`` joint weights of the mean.
-        parts: the layout's mirror parts, or None to compare labels as given.
-        min_joints: pairs sharing fewer joints cost ``inf``.
-        margin: metres a part's mirror must be cheaper by (plain mean over its joints).
-
-    Returns:
-        ``(T, D)`` costs in metres and ``(T, D, K)`` flags of the parts taken mirrored.
-
-    """
-    if parts is None:
-        distance = _norms(predicted[:, None] - detections[None])  # (T, D, J)
-        flips = np.zeros((*distance.shape[:2], 0), dtype=bool)
-    else:
-        # Both labellings at once, [as given, mirrored] -> (2, T, D, J); the sums keep the
-        # (D, J) @ (J, K) products per track of the separate computation (same roundings).
-        labellings = detections[:, parts.both_orders].swapaxes(0, 1)[:, None]  # (2,1,D,J,3)
-        both = _norms(predicted[None, :, None] - labellings)
-        shared = np.isfinite(both)
-        sums = np.where(shared, both, 0.0) @ parts.onehot  # (2, T, D, K)
-        counts = shared @ parts.onehot
-        with np.errstate(invalid="ignore", divide="ignore"):
-            flips = (counts[1] > 0) & (
-                sums[1] / counts[1] + margin < sums[0] / np.maximum(counts[0], 1)
-            )
-        # part -1 (midline) reads the appended False column
-        joint_flips = np.concatenate([flips, np.zeros((*flips.shape[:2], 1), dtype=bool)], 2)
-        # (np.take keeps C order: the products below then round as the separate form did)
-        distance = np.where(np.take(joint_flips, parts.part, axis=2), both[1], both[0])
-    shared = np.isfinite(distance)
-    count = shared.sum(axis=2)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        cost = np.where(shared, distance, 0.0) @ weights / (shared @ weights)
-    cost[count < min_joints] = np.inf
-    return cost, flips
-
-
 def _velocity_sums(times: np.ndarray, positions: np.ndarray) -> np.ndarray:
     """``(U, J, 9)`` each sample's terms of the least-squares slope: n, t, t², p (3), t·p (3).
 
@@ -421,30 +328,6 @@ def _velocity_sums(times: np.ndarray, positions: np.ndarray) -> np.ndarray:
     ones = valid.astype(float)
     t = times[:, None, None]
     return np.concatenate([ones, ones * t, ones * (t * t), filled, filled * t], axis=2)
-
-
-def _solve_velocities(
-    sums: np.ndarray, weights: np.ndarray
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Slopes from per-camera sums ``(U, C, J, 9)``: one intercept per camera (fixed effects).
-
-    ``weights`` ``(J,)`` pool the joints into the body velocity (the core, as in the cost).
-
-    Returns:
-        ``(U, J, 3)`` joint velocities (0 where undetermined), ``(U, 3)`` body velocities
-        (pooled over joints) and ``(U,)`` whether anything was determined.
-
-    """
-    n = np.maximum(sums[..., 0], 1.0)  # (U, C, J)
-    sxx = (sums[..., 2] - sums[..., 1] ** 2 / n).sum(axis=1)  # (U, J)
-    sxy = (sums[..., 6:9] - sums[..., 1:2] * sums[..., 3:6] / n[..., None]).sum(axis=1)
-    determined = sxx > 1e-5
-    velocities = sxy / np.where(determined, sxx, np.inf)[..., None]
-    pooled = (np.where(determined, sxx, 0.0) * weights).sum(axis=1)
-    body = (sxy * (determined * weights)[..., None]).sum(axis=1) / np.maximum(pooled, 1e-12)[
-        :, None
-    ]
-    return velocities, body, determined.any(axis=1)
 
 
 _REBASE_NS = 30_000_000_000
@@ -567,6 +450,8 @@ class Tracker:
         self._newest_ns: int | None = None
         self._released_ns: int | None = None
         self._up: np.ndarray | None = None
+        self._info: _LayoutInfo | None = None
+        self._camera_positions: dict[str, tuple[CameraCalibration, np.ndarray]] = {}
 
     # ----------------------------------------------------------------------------- calibration
     def set_calibration(self, calibration: Calibration) -> None:
@@ -634,17 +519,13 @@ class Tracker:
         """Associate one world-frame camera frame with the tracks; return confirmed outputs."""
         code = self._camera_codes.setdefault(camera, len(self._camera_codes))
         self._expire(frame.stamp_ns)
-        detections = self._valid_detections(frame.skeletons)
+        detections, positions, kept = self._valid_detections(frame.skeletons)
         if not detections:
             return []
         params = self.params
-        parts = _mirror_parts(detections[0].layout)
+        info = self._layout_info(detections[0].layout)
+        parts = info.parts
         stamp = detections[0].src_time_ns
-        positions = np.array([d.positions for d in detections])  # (D, J, 3)
-        usable = np.array([d.marker_present for d in detections])
-        if params.min_confidence > 0:
-            usable &= ~(np.array([d.confidences for d in detections]) < params.min_confidence)
-        positions = np.where(usable[..., None], positions, np.nan)
 
         no_flip = np.zeros(parts.count, dtype=bool)
         assigned: dict[int, tuple[_Track, np.ndarray]] = {}
@@ -653,7 +534,7 @@ class Tracker:
         for tracks in self._cascade(recent_ns):
             if tracks and free:
                 for det, track, flips in self._match(
-                    tracks, detections, positions, free, stamp=stamp, camera=code
+                    tracks, detections, positions, free, stamp=stamp, camera=code, info=info
                 ):
                     assigned[det] = (track, flips)
                 free = [d for d in free if d not in assigned]
@@ -662,38 +543,34 @@ class Tracker:
         for det in range(len(detections)):
             if det in assigned:
                 pairs.append((det, *assigned[det]))
-            elif np.isfinite(positions[det]).all(axis=1).sum() >= params.min_joints:
+            elif kept[det] >= params.min_joints:
                 pairs.append((det, self._new_track(positions[det], stamp), no_flip))
             else:
                 self.drops["too few joints"] += 1
         if not pairs:
             return []
-        flips = np.array([f for _, _, f in pairs])  # (U, K)
-        rows = np.array([det for det, _, _ in pairs])
-        canonical = positions[rows[:, None], parts.permutation(flips)]  # (U, J, 3)
-        if params.mirror_check and params.facing_check:
-            # Which hip, eye or ear is left is geometry once the shoulders are labelled.
-            aligned = _misaligned(canonical, detections[0].layout, parts)
-            if aligned.any():
-                flips = flips ^ aligned
-                canonical = positions[rows[:, None], parts.permutation(flips)]
-        tracks = [track for _, track, _ in pairs]
-        chosen = [detections[det] for det in rows]
-        position = self.correction.cameras.get(camera)
-        flips = flips ^ self._hit(
-            tracks,
-            canonical,
-            chosen,
-            parts,
-            stamp,
-            code,
-            flips,
-            None if position is None else np.asarray(position.translation, dtype=float),
+        # Detections in their tracks' labelling; which hip, eye or ear is left is then
+        # geometry once the shoulders are labelled (with the facing check).
+        shoulders, side_pairs, side_parts = info.sides
+        canonical, flips = kernels.canonical_poses(
+            positions,
+            np.array([det for det, _, _ in pairs]),
+            np.array([f for _, _, f in pairs]),
+            parts.part,
+            parts.mirror,
+            params.mirror_check and params.facing_check,
+            shoulders,
+            side_pairs,
+            side_parts,
         )
-        orders = parts.permutation(flips)
+        tracks = [track for _, track, _ in pairs]
+        chosen = [detections[det] for det, _, _ in pairs]
+        flips = flips ^ self._hit(
+            tracks, canonical, chosen, info, stamp, code, flips, self._camera_position(camera)
+        )
         return [
-            self._labelled(detection, track, order)
-            for detection, track, order in zip(chosen, tracks, orders, strict=True)
+            self._labelled(detection, track, flips[u], parts)
+            for u, (detection, track) in enumerate(zip(chosen, tracks, strict=True))
             if track.confirmed
         ]
 
@@ -707,20 +584,71 @@ class Tracker:
         stale = [t for t in self._tracks if t.confirmed and t.last_hit_ns < recent_ns]
         return live, stale, [t for t in self._tracks if not t.confirmed]
 
-    def _valid_detections(self, skeletons: list[Skeleton]) -> list[Skeleton]:
-        """Skeletons with a finite joint and the layout of the first one (and of the tracks)."""
-        valid: list[Skeleton] = []
-        for skeleton in skeletons:
-            if valid and skeleton.layout is not valid[0].layout:
-                self.drops["layout differs within a frame"] += 1
-            elif not (skeleton.marker_present & np.isfinite(skeleton.positions).all(1)).any():
-                self.drops["no finite joint"] += 1
-            else:
-                valid.append(skeleton)
-        if valid and self._tracks and valid[0].layout.n_joints != len(self._tracks[0].positions):
-            self.drops["layout differs from the tracks"] += len(valid)
-            return []
-        return valid
+    def _valid_detections(
+        self, skeletons: list[Skeleton]
+    ) -> tuple[list[Skeleton], np.ndarray, np.ndarray]:
+        """Skeletons with a finite joint and the layout of the first one (and of the tracks).
+
+        Returns them, their ``(D, J, 3)`` positions (NaN where absent or below
+        ``min_confidence``) and ``(D,)`` how many finite joints each keeps.
+        """
+        empty = ([], np.empty((0, 0, 3)), np.empty(0, dtype=np.int64))
+        if not skeletons:
+            return empty
+        layout = skeletons[0].layout
+        if any(skeleton.layout is not layout for skeleton in skeletons):
+            valid: list[Skeleton] = []
+            for skeleton in skeletons:
+                if valid and skeleton.layout is not valid[0].layout:
+                    self.drops["layout differs within a frame"] += 1
+                elif not (skeleton.marker_present & np.isfinite(skeleton.positions).all(1)).any():
+                    self.drops["no finite joint"] += 1
+                else:
+                    valid.append(skeleton)
+            if not valid:
+                return empty
+            skeletons = valid
+        positions, usable, kept = kernels.masked_positions(
+            np.array([s.markers for s in skeletons]),
+            np.array([s.marker_present for s in skeletons]),
+            self.params.min_confidence,
+        )
+        if not usable.all():
+            self.drops["no finite joint"] += int((~usable).sum())
+            skeletons = [s for s, ok in zip(skeletons, usable.tolist(), strict=True) if ok]
+            positions, kept = positions[usable], kept[usable]
+        if (
+            skeletons
+            and self._tracks
+            and skeletons[0].layout.n_joints != len(self._tracks[0].positions)
+        ):
+            self.drops["layout differs from the tracks"] += len(skeletons)
+            return empty
+        return skeletons, positions, kept
+
+    def _camera_position(self, camera: str) -> np.ndarray | None:
+        """``(3,)`` the camera's position in the world (from its current calibration) or None."""
+        calibration = self.correction.cameras.get(camera)
+        if calibration is None:
+            return None
+        cached = self._camera_positions.get(camera)
+        if cached is None or cached[0] is not calibration:
+            position = np.asarray(calibration.translation, dtype=float)
+            cached = self._camera_positions[camera] = (calibration, position)
+        return cached[1]
+
+    def _layout_info(self, layout: Layout) -> _LayoutInfo:
+        """The layout's mirror parts, joint weights, body frame and side pairs (kept per layout)."""
+        if self._info is None or self._info.layout is not layout:
+            parts = _mirror_parts(layout)
+            self._info = _LayoutInfo(
+                layout,
+                parts,
+                _joint_weights(layout, self.params.joint_weight_decay),
+                _body_frame(layout),
+                _side_arrays(layout, parts),
+            )
+        return self._info
 
     def _match(
         self,
@@ -731,55 +659,66 @@ class Tracker:
         *,
         stamp: int,
         camera: int,
+        info: _LayoutInfo,
     ) -> list[tuple[int, _Track, np.ndarray]]:
         """Optimal assignment of ``free`` detections to ``tracks``: (detection, track, flips)."""
         params = self.params
-        parts = _mirror_parts(detections[0].layout)
-        predicted = np.array([t.predict(stamp, params.max_prediction) for t in tracks])
-        cost, flips = _pair_costs(
-            predicted,
-            positions[free],
-            _joint_weights(detections[0].layout, params.joint_weight_decay),
-            parts if params.mirror_check else None,
-            min_joints=params.min_joints,
-            margin=params.mirror_margin,
+        parts = info.parts
+        cost, flips = kernels.match_costs(
+            np.array([t.positions for t in tracks]),
+            np.array([t.velocity for t in tracks]),
+            np.array([t.time_ns for t in tracks], dtype=np.int64),
+            stamp,
+            params.max_prediction,
+            positions if len(free) == len(positions) else positions[free],
+            info.weights,
+            parts.part,
+            parts.mirror,
+            parts.count,
+            params.mirror_check,
+            params.min_joints,
+            params.mirror_margin,
         )
-        if not params.mirror_check:
-            flips = np.zeros((*cost.shape, parts.count), dtype=bool)
         if params.velocity_weight > 0 or params.orientation_weight > 0:
             cost = cost + self._motion_costs(tracks, [detections[d] for d in free], parts, flips)
         if params.body_id_bonus:
-            cost = cost + params.body_id_bonus * self._body_id_terms(
-                tracks, detections, free, camera
+            cost = cost + params.body_id_bonus * np.array(
+                self._body_id_terms(tracks, detections, free, camera)
             )
-        unseen = np.array([(stamp - t.last_hit_ns) * _NS for t in tracks])
-        gate = params.gate_distance + params.gate_growth * np.clip(unseen, 0.0, None)
+        gate = np.array(
+            [
+                params.gate_distance + params.gate_growth * max((stamp - t.last_hit_ns) * _NS, 0.0)
+                for t in tracks
+            ]
+        )
         feasible = np.isfinite(cost) & (cost <= gate[:, None])
         if not feasible.any():
             return []
         rows, cols = linear_sum_assignment(np.where(feasible, cost, _INFEASIBLE))
         return [
             (free[c], tracks[r], flips[r, c])
-            for r, c in zip(rows, cols, strict=True)
+            for r, c in zip(rows.tolist(), cols.tolist(), strict=True)
             if feasible[r, c]
         ]
 
     @staticmethod
     def _body_id_terms(
         tracks: list[_Track], detections: list[Skeleton], free: list[int], camera: int
-    ) -> np.ndarray:
+    ) -> list[list[float]]:
         """``(T, D)`` body-id evidence: -1 agrees, +1 contradicts, 0 says nothing.
 
         -1 where the camera keeps the body id it gave the track last time; +1 for the track's
         other candidates when that id is in the frame (the camera still follows the track's
-        body as another detection).
+        body as another detection). A few dozen pairs: plain Python beats numpy here.
         """
-        ids = np.array([detections[d].id for d in free])
+        ids = [detections[d].id for d in free]
         frame_ids = {detection.id for detection in detections if detection.id >= 0}
-        known = np.array([t.cameras.get(camera, -1) for t in tracks])
-        same = (known[:, None] == ids) & (ids >= 0)
-        elsewhere = np.array([k >= 0 and k in frame_ids for k in known])[:, None] & ~same
-        return elsewhere.astype(float) - same
+        terms = []
+        for track in tracks:
+            known = track.cameras.get(camera, -1)
+            elsewhere = 1.0 if known >= 0 and known in frame_ids else 0.0
+            terms.append([-1.0 if known == i and i >= 0 else elsewhere for i in ids])
+        return terms
 
     def _motion_costs(
         self,
@@ -812,12 +751,12 @@ class Tracker:
         self._tracks.append(track)
         return track
 
-    def _hit(  # noqa: PLR0917 - one frame's matched pairs, all positional for brevity
+    def _hit(  # noqa: PLR0912, PLR0917 - one frame's matched pairs, all positional for brevity
         self,
         tracks: list[_Track],
         canonical: np.ndarray,
         detections: list[Skeleton],
-        parts: _MirrorParts,
+        info: _LayoutInfo,
         time_ns: int,
         camera: int,
         flips: np.ndarray,
@@ -829,7 +768,7 @@ class Tracker:
             tracks: the U tracks hit (distinct).
             canonical: ``(U, J, 3)`` their detections, relabelled to the tracks' sides.
             detections: the U detections as received (ids, orientations).
-            parts: the layout's mirror parts.
+            info: the layout's mirror parts, weights and body frame.
             time_ns: the frame's corrected stamp.
             camera: the frame's camera code.
             flips: ``(U, K)`` parts relabelled per detection.
@@ -841,23 +780,21 @@ class Tracker:
 
         """
         params = self.params
-        previous = np.array([t.time_ns for t in tracks])
-        now = np.maximum(previous, time_ns)
-        dt = np.clip((now - previous) * _NS, -params.max_prediction, params.max_prediction)
-        positions = np.array([t.positions for t in tracks])
-        predicted = positions + np.array([t.velocity for t in tracks])[:, None] * dt[:, None, None]
-        alpha = np.array([params.position_smoothing if t.hits else 1.0 for t in tracks])
-        measured = np.isfinite(canonical).all(axis=2)[..., None]
-        updated = np.where(
-            measured, predicted + alpha[:, None, None] * (canonical - predicted), predicted
+        parts = info.parts
+        updated, terms = kernels.hit_update(
+            np.array([t.positions for t in tracks]),
+            np.array([t.velocity for t in tracks]),
+            np.array([t.time_ns for t in tracks], dtype=np.int64),
+            np.array([t.epoch_ns for t in tracks], dtype=np.int64),
+            np.array([params.position_smoothing if t.hits else 1.0 for t in tracks]),
+            canonical,
+            time_ns,
+            params.max_prediction,
         )
-        updated = np.where(np.isfinite(updated), updated, canonical)
-        epochs = np.array([t.epoch_ns for t in tracks])
-        terms = _velocity_sums((time_ns - epochs) * _NS, canonical)
         window_ns = round(params.velocity_window * 1e9)
         for u, track in enumerate(tracks):
             track.positions = updated[u]
-            track.time_ns = int(now[u])
+            track.time_ns = max(track.time_ns, time_ns)
             track.last_hit_ns = max(track.last_hit_ns, time_ns)
             track.hits += 1
             track.cameras[camera] = detections[u].id
@@ -869,22 +806,24 @@ class Tracker:
                 if np.isfinite(detection.orientations).any():
                     track.orientations = detection.orientations[order]
         cameras = max(len(t.sums) for t in tracks)
-        sums = np.zeros((len(tracks), cameras, *tracks[0].sums.shape[1:]))
-        for u, track in enumerate(tracks):
-            sums[u, : len(track.sums)] = track.sums
-        weights = _joint_weights(detections[0].layout, params.joint_weight_decay)
-        velocities, body, determined = _solve_velocities(sums, weights)
-
+        if all(len(t.sums) == cameras for t in tracks):
+            sums = np.array([t.sums for t in tracks])
+        else:
+            sums = np.zeros((len(tracks), cameras, *tracks[0].sums.shape[1:]))
+            for u, track in enumerate(tracks):
+                sums[u, : len(track.sums)] = track.sums
+        velocities, body, determined = kernels.solve_velocities(sums, info.weights)
         for u, track in enumerate(tracks):
             if determined[u]:
                 track.velocities = velocities[u]
                 track.velocity = body[u]
         swaps = np.zeros_like(flips)
-        frame = _body_frame(detections[0].layout)
+        frame = info.frame
         facing = params.mirror_check and params.facing_check and bool(frame.usable)
         if facing:
             turned = self._facing(
                 tracks,
+                updated,
                 canonical,
                 frame,
                 mirror=parts.mirror,
@@ -894,20 +833,19 @@ class Tracker:
             swaps[turned] = True
         for u, track in enumerate(tracks):
             if not track.confirmed and track.hits >= params.min_hits:
-                self._confirm(track, detections[u].layout, time_ns)
+                self._confirm(track, info, time_ns)
             if params.mirror_check and params.mirror_vote and track.confirmed and not facing:
                 swaps[u] ^= self._vote(track, parts, camera, time_ns, flips[u] ^ swaps[u])
         return swaps
 
-    def _world_up(self, trunks: np.ndarray) -> np.ndarray:
+    def _world_up(self, positions: np.ndarray, frame: _BodyFrame) -> np.ndarray:
         """``(3,)`` the world's up, a running mean of people's trunks (root -> neck).
 
         The world frame may be a camera's (y down) or z-up; people stand most of the time,
         and one bending person must not tilt the front the facing check compares with.
         """
-        trunks = trunks[np.isfinite(trunks).all(axis=1)]
-        if len(trunks):
-            mean = trunks.mean(axis=0)
+        mean, count = kernels.trunk_mean(positions, frame.root, frame.neck)
+        if count:
             self._up = mean if self._up is None else self._up + 0.01 * (mean - self._up)
             self._up = self._up / np.linalg.norm(self._up)
         return self._up if self._up is not None else np.full(3, np.nan)
@@ -915,6 +853,7 @@ class Tracker:
     def _facing(
         self,
         tracks: list[_Track],
+        positions: np.ndarray,
         canonical: np.ndarray,
         frame: _BodyFrame,
         *,
@@ -925,44 +864,37 @@ class Tracker:
         """Weigh one frame's evidence on each track's facing; relabel tracks found reversed.
 
         For a detection (in its track's labelling) with anatomical forward ``a`` and a track
-        front ``f``: if the track is right, the detection is flipped iff ``a·f < 0``; if the
-        track is mirrored, the opposite, and its front is ``-f``. Each hypothesis' likelihood
-        uses the flip prior for the view the camera would have (back: cos(f, to camera) < -0.5).
+        front ``f`` (``positions`` ``(U, J, 3)``: the tracks' poses): if the track is right,
+        the detection is flipped iff ``a·f < 0``; if the track is mirrored, the opposite, and
+        its front is ``-f``. Each hypothesis' likelihood uses the flip prior for the view the
+        camera would have (back: cos(f, to camera) < -0.5); walking forward adds evidence
+        (``kernels.facing_evidence`` computes it).
 
         Returns:
             ``(U,)`` which tracks were relabelled (all their parts swapped).
 
         """
         params = self.params
-        positions = np.array([t.positions for t in tracks])
-        up = np.broadcast_to(self._world_up(frame.trunk(positions)), positions[:, 0].shape)
-        front = frame.front(positions, up)
-        forward = frame.forward(canonical, up)
-        flipped = (forward * front).sum(axis=1) < 0
-        evidence = np.zeros(len(tracks))
-        if camera_position is not None:
-            to_camera = _unit_rows(_flat(camera_position - positions[:, frame.root], up))
-            cosine = (front * to_camera).sum(axis=1)
-            prior_right = np.where(cosine < -0.5, params.flip_prior_back, params.flip_prior)
-            prior_wrong = np.where(-cosine < -0.5, params.flip_prior_back, params.flip_prior)
-            likely_right = np.where(flipped, prior_right, 1.0 - prior_right)
-            likely_wrong = np.where(flipped, 1.0 - prior_wrong, prior_wrong)
-            evidence += np.log(likely_right / likely_wrong)
-        else:  # no camera pose: a flipped-looking detection is simply evidence against
-            evidence += np.where(flipped, -1.0, 1.0) * np.log(
-                (1.0 - params.flip_prior) / params.flip_prior
-            )
-        velocity = np.array([t.velocity for t in tracks])
-        walking = _flat(velocity, up)
-        speed = np.linalg.norm(walking, axis=1)
-        along = (walking * front).sum(axis=1) / np.maximum(speed, 1e-9)
-        evidence += np.where(speed > params.walking_speed, np.sign(along), 0.0) * (
-            params.walking_evidence
-        )
-        evidence = np.where(np.isfinite(evidence), evidence, 0.0)
+        up = self._world_up(positions, frame)
+        evidence = kernels.facing_evidence(
+            positions,
+            canonical,
+            np.array([t.velocity for t in tracks]),
+            up,
+            _NO_CAMERA if camera_position is None else camera_position,
+            camera_position is not None,
+            frame.root,
+            frame.left,
+            frame.right,
+            frame.pointers,
+            params.flip_prior,
+            params.flip_prior_back,
+            params.walking_speed,
+            params.walking_evidence,
+        ).tolist()
         turned = np.zeros(len(tracks), dtype=bool)
         for u, track in enumerate(tracks):
-            fade = np.exp(-max(time_ns - track.facing_ns, 0) * _NS / params.facing_memory)
+            fade = math.exp(-max(time_ns - track.facing_ns, 0) * _NS / params.facing_memory)
             track.facing = track.facing * fade + evidence[u]
             track.facing_ns = time_ns
             if track.facing < -params.facing_threshold:
@@ -998,7 +930,7 @@ class Tracker:
             track.mirrored = {cam for cam, (_, vote) in track.votes.items() if vote.any()}
         return swap
 
-    def _confirm(self, track: _Track, layout: Layout, time_ns: int) -> None:
+    def _confirm(self, track: _Track, info: _LayoutInfo, time_ns: int) -> None:
         """Confirm a tentative track seen enough, unless it duplicates a confirmed one."""
         params = self.params
         cameras = min(params.min_cameras, max(len(self.correction.cameras), 1))
@@ -1007,15 +939,20 @@ class Tracker:
             return
         confirmed = [t for t in self._tracks if t.confirmed]
         if confirmed:
-            predicted = np.array([t.predict(time_ns, params.max_prediction) for t in confirmed])
-            weights = _joint_weights(layout, params.joint_weight_decay)
-            distance, _ = _pair_costs(
-                predicted,
+            distance, _ = kernels.match_costs(
+                np.array([t.positions for t in confirmed]),
+                np.array([t.velocity for t in confirmed]),
+                np.array([t.time_ns for t in confirmed], dtype=np.int64),
+                time_ns,
+                params.max_prediction,
                 track.positions[None],
-                weights,
-                None,
-                min_joints=params.min_joints,
-                margin=0.0,
+                info.weights,
+                info.parts.part,
+                info.parts.mirror,
+                info.parts.count,
+                False,
+                params.min_joints,
+                0.0,
             )
             if (distance < params.duplicate_distance).any():
                 self._tracks.remove(track)
@@ -1032,22 +969,28 @@ class Tracker:
             <= (params.track_timeout if track.confirmed else params.tentative_timeout)
         ]
 
-    def _labelled(self, detection: Skeleton, track: _Track, order: np.ndarray) -> Skeleton:
+    @staticmethod
+    def _labelled(
+        detection: Skeleton, track: _Track, flips: np.ndarray, parts: _MirrorParts
+    ) -> Skeleton:
         """The output skeleton of one detection: track id, sides fixed, velocities filled.
 
         The detection is the tracker's own copy (made by the correction), so it is changed in
-        place. Link ids are child joint ids, so links take the joints' order.
+        place: the parts in ``flips`` relabelled (links too: link ids are child joint ids),
+        present joints without a velocity given the track's.
         """
-        out = detection
-        if (order != np.arange(len(order))).any():
-            out.markers = out.markers[order]
-            out.marker_present = out.marker_present[order]
-            out.links = out.links[order]
-            out.link_present = out.link_present[order]
-        out.id = track.id
-        missing = out.marker_present & ~np.isfinite(out.velocities).all(axis=1)
-        out.velocities[missing] = track.velocities[missing]
-        return out
+        kernels.label_rows(
+            detection.markers,
+            detection.marker_present,
+            detection.links,
+            detection.link_present,
+            flips,
+            parts.part,
+            parts.mirror,
+            track.velocities,
+        )
+        detection.id = track.id
+        return detection
 
 
 def _nan_mean(values: np.ndarray) -> np.ndarray:
