@@ -56,26 +56,32 @@ def main() -> int:
     node = rclpy.create_node("hiros_bridge_client")
     received: dict[str, list[bytes]] = {c: [] for c in CAMERAS}
     publishers = {}
+    subscriptions = []
     for camera in CAMERAS:
-        node.create_subscription(
+        subscription = node.create_subscription(
             SkeletonGroupMsg,
             f"/{camera}/skeletons",
             lambda data, c=camera: received[c].append(bytes(data)),
             QoSProfile(depth=100),
             raw=True,
         )
+        subscriptions.append(subscription)
         publishers[camera] = node.create_publisher(
             MarkerArray, f"/{camera}/body_tracking_data", QoSProfile(depth=100)
         )
     deadline = time.monotonic() + 60
-    while any(
-        p.get_subscription_count() == 0 or node.count_publishers(f"/{c}/skeletons") == 0
-        for c, p in publishers.items()
+    while any(p.get_subscription_count() == 0 for p in publishers.values()) or any(
+        s.get_publisher_count() == 0 for s in subscriptions
     ):
         rclpy.spin_once(node, timeout_sec=0.1)
         if time.monotonic() > deadline:
             print("bridge not discovered", file=sys.stderr)
             return 2
+    # Both ends have matched ours; give the bridge's own writers the same moment to match our
+    # readers (volatile topics deliver nothing to a reader its writer has not matched yet).
+    settle = time.monotonic() + 1.0
+    while time.monotonic() < settle:
+        rclpy.spin_once(node, timeout_sec=0.05)
     for camera, publisher in publishers.items():
         for raw in driver_messages(camera):
             publisher.publish(raw)
