@@ -41,6 +41,7 @@ __all__ = [
     "decode_marker_array",
     "encode_group",
     "encode_marker_array",
+    "marker_array_plan",
 ]
 
 _NS = 1_000_000_000
@@ -617,6 +618,17 @@ def _build_marker_plan(data: MarkerArrayData, texts: list[bytes]) -> Plan:
 def _text_slots(texts: list[bytes]) -> dict[str, np.ndarray]:
     lengths = np.array([len(t) for t in texts], dtype=np.intp)
     return {f"text{n}": np.flatnonzero(lengths == n) for n in np.unique(lengths[lengths > 0])}
+
+
+def marker_array_plan(data: MarkerArrayData) -> Plan:
+    """The (cached) plan ``encode_marker_array`` fills for messages shaped like ``data``.
+
+    Its ``slots`` give the byte offset of every marker's fields (``stamp``, ``pose_scale``,
+    ``points``, ...), for encoders that fill an encoded message's bytes themselves.
+    """
+    texts = _text_bytes(data.texts)
+    key = _marker_key(data, texts)
+    return _MARKER_PLANS.get(key) or _MARKER_PLANS.put(key, _build_marker_plan(data, texts))
 
 
 def encode_marker_array(data: MarkerArrayData) -> bytes:

@@ -81,24 +81,44 @@ def link_rows(
     A link is present where both its end joints are: its position is their midpoint, its
     orientation the child joint's, its confidence the smaller one (``fmin``); every other row is
     NaN. Any leading shape (one skeleton or a stack of them) in one pass: a fixed dozen numpy
-    calls, so stages rebuild the links of all their people at once.
+    calls, so stages rebuild the links of all their people at once. When the link ids form
+    one run (every built-in layout: all joints but the root), the rows are written in place
+    through a slice instead of gathered and scattered.
     """
     parents, children = layout.link_parents, layout.link_children
+    rows = _children_slice(layout)
     shape = marker_present.shape
-    head = markers[..., : _ORIENTATION.stop]  # confidence, position, orientation
-    parent_rows = head[..., parents, :]
-    values = head[..., children, :]  # a copy: becomes the link rows
-    np.fmin(parent_rows[..., _CONFIDENCE], values[..., _CONFIDENCE], out=values[..., _CONFIDENCE])
-    position = values[..., _POSITION]
-    position += parent_rows[..., _POSITION]
-    position *= 0.5
-    both = marker_present[..., parents] & marker_present[..., children]
-    values[~both] = np.nan
+    parent_rows = markers[..., parents, : _ORIENTATION.start]  # confidence, position
+    child_rows = markers[..., rows, : _ORIENTATION.stop]
     links = np.full((*shape, STATE_WIDTH), np.nan)
-    links[..., children, : _ORIENTATION.stop] = values
+    values = links[..., rows, : _ORIENTATION.stop]  # a view when ``rows`` is a slice
+    np.fmin(parent_rows[..., _CONFIDENCE], child_rows[..., _CONFIDENCE], out=values[..., 0])
+    position = values[..., _POSITION]
+    np.add(child_rows[..., _POSITION], parent_rows[..., _POSITION], out=position)
+    position *= 0.5
+    values[..., _ORIENTATION] = child_rows[..., _ORIENTATION]
+    both = marker_present[..., parents] & marker_present[..., rows]
+    values[~both] = np.nan
+    if not isinstance(rows, slice):
+        links[..., children, : _ORIENTATION.stop] = values
     present = np.zeros(shape, dtype=bool)
-    present[..., children] = both
+    present[..., rows] = both
     return links, present
+
+
+_CHILD_SLICES: dict[int, tuple[Layout, slice | np.ndarray]] = {}
+
+
+def _children_slice(layout: Layout) -> slice | np.ndarray:
+    """The layout's link ids as a slice when they are consecutive, else as the index array."""
+    found = _CHILD_SLICES.get(id(layout))
+    if found is None or found[0] is not layout:
+        children = np.asarray(layout.link_children)
+        rows: slice | np.ndarray = children
+        if children.size and np.array_equal(children, np.arange(children[0], children[-1] + 1)):
+            rows = slice(int(children[0]), int(children[-1]) + 1)
+        found = _CHILD_SLICES[id(layout)] = (layout, rows)
+    return found[1]
 
 
 @dataclass(eq=False)

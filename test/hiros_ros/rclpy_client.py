@@ -48,6 +48,9 @@ def main() -> int:
         if time.monotonic() > deadline:
             print("no echo node discovered", file=sys.stderr)
             return 2
+    settle = time.monotonic() + 1.0  # let the echo node's writer match our reader too
+    while time.monotonic() < settle:
+        rclpy.spin_once(node, timeout_sec=0.05)
     sent = [make_group(i) for i in range(COUNT)]
     for group in sent:
         publisher.publish(group)
