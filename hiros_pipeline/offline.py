@@ -17,9 +17,9 @@ from pathlib import Path
 import yaml
 
 from hiros_core.calibration import Calibration
-from hiros_core.recording import RecordingWriter, iter_groups
+from hiros_core.recording import MARKER_ARRAY, RecordingWriter, iter_groups
 from hiros_pipeline.pipeline import STAGES, Pipeline, PipelineParams, StageOutputs
-from hiros_visualizer.markers import skeleton_markers
+from hiros_visualizer.markers import encode_skeleton_markers
 
 __all__ = ["RunSummary", "message_count", "run_recording"]
 
@@ -136,6 +136,9 @@ def _write(writer: RecordingWriter, outputs: StageOutputs, summary: RunSummary) 
             summary.first_ns = group.stamp_ns if summary.first_ns is None else summary.first_ns
             summary.last_ns = group.stamp_ns
         if stage in DRAWN_STAGES:
-            writer.write_marker_array(
-                f"/hiros/{stage}/markers", skeleton_markers(group, stage), group.stamp_ns
+            writer.write(
+                f"/hiros/{stage}/markers",
+                MARKER_ARRAY,
+                encode_skeleton_markers(group, stage),
+                group.stamp_ns,
             )

@@ -1,8 +1,13 @@
 """hiros_visualizer: coloured skeleton markers for any SkeletonGroup topic."""
 
-from hiros_visualizer.markers import VisualizerParams, id_color, skeleton_markers
+from hiros_visualizer.markers import (
+    VisualizerParams,
+    encode_skeleton_markers,
+    id_color,
+    skeleton_markers,
+)
 
-__all__ = ["VisualizerParams", "id_color", "main", "skeleton_markers"]
+__all__ = ["VisualizerParams", "encode_skeleton_markers", "id_color", "main", "skeleton_markers"]
 
 
 def main(args: list[str] | None = None) -> None:

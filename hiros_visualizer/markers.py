@@ -12,7 +12,7 @@ and the points change, each in one numpy scatter.
 from __future__ import annotations
 
 import colorsys
-from dataclasses import astuple, dataclass
+from dataclasses import dataclass, fields
 from functools import lru_cache
 
 import numpy as np
@@ -144,6 +144,7 @@ class _DrawPlan:
 _DRAW_PLANS: dict[tuple, _DrawPlan] = {}
 _DRAW_PLAN_CAPACITY = 256
 _INT32_SECONDS = (-(2**31), 2**31)
+_DRAWING_FIELDS = tuple(f.name for f in fields(VisualizerParams))  # not a subclass's topics
 
 
 def encode_skeleton_markers(
@@ -169,7 +170,8 @@ def encode_skeleton_markers(
     present = np.array([s.marker_present for s in skeletons])
     visible = present & np.isfinite(positions).all(axis=2)
     ids = tuple(s.id for s in skeletons)
-    key = (group.frame_id, namespace, astuple(params), layout, ids, visible.tobytes())
+    drawing = tuple(getattr(params, name) for name in _DRAWING_FIELDS)
+    key = (group.frame_id, namespace, drawing, layout, ids, visible.tobytes())
     plan = _DRAW_PLANS.get(key)
     if plan is None:
         if len(_DRAW_PLANS) >= _DRAW_PLAN_CAPACITY:
@@ -178,7 +180,7 @@ def encode_skeleton_markers(
         plan = _DRAW_PLANS[key] = _draw_plan(data, encode_marker_array(data), visible, layout)
     out = plan.template.copy()
     out.view("<f8")[plan.points] = positions.reshape(-1)[plan.sources]
-    out.view("<f8")[plan.tops] = _label_tops(positions, visible)
+    out.view("<f8")[plan.tops] = _label_tops(positions, visible).ravel()
     stamps = out.view("<i4")
     stamps[plan.stamps] = sec
     stamps[plan.stamps + 1] = nanosec

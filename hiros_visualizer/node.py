@@ -7,10 +7,10 @@ from dataclasses import dataclass, field
 from hiros_skeleton_msgs.msg import SkeletonGroup as SkeletonGroupMsg
 from visualization_msgs.msg import MarkerArray
 
-from hiros_core.codec import decode_group, encode_marker_array
+from hiros_core.codec import decode_group
 from hiros_ros import HirosNode, run_node
 from hiros_ros.node import pipeline_qos
-from hiros_visualizer.markers import VisualizerParams, skeleton_markers
+from hiros_visualizer.markers import VisualizerParams, encode_skeleton_markers
 
 
 @dataclass
@@ -39,8 +39,8 @@ class VisualizerNode(HirosNode):
 
     def on_group(self, topic: str, publisher: object, data: bytes) -> None:
         """Decode, draw, publish."""
-        markers = skeleton_markers(decode_group(data), topic.strip("/"), self.params)
-        self.publish_raw(publisher, encode_marker_array(markers))
+        markers = encode_skeleton_markers(decode_group(data), topic.strip("/"), self.params)
+        self.publish_raw(publisher, markers)
 
 
 def main(args: list[str] | None = None) -> None:

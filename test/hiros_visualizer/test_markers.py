@@ -1,8 +1,16 @@
 import numpy as np
 
+from hiros_core.codec import encode_marker_array
 from hiros_core.layouts import AZURE_KINECT, KINECT_V2
 from hiros_core.model import Skeleton, SkeletonGroup
-from hiros_visualizer.markers import LINE_LIST, SPHERE_LIST, TEXT_VIEW_FACING, skeleton_markers
+from hiros_visualizer.markers import (
+    LINE_LIST,
+    SPHERE_LIST,
+    TEXT_VIEW_FACING,
+    VisualizerParams,
+    encode_skeleton_markers,
+    skeleton_markers,
+)
 
 
 def person(seed, layout=AZURE_KINECT, skeleton_id=0):
@@ -41,3 +49,26 @@ def test_mixed_layouts_and_empty_groups():
     assert len(data.points[0]) == 25
     assert len(data.points[3]) == 32
     assert len(skeleton_markers(SkeletonGroup(0, "w", []))) == 0
+
+
+def test_encoded_markers_equal_the_general_encoding_frame_after_frame():
+    rng = np.random.default_rng(5)
+    params = VisualizerParams(joint_size=0.03)
+    people = [person(4, skeleton_id=3), person(5, skeleton_id=8)]
+    frames = []
+    for step in range(6):
+        frame = [p.copy() for p in people]
+        for p in frame:
+            p.positions[:] += rng.normal(scale=0.01, size=p.positions.shape)
+        if step >= 2:  # a new shape: a joint goes missing, another becomes unknown
+            frame[0].marker_present[7] = False
+            frame[1].positions[3] = np.nan
+        if step == 4:  # a person leaves: yet another shape
+            frame = frame[:1]
+        frames.append(SkeletonGroup(1_000_000_000 * step + 17, "world", frame))
+    frames.append(SkeletonGroup(9, "world", [person(6, KINECT_V2, 1), person(7, skeleton_id=2)]))
+    frames.append(SkeletonGroup(10, "world", []))
+    for group in frames:
+        for namespace in ("merger", "filter"):
+            expected = encode_marker_array(skeleton_markers(group, namespace, params))
+            assert encode_skeleton_markers(group, namespace, params) == expected
