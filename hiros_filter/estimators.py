@@ -174,11 +174,6 @@ class KalmanBank:
         with np.errstate(invalid="ignore", over="ignore"):
             gain = P[:, :, 0] / variance[:, None]  # (n, 3, J)
             innovation = positions.transpose(0, 2, 1) - x[:, 0]  # (n, 3 axes, J)
-            import os
-            gate = float(os.environ.get("GATE", "0"))
-            if gate > 0:
-                m2 = np.sum(innovation**2, axis=1) / (3.0 * variance)
-                gain = gain / np.maximum(1.0, np.sqrt(m2) / gate)[:, None]
             if self.max_noise_scale > 1.0:
                 surprise = np.sum(innovation**2, axis=1) / (3.0 * variance)
                 scale = self.scale[index]
