@@ -50,6 +50,8 @@ class KinematicTree:
         has_parent: ``(J,)`` True for joints that end a link.
         parent_of: ``(J, J)`` float, ``parent_of[c, p] = 1`` when ``p`` is ``c``'s parent, so
             ``flags @ parent_of`` moves per-link flags (by child) to the parents.
+        order: ``(J,)`` the joints level by level (parents before children).
+        level_starts: ``(levels + 1,)`` where each level begins in ``order``.
 
     """
 
@@ -61,6 +63,8 @@ class KinematicTree:
     subtree_t: np.ndarray
     has_parent: np.ndarray
     parent_of: np.ndarray
+    order: np.ndarray
+    level_starts: np.ndarray
 
     @classmethod
     def from_layout(cls, layout: Layout) -> KinematicTree:
@@ -92,6 +96,8 @@ class KinematicTree:
             subtree_t=np.ascontiguousarray(subtree.T),
             has_parent=parents >= 0,
             parent_of=parent_of,
+            order=np.concatenate(levels).astype(np.int64),
+            level_starts=np.cumsum([0, *map(len, levels)]).astype(np.int64),
         )
 
 
@@ -165,6 +171,7 @@ def fit_fixed_lengths(
     fallback_vectors: np.ndarray | None = None,
     sweeps: int = 1,
     refinements: int = 2,
+    compiled: bool = False,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Joint positions closest to ``measured`` (weighted) whose calibrated links keep ``lengths``.
 
@@ -181,12 +188,22 @@ def fit_fixed_lengths(
             give a direction (usually last frame's solution).
         sweeps: root-to-leaves sweeps of block-coordinate descent (the start).
         refinements: Gauss-Newton steps after the sweeps.
+        compiled: run the numba kernel of :mod:`hiros_optimizer.compiled` (the same algorithm
+            and results up to rounding, ~50x faster; compiled on first use) instead of numpy.
 
     Returns:
         ``(P, J, 3)`` positions and ``(P, J, 3)`` link vectors (child minus parent; the root's
         row is its position). Calibrated links have exactly their length.
 
     """
+    if compiled:
+        from hiros_optimizer.compiled import fit_people
+
+        return fit_people(
+            tree.parents, tree.order, tree.level_starts, measured, weights, lengths,
+            prior=prior, prior_weight=prior_weight, fallback_vectors=fallback_vectors,
+            sweeps=sweeps, refinements=refinements,
+        )  # fmt: skip
     weights = np.where(np.isfinite(measured).all(axis=-1), np.clip(weights, 0.0, None), 0.0)
     weights = np.nan_to_num(weights)
     targets = np.nan_to_num(measured) * weights[..., None]

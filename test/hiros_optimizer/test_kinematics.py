@@ -1,4 +1,5 @@
 import numpy as np
+import pytest
 
 from hiros_core.layouts import AZURE_KINECT, KINECT_V2
 from hiros_optimizer.kinematics import KinematicTree, fit_fixed_lengths, link_lengths
@@ -89,3 +90,34 @@ def test_other_layout_and_missing_joints():
     fitted, _ = fit_fixed_lengths(tree, positions, weights, lengths)
     assert np.isfinite(fitted).all()
     np.testing.assert_allclose(link_lengths(fitted, tree.parents)[:, 1:], 0.3)
+
+
+@pytest.mark.parametrize("layout", [AZURE_KINECT, KINECT_V2])
+@pytest.mark.parametrize(("sweeps", "refinements"), [(1, 2), (0, 3), (2, 0)])
+def test_compiled_fit_equals_the_numpy_fit(layout, sweeps, refinements):
+    """Weightless joints and subtrees, a NaN measurement, a free link, people without prior."""
+    rng = np.random.default_rng(sweeps * 10 + refinements)
+    tree = KinematicTree.from_layout(layout)
+    people, joints = 4, layout.n_joints
+    lengths = rng.uniform(0.05, 0.4, (people, joints))
+    lengths[:, tree.parents < 0] = np.nan
+    lengths[:, 5] = np.nan
+    measured = rng.normal(scale=0.3, size=(people, joints, 3))
+    measured[2, 7] = np.nan
+    weights = rng.uniform(0.0, 1.0, (people, joints))
+    weights[0, 3] = 0.0
+    weights[1, 10:] = 0.0
+    prior = measured + rng.normal(scale=0.05, size=measured.shape)
+    prior[3] = np.nan
+    fallback = rng.normal(size=measured.shape)
+    kwargs = {
+        "prior": prior,
+        "prior_weight": 0.05,
+        "fallback_vectors": fallback,
+        "sweeps": sweeps,
+        "refinements": refinements,
+    }
+    reference = fit_fixed_lengths(tree, measured, weights, lengths, **kwargs)
+    compiled = fit_fixed_lengths(tree, measured, weights, lengths, compiled=True, **kwargs)
+    for expected, got in zip(reference, compiled, strict=True):
+        np.testing.assert_allclose(got, expected, atol=1e-9)
