@@ -32,6 +32,7 @@ from __future__ import annotations
 
 from collections import Counter
 from dataclasses import dataclass
+from functools import lru_cache
 from typing import Any
 
 import numpy as np
@@ -208,6 +209,8 @@ class Optimizer:
         self._trees: dict[str, KinematicTree] = {}
         self.new_calibrations: list[int] = []
         """Track ids calibrated by the last :meth:`update` (the node exports on these)."""
+        if self.params.compiled:
+            _warm_up()
 
     # ----------------------------------------------------------------- person calibrations
 
@@ -507,6 +510,19 @@ class Optimizer:
             distance = np.linalg.norm(measured - prior, axis=-1)
             factor = np.minimum(1.0, (self.params.outlier_distance / distance) ** 2)
         return np.where(suspect & np.isfinite(factor), factor, 1.0)
+
+
+@lru_cache(maxsize=1)
+def _warm_up() -> None:
+    """Compile (or load from numba's disk cache) the fit kernel now, not at the first fit.
+
+    Once per process: a live node would otherwise stall on its first calibrated person (about
+    0.5 s from the cache, over 10 s on a machine that never compiled it).
+    """
+    tree = KinematicTree.from_layout(get_layout("azure_kinect"))
+    positions = np.zeros((1, len(tree.parents), 3))
+    lengths = np.where(tree.has_parent, 0.1, np.nan)[None]
+    fit_fixed_lengths(tree, positions, np.ones(positions.shape[:2]), lengths, compiled=True)
 
 
 def _nanmedian_last(values: np.ndarray, count: np.ndarray) -> np.ndarray:
