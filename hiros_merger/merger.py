@@ -36,14 +36,16 @@ Shapes: ``M`` tracks, ``C`` detections per track (padded), ``J`` joints; metres,
 
 from __future__ import annotations
 
+import math
 from collections import Counter
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 
 from hiros_core.calibration import Calibration, CameraCalibration
 from hiros_core.layouts import Layout
 from hiros_core.model import STATE_WIDTH, Skeleton, SkeletonGroup, camera_from_frame
+from hiros_merger import kernels
 
 __all__ = ["Merger", "MergerParams"]
 
@@ -113,6 +115,7 @@ class _BodyAxes:
     right: np.ndarray  # (2,)
     torso: np.ndarray  # joints standing for the torso in occlusion tests
     pointers: np.ndarray  # (k, 2) joint pairs pointing forward: ankle -> foot, head -> nose
+    has_front: bool  # whether the layout names what the facing direction needs
 
     @classmethod
     def of(cls, layout: Layout) -> _BodyAxes:
@@ -128,54 +131,8 @@ class _BodyAxes:
         pointers = np.array(
             [(names[a], names[b]) for a, b in pairs if a in names and b in names], dtype=np.int64
         ).reshape(-1, 2)
-        return cls(root, neck, left, right, torso, pointers)
-
-    def front(self, positions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Unit up (root -> neck) and front (cross(left, up)) of poses ``(..., J, 3)``."""
-        up = _unit(positions[..., self.neck, :] - positions[..., self.root, :])
-        # mean of left minus mean of right, as numpy's means compute them
-        left_mean = np.add.reduce(positions[..., self.left, :], axis=-2) / len(self.left)
-        right_mean = np.add.reduce(positions[..., self.right, :], axis=-2) / len(self.right)
-        left = left_mean - right_mean
-        return up, _unit(_cross(left, up))
-
-    def forward(self, positions: np.ndarray, up: np.ndarray) -> np.ndarray:
-        """Unit anatomical forward (feet and nose, ⟂ up) of poses ``(..., J, 3)``.
-
-        It does not depend on the left/right labels, so it tells a front/back flipped
-        detection (forward against the body's front) from a correct one.
-        """
-        steps = positions[..., self.pointers[:, 1], :] - positions[..., self.pointers[:, 0], :]
-        up = up[..., None, :]
-        steps = _unit(steps - np.add.reduce(steps * up, axis=-1)[..., None] * up)
-        return _unit(np.add.reduce(np.where(np.isfinite(steps), steps, 0.0), axis=-2))
-
-    @property
-    def has_front(self) -> bool:
-        """Whether the layout names what the facing direction needs."""
-        return self.neck >= 0 and (self.left >= 0).all() and (self.right >= 0).all()
-
-
-@dataclass
-class _Batch:
-    """The detections being fused, padded to ``(M, C, ...)``: M tracks, C cameras at most.
-
-    ``known`` ``(M, C)``: detections whose camera position is known; ``confidences``
-    ``(M, C, J)``: SDK confidences, 1 where unknown (both computed once by ``_stack``).
-    """
-
-    markers: np.ndarray  # (M, C, J, 20) rows as received, NaN padding
-    positions: np.ndarray  # (M, C, J, 3) brought to the output time
-    ages: np.ndarray  # (M, C) seconds from detection to output time
-    cameras: np.ndarray  # (M, C, 3) camera positions, NaN when unknown
-    camera_names: list[list[str]]  # (M, C), "" for padding
-    known: np.ndarray = field(init=False)
-    confidences: np.ndarray = field(init=False)
-
-    def __post_init__(self) -> None:
-        self.known = np.isfinite(self.cameras).all(axis=-1)
-        confidences = self.markers[..., 0]
-        self.confidences = np.where(np.isfinite(confidences), confidences, 1.0)
+        has_front = neck >= 0 and bool((left >= 0).all() and (right >= 0).all())
+        return cls(root, neck, left, right, torso, pointers, has_front)
 
 
 _AXES: dict[str, _BodyAxes] = {}
@@ -187,74 +144,6 @@ def _axes(layout: Layout) -> _BodyAxes:
     if axes is None:
         axes = _AXES[layout.name] = _BodyAxes.of(layout)
     return axes
-
-
-def _unit(vectors: np.ndarray) -> np.ndarray:
-    """Vectors ``(..., 3)`` scaled to unit length; zero or NaN ones become NaN."""
-    with np.errstate(invalid="ignore", divide="ignore"):
-        return vectors / _norm(vectors)[..., None]
-
-
-def _norm(vectors: np.ndarray) -> np.ndarray:
-    """``np.linalg.norm(vectors, axis=-1)``: the same arithmetic without its wrapper."""
-    return np.sqrt(np.add.reduce(vectors * vectors, axis=-1))
-
-
-def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """``np.cross`` of ``(..., 3)`` vectors, written out (numpy's wrapper costs more)."""
-    ax, ay, az = a[..., 0], a[..., 1], a[..., 2]
-    bx, by, bz = b[..., 0], b[..., 1], b[..., 2]
-    return np.stack([ay * bz - az * by, az * bx - ax * bz, ax * by - ay * bx], axis=-1)
-
-
-def _weighted_median(values: np.ndarray, weights: np.ndarray) -> np.ndarray:
-    """Weighted median along axis 1 of ``values`` ``(M, C, J, 3)`` with ``weights`` ``(M, C, J)``.
-
-    Per coordinate: the smallest value whose cumulative weight reaches half the total; NaN
-    values carry no weight. Entries with all weights 0 give NaN.
-    """
-    weights = np.where(np.isfinite(values), weights[..., None], 0.0)
-    order = np.argsort(np.where(weights > 0, values, np.inf), axis=1)
-    # Gathers along axis 1 as flat indices (take_along_axis' wrapper costs more than them).
-    n_tracks, n_cameras = values.shape[:2]
-    inner = values[0, 0].size
-    base = (np.arange(n_tracks) * (n_cameras * inner))[:, None, None, None] + np.arange(
-        inner
-    ).reshape(values.shape[2:])
-    flat = base + order * inner
-    sorted_values = values.reshape(-1)[flat]
-    cumulative = np.cumsum(weights.reshape(-1)[flat], axis=1)
-    total = cumulative[:, -1:]
-    first = np.argmax(cumulative >= 0.5 * total, axis=1)[:, None]
-    median = np.take_along_axis(sorted_values, first, axis=1)[:, 0]
-    return np.where(total[:, 0] > 0, median, np.nan)
-
-
-def _weighted_mean(values: np.ndarray, weights: np.ndarray) -> np.ndarray:
-    """Weighted mean along axis 1 of ``(M, C, J, k)`` with ``(M, C, J)``; NaN where no weight."""
-    finite = np.isfinite(values).all(axis=-1)
-    weights = np.where(finite, weights, 0.0)
-    total = weights.sum(axis=1)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        mean = (np.where(finite[..., None], values, 0.0) * weights[..., None]).sum(axis=1)
-        return mean / total[..., None]
-
-
-def _distance(positions: np.ndarray, fused: np.ndarray) -> np.ndarray:
-    """``(M, C, J)`` distance of each detection's joints to the fused ``(M, J, 3)``.
-
-    ``np.linalg.norm(positions - fused[:, None], axis=-1)`` without its wrapper.
-    """
-    difference = positions - fused[:, None]
-    return np.sqrt(np.add.reduce(difference * difference, axis=-1))
-
-
-def _mean_of_filled(filled: np.ndarray, finite: np.ndarray, weights: np.ndarray) -> np.ndarray:
-    """:func:`_weighted_mean` of values already zero-filled where not ``finite``."""
-    weights = np.where(finite, weights, 0.0)
-    total = weights.sum(axis=1)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        return (filled * weights[..., None]).sum(axis=1) / total[..., None]
 
 
 def _quaternion_mean(quaternions: np.ndarray, weights: np.ndarray) -> np.ndarray:
@@ -394,41 +283,66 @@ class Merger:
         layout: Layout,
         out_ns: int,
     ) -> list[Skeleton]:
-        """Fuse the detections of each track: robust weighted mean of positions, SO(3) mean."""
-        params = self.params
-        batch = self._stack(entries, track_ids, out_ns)
-        weight = self._prior_weights(batch)
-        positions = batch.positions
-        fused = _weighted_median(positions, weight)
-        axes = _axes(layout)
-        if axes.has_front:
-            up, front = axes.front(fused)
-            if len(axes.pointers):
-                forward = axes.forward(positions, up[:, None])
-                flipped = np.einsum("mck,mk->mc", forward, front) < 0
-                weight = weight * np.where(flipped, params.flipped_weight, 1.0)[..., None]
-            if batch.known.any():
-                weight = (
-                    weight
-                    * self._view_weights(fused, front, batch.cameras, batch.known, axes)[..., None]
-                )
-        if params.occlusion_radius > 0 and len(track_ids) > 1 and batch.known.any():
-            weight = weight * self._occlusion(fused, positions, batch.cameras, batch.known, axes)
-        # The positions do not change between iterations: their mask and zero-filled copy once.
-        finite = np.isfinite(positions).all(axis=-1)
-        filled = np.where(finite[..., None], positions, 0.0)
-        for _ in range(params.iterations):
-            residual = _distance(positions, fused)
-            fused = _mean_of_filled(filled, finite, self._robust(weight, residual))
-        residual = _distance(positions, fused)
-        final = self._robust(weight, residual)
-        self._update_agreement(residual, batch.camera_names)
+        """Fuse the detections of each track: robust weighted mean of positions, SO(3) mean.
 
-        markers = batch.markers
-        confidence = _weighted_mean(
-            np.where(final > 0, batch.confidences, np.nan)[..., None], final
-        )[..., 0]
-        velocity = _weighted_mean(markers[..., 8:11], final)
+        The positions, weights and means are one compiled kernel (``kernels.fuse``, the
+        numpy form of each step is in the module docstring's formulas); the orientations'
+        eigen-decomposition stays with numpy.
+        """
+        params = self.params
+        index = {track_id: m for m, track_id in enumerate(track_ids)}
+        counts = dict.fromkeys(track_ids, 0)
+        rows_of: list[int] = []
+        slots: list[int] = []
+        for track_id, _, _ in entries:
+            rows_of.append(index[track_id])
+            slots.append(counts[track_id])
+            counts[track_id] += 1
+        scale = params.agreement_scale
+        factors = {
+            name: 1.0 / (1.0 + (error / scale) ** 2) for name, error in self.agreement.items()
+        }
+        axes = _axes(layout)
+        markers, fused, final, confidence, velocity, disagreement = kernels.fuse(
+            np.array([s.markers for _, _, s in entries]),
+            np.array([s.marker_present for _, _, s in entries]),
+            np.array(rows_of, dtype=np.int64),
+            np.array(slots, dtype=np.int64),
+            (len(track_ids), max(counts.values())),
+            np.array([(out_ns - s.src_time_ns) * _NS for _, _, s in entries]),
+            np.array(
+                [self._camera_positions.get(camera, _UNKNOWN_CAMERA) for _, camera, _ in entries],
+                dtype=float,
+            ),
+            np.array([factors.get(camera, 1.0) for _, camera, _ in entries]),
+            np.array(
+                [
+                    params.max_extrapolation,
+                    params.confidence_floor,
+                    params.confidence_power,
+                    params.staleness_scale,
+                    params.depth_gain,
+                    params.flipped_weight,
+                    params.view_weight_min,
+                    params.view_power,
+                    params.occlusion_radius,
+                    params.occlusion_weight,
+                    params.outlier_scale,
+                    params.outlier_cutoff,
+                ],
+                dtype=float,
+            ),
+            params.iterations,
+            params.extrapolate,
+            axes.root,
+            axes.neck,
+            axes.left,
+            axes.right,
+            axes.torso,
+            axes.pointers,
+            axes.has_front,
+        )
+        self._update_agreement(disagreement, rows_of, slots, [c for _, c, _ in entries])
         orientations = markers[..., 4:8]
         orientation = (
             _quaternion_mean(orientations, final)
@@ -462,142 +376,30 @@ class Merger:
                 skeleton.confidence = float(np.nanmean(rows[m, present[m], 0]))
         return out
 
-    def _robust(self, weight: np.ndarray, residual: np.ndarray) -> np.ndarray:
-        """Cauchy reweighting, and nothing beyond ``outlier_cutoff`` unless nothing is left."""
-        params = self.params
-        robust = weight / (1.0 + (residual / params.outlier_scale) ** 2)
-        robust = np.where(np.isfinite(residual), robust, 0.0)
-        inside = np.where(residual <= params.outlier_cutoff, robust, 0.0)
-        return np.where((inside.sum(axis=1) > 0)[:, None], inside, robust)
-
-    def _stack(
-        self, entries: list[tuple[int, str, Skeleton]], track_ids: list[int], out_ns: int
-    ) -> _Batch:
-        """Pad the detections into ``(M, C, ...)`` arrays, brought to the output time."""
-        params = self.params
-        rows = {track_id: m for m, track_id in enumerate(track_ids)}
-        counts = dict.fromkeys(track_ids, 0)
-        slot_list: list[int] = []
-        for track_id, _, _ in entries:
-            slot_list.append(counts[track_id])
-            counts[track_id] += 1
-        row_list = [rows[track_id] for track_id, _, _ in entries]
-        rows_of, slots = np.array(row_list), np.array(slot_list)
-        shape = (len(track_ids), max(counts.values()))
-        markers = np.full((*shape, entries[0][2].layout.n_joints, 20), np.nan)
-        received = np.array([s.markers for _, _, s in entries])
-        present = np.array([s.marker_present for _, _, s in entries])
-        markers[rows_of, slots] = np.where(present[..., None], received, np.nan)
-        ages = np.zeros(shape)
-        ages[rows_of, slots] = [(out_ns - s.src_time_ns) * _NS for _, _, s in entries]
-        positions = markers[..., 1:4]
-        if params.extrapolate:
-            dt = np.clip(ages, -params.max_extrapolation, params.max_extrapolation)
-            velocities = markers[..., 8:11]
-            positions = (
-                positions + np.where(np.isfinite(velocities), velocities, 0.0) * dt[..., None, None]
-            )
-        cameras = np.full((*shape, 3), np.nan)
-        cameras[rows_of, slots] = [
-            self._camera_positions.get(camera, _UNKNOWN_CAMERA) for _, camera, _ in entries
-        ]
-        names = [[""] * shape[1] for _ in range(shape[0])]
-        for (_, camera, _), m, c in zip(entries, row_list, slot_list, strict=True):
-            names[m][c] = camera
-        return _Batch(markers, positions, ages, cameras, names)
-
-    def _prior_weights(self, batch: _Batch) -> np.ndarray:
-        """``(M, C, J)`` weights known before fusing: confidence, staleness, agreement, depth."""
-        params = self.params
-        weight = np.maximum(batch.confidences, params.confidence_floor) ** params.confidence_power
-        weight = np.where(np.isfinite(batch.positions).all(axis=-1), weight, 0.0)
-        weight = weight / (1.0 + (batch.ages / params.staleness_scale) ** 2)[..., None]
-        scale = params.agreement_scale
-        factors = {
-            name: 1.0 / (1.0 + (error / scale) ** 2) for name, error in self.agreement.items()
-        }
-        agreement = np.array(
-            [[factors.get(name, 1.0) for name in names] for names in batch.camera_names]
-        )
-        weight = weight * agreement[..., None]
-        depth = _norm(batch.positions - batch.cameras[:, :, None])
-        depth_weight = (1.0 + params.depth_gain * depth) ** -2
-        return np.where(batch.known[..., None], weight * depth_weight, weight)
-
-    def _view_weights(
+    def _update_agreement(
         self,
-        fused: np.ndarray,
-        front: np.ndarray,
-        cameras: np.ndarray,
-        known: np.ndarray,
-        axes: _BodyAxes,
-    ) -> np.ndarray:
-        """``(M, C)`` weight of each camera's view: 1 from the front, down to the back."""
-        params = self.params
-        to_camera = cameras - fused[:, None, axes.root]
-        to_camera /= _norm(to_camera)[..., None]
-        cosine = np.einsum("mk,mck->mc", front, to_camera)
-        view = np.maximum(params.view_weight_min, ((1.0 + cosine) / 2.0) ** params.view_power)
-        return np.where(known & np.isfinite(view), view, 1.0)
+        disagreement: np.ndarray,
+        rows_of: list[int],
+        slots: list[int],
+        cameras: list[str],
+    ) -> None:
+        """Fold each camera's mean joint distance to the fused skeletons into its agreement.
 
-    def _occlusion(
-        self,
-        fused: np.ndarray,
-        positions: np.ndarray,
-        cameras: np.ndarray,
-        known: np.ndarray,
-        axes: _BodyAxes,
-    ) -> np.ndarray:
-        """``(M, C, J)`` factor for joints whose camera ray passes another person's torso.
-
-        A torso point ``q`` of another track blocks the ray from camera ``o`` to joint ``p``
-        when it lies within ``occlusion_radius`` of the ray and between ``o`` and ``p``.
+        ``disagreement`` ``(M, C)`` per detection (NaN: no joint), at ``(rows_of, slots)`` of
+        the detections of ``cameras``; taken in track order (the order of the sums).
         """
-        params = self.params
-        n_tracks = len(fused)
-        points = fused[:, axes.torso].reshape(-1, 3)  # (Q, 3), Q = M × torso joints
-        owner = np.repeat(np.arange(n_tracks), len(axes.torso))
-        ray = positions - cameras[:, :, None]  # (M, C, J, 3)
-        length = _norm(ray)
-        direction = ray / length[..., None]
-        rel = points[None, None] - cameras[:, :, None]  # (M, C, Q, 3)
-        along = np.einsum("mcjk,mcqk->mcjq", direction, rel)  # (M, C, J, Q)
-        radius = params.occlusion_radius
-        with np.errstate(invalid="ignore"):
-            # Squared distance of each torso point to each ray, |rel|² - along², decides
-            # "within the radius" except within 1e-9 m² of it, where the distance is computed
-            # as the point minus its projection (the exact form) for those pairs only.
-            across_sq = np.add.reduce(rel * rel, axis=-1)[:, :, None, :] - along * along
-            close = across_sq < radius * radius
-            unsure = np.abs(across_sq - radius * radius) < 1e-9
-            if unsure.any():
-                m, c, j, q = np.nonzero(unsure)
-                closest = along[m, c, j, q][:, None] * direction[m, c, j]
-                close[m, c, j, q] = _norm(rel[m, c, q] - closest) < radius
-            blocking = (
-                close
-                & (along > 0)
-                & (along < length[..., None] - radius)
-                & (owner != np.arange(n_tracks)[:, None, None, None])
-            )
-        occluded = blocking.any(axis=-1) & known[..., None]
-        return np.where(occluded, params.occlusion_weight, 1.0)
-
-    def _update_agreement(self, residual: np.ndarray, camera_names: list[list[str]]) -> None:
-        """Fold each camera's mean joint distance to the fused skeletons into its agreement."""
         alpha = self.params.agreement_smoothing
+        values = disagreement.tolist()
         per_camera: dict[str, list[float]] = {}
-        finite = np.isfinite(residual)
-        mean = np.where(finite, np.minimum(residual, 0.5), 0.0).sum(-1) / np.maximum(
-            finite.sum(-1), 1
-        )
-        seen = finite.any(axis=-1).tolist()
-        for names, row, seen_row in zip(camera_names, mean.tolist(), seen, strict=True):
-            for name, value, any_seen in zip(names, row, seen_row, strict=True):
-                if name and any_seen:
-                    per_camera.setdefault(name, []).append(value)
+        for m, c, name in sorted(zip(rows_of, slots, cameras, strict=True)):
+            value = values[m][c]
+            if name and not math.isnan(value):
+                per_camera.setdefault(name, []).append(value)
         for name, errors in per_camera.items():
-            value = float(np.mean(errors)) if len(errors) > 1 else errors[0]
+            total = 0.0
+            for error in errors:
+                total += error
+            value = total / len(errors)
             previous = self.agreement.get(name)
             self.agreement[name] = (
                 value if previous is None else previous + alpha * (value - previous)

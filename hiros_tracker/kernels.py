@@ -28,7 +28,7 @@ __all__ = [
 ]
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def masked_positions(
     markers: np.ndarray, present: np.ndarray, min_confidence: float
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -56,7 +56,7 @@ def masked_positions(
     return positions, usable, kept
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def match_costs(  # noqa: PLR0912, PLR0917 - one loop nest, one frame's whole input
     positions: np.ndarray,
     velocity: np.ndarray,
@@ -148,14 +148,14 @@ def match_costs(  # noqa: PLR0912, PLR0917 - one loop nest, one frame's whole in
     return cost, flips
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _order(flips: np.ndarray, part: np.ndarray, mirror: np.ndarray, out: np.ndarray) -> None:
     """Joint order relabelling the parts flagged in ``flips`` ``(K,)``, written to ``out``."""
     for j in range(len(part)):
         out[j] = mirror[j] if part[j] >= 0 and flips[part[j]] else j
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def canonical_poses(  # noqa: PLR0917
     positions: np.ndarray,
     rows: np.ndarray,
@@ -212,7 +212,7 @@ def canonical_poses(  # noqa: PLR0917
     return canonical, flips
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def hit_update(  # noqa: PLR0917
     positions: np.ndarray,
     velocity: np.ndarray,
@@ -266,7 +266,7 @@ def hit_update(  # noqa: PLR0917
     return updated, terms
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def solve_velocities(
     sums: np.ndarray, weights: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -302,7 +302,7 @@ def solve_velocities(
     return velocities, body, determined
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _unit3(x: float, y: float, z: float) -> tuple[float, float, float]:
     """A vector scaled to unit length; zero or NaN gives NaN."""
     norm = math.sqrt(x * x + y * y + z * z)
@@ -311,7 +311,7 @@ def _unit3(x: float, y: float, z: float) -> tuple[float, float, float]:
     return x / norm, y / norm, z / norm
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _flat3(  # noqa: PLR0917 - two vectors as scalars (no arrays in the inner loop)
     x: float, y: float, z: float, ux: float, uy: float, uz: float
 ) -> tuple[float, float, float]:
@@ -320,7 +320,7 @@ def _flat3(  # noqa: PLR0917 - two vectors as scalars (no arrays in the inner lo
     return x - along * ux, y - along * uy, z - along * uz
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def trunk_mean(positions: np.ndarray, root: int, neck: int) -> tuple[np.ndarray, int]:
     """``(3,)`` mean unit root -> neck over the poses where it is finite, and how many."""
     mean = np.zeros(3)
@@ -341,7 +341,7 @@ def trunk_mean(positions: np.ndarray, root: int, neck: int) -> tuple[np.ndarray,
     return mean, count
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def facing_evidence(  # noqa: PLR0917
     positions: np.ndarray,
     canonical: np.ndarray,
@@ -429,7 +429,7 @@ def facing_evidence(  # noqa: PLR0917
     return evidence
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def label_rows(  # noqa: PLR0917
     markers: np.ndarray,
     present: np.ndarray,
