@@ -145,6 +145,20 @@ class KalmanBank:
             self.x[index] = x
             self.P[index] = P
 
+    def step(
+        self, slots: np.ndarray, dt: np.ndarray, mask: np.ndarray, positions: np.ndarray
+    ) -> None:
+        """:meth:`predict` then :meth:`correct`, as one numba kernel (same numbers)."""
+        from hiros_filter.compiled import kalman_step
+
+        dt = np.asarray(dt, dtype=float)
+        kalman_step(
+            self.x, self.P, self.scale, np.asarray(slots, dtype=np.int64), dt, np.round(dt, 6),
+            np.asarray(mask, dtype=bool), np.ascontiguousarray(positions, dtype=float),
+            float(self.q), float(self.r), float(self.max_noise_scale),
+            float(self.adaptation_rate),
+        )  # fmt: skip
+
     def update(self, slots: np.ndarray, joints: np.ndarray, positions: np.ndarray) -> None:
         """Correct (slot, joint) pairs with measured ``(n, 3)`` positions (H = [1, 0, 0])."""
         P = self.P[slots, :, :, joints]  # (n, 3, 3)

@@ -1,0 +1,165 @@
+"""The filter's per-frame arithmetic as numba kernels (same results as the numpy versions).
+
+:class:`hiros_filter.estimators.KalmanBank` (predict, then masked correction) and
+:class:`hiros_filter.lengths.LengthKeeper` (input lengths, held links, projection) written as
+loops over the frame's tracks and joints. The numpy versions are kept as the readable
+reference (tests compare the two); at a few people the numpy calls' overhead, not the
+arithmetic, was the filter's cost. Subtree sums of the projection are one root -> leaves
+pass (each joint moves by the corrections of the links above it) instead of a product with the
+``(J, J)`` subtree matrix.
+
+Compiled on first use (cached on disk with ``cache=True``), never at import of the package.
+"""
+
+# Numba kernels: untyped array arguments passed positionally, long straight-line loops.
+# ruff: noqa: ANN001, ANN201, PLR0912, PLR0917
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+__all__ = ["kalman_step", "keep_lengths"]
+
+_EPS = 1e-12
+_SAME_LENGTH = 1e-9
+
+
+@njit(cache=True)
+def kalman_step(x, P, scale, rows, dt, dt_rounded, mask, positions, q, r, max_scale, rate):
+    """``KalmanBank.predict(rows, dt)`` then ``KalmanBank.correct(rows, mask, positions)``.
+
+    ``x``, ``P`` ``(S, 3, 3, J)`` and ``scale`` ``(S, J)`` are updated in place; ``dt_rounded``
+    is ``dt`` rounded to the µs the process noise is tabulated at.
+    """
+    n_joints = x.shape[3]
+    q_matrix = np.empty((3, 3))
+    for i in range(len(rows)):
+        s = rows[i]
+        h = dt[i]
+        half = 0.5 * h * h
+        t = dt_rounded[i]
+        q_matrix[0, 0] = t**5 / 20.0 * q
+        q_matrix[0, 1] = q_matrix[1, 0] = t**4 / 8.0 * q
+        q_matrix[0, 2] = q_matrix[2, 0] = t**3 / 6.0 * q
+        q_matrix[1, 1] = t**3 / 3.0 * q
+        q_matrix[1, 2] = q_matrix[2, 1] = t**2 / 2.0 * q
+        q_matrix[2, 2] = t * q
+        for j in range(n_joints):
+            for axis in range(3):
+                x[s, 0, axis, j] += h * x[s, 1, axis, j] + half * x[s, 2, axis, j]
+                x[s, 1, axis, j] += h * x[s, 2, axis, j]
+            for b in range(3):  # F P, row by row
+                P[s, 0, b, j] += h * P[s, 1, b, j] + half * P[s, 2, b, j]
+                P[s, 1, b, j] += h * P[s, 2, b, j]
+            for a in range(3):  # (F P) Fᵀ, column by column
+                P[s, a, 0, j] += h * P[s, a, 1, j] + half * P[s, a, 2, j]
+                P[s, a, 1, j] += h * P[s, a, 2, j]
+            noise = scale[s, j]
+            for a in range(3):
+                for b in range(3):
+                    P[s, a, b, j] += q_matrix[a, b] * noise
+            if not mask[i, j]:
+                continue
+            variance = P[s, 0, 0, j] + r
+            g0 = P[s, 0, 0, j] / variance
+            g1 = P[s, 1, 0, j] / variance
+            g2 = P[s, 2, 0, j] / variance
+            surprise = 0.0
+            for axis in range(3):
+                innovation = positions[i, j, axis] - x[s, 0, axis, j]
+                surprise += innovation * innovation
+                x[s, 0, axis, j] += g0 * innovation
+                x[s, 1, axis, j] += g1 * innovation
+                x[s, 2, axis, j] += g2 * innovation
+            if max_scale > 1.0:
+                smoothed = noise + rate * (surprise / (3.0 * variance) - noise)
+                scale[s, j] = min(max(smoothed, 1.0), max_scale)
+            p00, p01, p02 = P[s, 0, 0, j], P[s, 0, 1, j], P[s, 0, 2, j]
+            for a, g in ((0, g0), (1, g1), (2, g2)):
+                P[s, a, 0, j] -= g * p00
+                P[s, a, 1, j] -= g * p01
+                P[s, a, 2, j] -= g * p02
+
+
+@njit(cache=True)
+def keep_lengths(parents, order, states, measured, present, previous_lengths):
+    """Input lengths, held links and ``LengthKeeper.project`` for a frame's tracks at once.
+
+    Args:
+        parents: ``(J,)`` the layout's tree (``KinematicTree.parents``).
+        order: ``(J,)`` parents before children (``KinematicTree.order``).
+        states: ``(3, n, J, 3)`` positions, velocities, accelerations; projected in place.
+        measured: ``(n, J, 3)`` input positions.
+        present: ``(n, J)`` joints in the input (their mean position is kept).
+        previous_lengths: ``(n, J)`` the tracks' input lengths of the previous frame.
+
+    Returns:
+        ``(n, J)`` this frame's input lengths (NaN for roots and absent ends).
+
+    """
+    n, n_joints = present.shape
+    lengths = np.full((n, n_joints), np.nan)
+    fixes = np.zeros((n_joints, 9))
+    unit = np.empty(3)
+    for i in range(n):
+        held_any = False
+        for j in range(n_joints):
+            p = parents[j]
+            fixes[j, :] = 0.0
+            if p < 0 or not (present[i, j] and present[i, p]):
+                continue
+            length = 0.0
+            for k in range(3):
+                d = measured[i, j, k] - measured[i, p, k]
+                length += d * d
+            length = np.sqrt(length)
+            lengths[i, j] = length
+            if not abs(length - previous_lengths[i, j]) <= _SAME_LENGTH * length:
+                continue
+            norm = 0.0
+            for k in range(3):
+                unit[k] = states[0, i, j, k] - states[0, i, p, k]
+                norm += unit[k] * unit[k]
+            norm = np.sqrt(norm)
+            if not norm > _EPS:
+                continue
+            held_any = True
+            along = 0.0
+            along_acceleration = 0.0
+            for k in range(3):
+                unit[k] /= norm
+                along += (states[1, i, j, k] - states[1, i, p, k]) * unit[k]
+                along_acceleration += (states[2, i, j, k] - states[2, i, p, k]) * unit[k]
+            perpendicular = 0.0
+            for k in range(3):
+                v = states[1, i, j, k] - states[1, i, p, k] - along * unit[k]
+                perpendicular += v * v
+            centripetal = -perpendicular / length
+            for k in range(3):
+                fixes[j, k] = (length - norm) * unit[k]
+                fixes[j, 3 + k] = -along * unit[k]
+                fixes[j, 6 + k] = (centripetal - along_acceleration) * unit[k]
+        if not held_any:
+            continue
+        # Root -> leaves: each joint moves with the corrections of the links above it.
+        for j in order:
+            p = parents[j]
+            if p >= 0:
+                for c in range(9):
+                    fixes[j, c] += fixes[p, c]
+        mean = np.zeros(9)
+        count = 0
+        for j in range(n_joints):
+            if present[i, j]:
+                count += 1
+                for c in range(9):
+                    mean[c] += fixes[j, c]
+        for c in range(9):
+            mean[c] /= max(count, 1)
+        for j in range(n_joints):
+            for quantity in range(3):
+                for k in range(3):
+                    c = 3 * quantity + k
+                    states[quantity, i, j, k] += fixes[j, c] - mean[c]
+    return lengths
