@@ -1,18 +1,18 @@
 """The filter's per-frame arithmetic as numba kernels (same results as the numpy versions).
 
-:class:`hiros_filter.estimators.KalmanBank` (predict, then masked correction) and
-:class:`hiros_filter.lengths.LengthKeeper` (input lengths, held links, projection) written as
-loops over the frame's tracks and joints. The numpy versions are kept as the readable
-reference (tests compare the two); at a few people the numpy calls' overhead, not the
-arithmetic, was the filter's cost. Subtree sums of the projection are one root -> leaves
-pass (each joint moves by the corrections of the links above it) instead of a product with the
-``(J, J)`` subtree matrix.
+:class:`hiros_filter.estimators.KalmanBank` (predict, then masked correction),
+:class:`hiros_filter.lengths.LengthKeeper` (input lengths, held links, projection) and the
+slerp smoothing of orientations with their angular rates, written as loops over the frame's
+tracks and joints. The numpy versions are kept as the readable reference (tests compare the
+two); at a few people the numpy calls' overhead, not the arithmetic, was the filter's cost.
+Subtree sums of the projection are one root -> leaves pass (each joint moves by the
+corrections of the links above it) instead of a product with the ``(J, J)`` subtree matrix.
 
 Compiled on first use (cached on disk with ``cache=True``), never at import of the package.
 """
 
 # Numba kernels: untyped array arguments passed positionally, long straight-line loops.
-# ruff: noqa: ANN001, ANN201, PLR0912, PLR0917
+# ruff: noqa: ANN001, ANN201, ANN202, PLR0912, PLR0915, PLR0917
 
 from __future__ import annotations
 
@@ -163,3 +163,92 @@ def keep_lengths(parents, order, states, measured, present, previous_lengths):
                     c = 3 * quantity + k
                     states[quantity, i, j, k] += fixes[j, c] - mean[c]
     return lengths
+
+
+@njit(cache=True)
+def smooth_orientations(markers, present, rows, dt, quaternions, velocities, accelerations, cutoff):
+    """``Filter._smooth_orientations`` of running tracks (``dt`` known), in place.
+
+    ``markers`` ``(n, J, 20)`` are the output rows; ``quaternions`` ``(S, J, 4)``,
+    ``velocities`` and ``accelerations`` ``(S, J, 3)`` the tracks' orientation state.
+    """
+    n, n_joints = present.shape
+    unit = np.empty(4)
+    end = np.empty(4)
+    turned = np.empty(4)
+    velocity = np.empty(3)
+    for i in range(n):
+        s = rows[i]
+        step = dt[i]
+        weight = 1.0 - np.exp(-2.0 * np.pi * cutoff * step)
+        for j in range(n_joints):
+            norm = 0.0
+            for k in range(4):
+                norm += markers[i, j, 4 + k] ** 2
+            norm = np.sqrt(norm)
+            if not (present[i, j] and norm > 0.5):  # NaN fails too
+                continue
+            carry = True
+            for k in range(4):
+                unit[k] = markers[i, j, 4 + k] / norm
+                carry = carry and np.isfinite(quaternions[s, j, k])
+            if not carry:  # (re)starting joint: the measurement, no angular rates yet
+                for k in range(4):
+                    quaternions[s, j, k] = unit[k]
+                for k in range(3):
+                    velocities[s, j, k] = np.nan
+                    accelerations[s, j, k] = np.nan
+            else:
+                # slerp from the previous output towards the measurement, the short way
+                dot = 0.0
+                for k in range(4):
+                    dot += quaternions[s, j, k] * unit[k]
+                sign = -1.0 if dot < 0 else 1.0
+                for k in range(4):
+                    end[k] = sign * unit[k]
+                angle = np.arccos(min(max(abs(dot), 0.0), 1.0))
+                sine = np.sin(angle)
+                if sine < 1e-6:
+                    first, second = 1.0 - weight, weight
+                else:
+                    first = np.sin((1.0 - weight) * angle) / sine
+                    second = np.sin(weight * angle) / sine
+                size = 0.0
+                for k in range(4):
+                    turned[k] = first * quaternions[s, j, k] + second * end[k]
+                    size += turned[k] ** 2
+                size = np.sqrt(size)
+                for k in range(4):
+                    turned[k] /= size
+                # rotation vector of turned ⊗ conj(previous), over dt
+                x0, y0, z0, w0 = (
+                    quaternions[s, j, 0],
+                    quaternions[s, j, 1],
+                    quaternions[s, j, 2],
+                    (quaternions[s, j, 3]),
+                )
+                x1, y1, z1, w1 = turned[0], turned[1], turned[2], turned[3]
+                w = w1 * w0 + x1 * x0 + y1 * y0 + z1 * z0
+                velocity[0] = x1 * w0 - w1 * x0 - y1 * z0 + z1 * y0
+                velocity[1] = y1 * w0 - w1 * y0 - z1 * x0 + x1 * z0
+                velocity[2] = z1 * w0 - w1 * z0 - x1 * y0 + y1 * x0
+                if w < 0:
+                    for k in range(3):
+                        velocity[k] = -velocity[k]
+                sine = np.sqrt(velocity[0] ** 2 + velocity[1] ** 2 + velocity[2] ** 2)
+                turn = 2.0 * np.arctan2(sine, abs(w))
+                scale = turn / sine if sine > 1e-12 else 2.0
+                for k in range(3):
+                    rate = velocity[k] * scale / step
+                    previous_rate = velocities[s, j, k]
+                    accelerations[s, j, k] = (
+                        (rate - previous_rate) / step if np.isfinite(previous_rate) else 0.0
+                    )
+                    velocities[s, j, k] = rate
+                for k in range(4):
+                    quaternions[s, j, k] = turned[k]
+            for k in range(4):
+                markers[i, j, 4 + k] = quaternions[s, j, k]
+            for k in range(3):
+                markers[i, j, 11 + k] = velocities[s, j, k]
+                markers[i, j, 17 + k] = accelerations[s, j, k]

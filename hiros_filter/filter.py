@@ -430,6 +430,14 @@ class Filter:
         Orientations, angular velocities and accelerations of the valid joints are written
         into ``markers``; every joint is computed at once and the results are kept by mask.
         """
+        if self.params.compiled and dt is not None:
+            from hiros_filter.compiled import smooth_orientations
+
+            smooth_orientations(
+                markers, present, rows, dt, tracks.quaternions, tracks.angular_velocities,
+                tracks.angular_accelerations, self.params.orientation_cutoff_frequency,
+            )  # fmt: skip
+            return
         quaternions = markers[..., 4:8]
         norms = np.sqrt(np.add.reduce(quaternions * quaternions, axis=-1))  # as np.linalg.norm
         valid = present & np.isfinite(norms) & (norms > 0.5)
@@ -495,8 +503,14 @@ def _warm_up() -> None:
     present = np.ones((1, AZURE_KINECT.n_joints), dtype=bool)
     tracks.kalman.reset(rows.repeat(AZURE_KINECT.n_joints), np.arange(32), positions[0])
     tracks.kalman.step(rows, np.array([1 / 30]), present, positions)
-    from hiros_filter.compiled import keep_lengths
+    from hiros_filter.compiled import keep_lengths, smooth_orientations
 
+    markers = np.zeros((1, AZURE_KINECT.n_joints, 20))
+    markers[..., 7] = 1.0
+    smooth_orientations(
+        markers, present, rows, np.array([1 / 30]), tracks.quaternions,
+        tracks.angular_velocities, tracks.angular_accelerations, 6.0,
+    )  # fmt: skip
     keep_lengths(
         tracks.keeper.tree.parents,
         tracks.keeper.tree.order,

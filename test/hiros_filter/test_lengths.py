@@ -115,11 +115,15 @@ def test_missing_joint_keeps_the_other_lengths_and_nothing_explodes():
 
 
 def test_compiled_filter_equals_the_numpy_filter():
-    """Two tracks, held and free links, a joint lost past max_gap (restart), a late frame."""
+    """Two tracks, held and free links, a joint lost past max_gap (restart), a late frame,
+    orientations with sign flips and a gap."""
     rng = np.random.default_rng(5)
     first = swinging_person(80, seed=5)
     second = swinging_person(80, seed=6) + rng.normal(scale=0.01, size=(80, J, 3))
     first[30:50, 7] = np.nan  # 20 frames > max_gap 0.5 s: the joint restarts
+    turning = Rotation.from_rotvec(rng.normal(scale=0.3, size=(80 * J, 3))).as_quat()
+    turning = turning.reshape(80, J, 4) * rng.choice([-1.0, 1.0], size=(80, J, 1))
+    turning[10:14, 3] = np.nan  # an orientation missing for a few frames
     stages = [Filter(FilterParams(compiled=compiled)) for compiled in (False, True)]
     outputs = [[], []]
     for frame in range(80):
@@ -127,7 +131,9 @@ def test_compiled_filter_equals_the_numpy_filter():
             continue  # a dropped frame: dt of two periods
         stamp = sec_to_ns(frame / RATE)
         skeletons = [
-            Skeleton.from_positions(p[frame], skeleton_id=i, src_time_ns=stamp)
+            Skeleton.from_positions(
+                p[frame], skeleton_id=i, src_time_ns=stamp, orientations=turning[frame]
+            )
             for i, p in enumerate((first, second))
         ]
         for stage, out in zip(stages, outputs, strict=True):
