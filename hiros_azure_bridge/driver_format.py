@@ -36,7 +36,7 @@ from typing import Any
 import numpy as np
 import yaml
 
-from hiros_core.codec import MarkerArrayData
+from hiros_core.codec import MarkerArrayData, MarkerFields, decode_marker_fields
 from hiros_core.errors import CodecError, ConfigError, LayoutError
 from hiros_core.layouts import AZURE_KINECT, Layout, get_layout
 from hiros_core.model import STATE_WIDTH, Skeleton, SkeletonGroup
@@ -193,6 +193,7 @@ class DriverBridge:
         self.drops: Counter[str] = Counter()
         self.last_stamp_ns: int | None = None
         self._lookups: dict[str, tuple[Layout, np.ndarray | None]] = {}
+        self._shapes: dict[tuple, _IdShape] = {}
         self._lookup("")  # an unknown name in joint_names fails here, not per message
 
     def _count(self, reason: str, amount: int) -> None:
@@ -221,7 +222,16 @@ class DriverBridge:
             found = self._lookups[namespace] = (layout, table)
         return found
 
-    def update(self, data: MarkerArrayData) -> SkeletonGroup | None:
+    def update_bytes(self, data: bytes | bytearray | memoryview) -> SkeletonGroup | None:
+        """``update(decode_marker_array(data))``, decoding only the columns a bridge reads.
+
+        Raises:
+            CodecError: the bytes are no MarkerArray.
+
+        """
+        return self.update(decode_marker_fields(data))
+
+    def update(self, data: MarkerArrayData | MarkerFields) -> SkeletonGroup | None:
         """Convert one MarkerArray; None when the whole message is dropped (see ``drops``)."""
         actions = np.asarray(data.actions)
         if len(actions) == 0:
@@ -267,7 +277,7 @@ class DriverBridge:
         return True
 
     def _skeletons(
-        self, data: MarkerArrayData, rows: np.ndarray | None, stamp: int, frame: str
+        self, data: MarkerArrayData | MarkerFields, rows: np.ndarray | None, stamp: int, frame: str
     ) -> list[Skeleton]:
         """Skeletons of the ADD markers ``rows`` (None: all), one per body id in increasing order.
 
@@ -275,49 +285,43 @@ class DriverBridge:
         usual message (ids increasing, no duplicates, whole bodies) skips the sorting and
         scattering the general case needs.
         """
-        layout, body, joint, block = self._kept_markers(data, rows)
+        layout, body, joint, block, arranged = self._kept_markers(data, rows)
         if len(body) == 0:
             return []
-        # ``body`` is in increasing order (sorted keys): people start where it changes.
-        change = np.empty(len(body), dtype=bool)
-        change[0] = True
-        np.not_equal(body[1:], body[:-1], out=change[1:])
-        starts = np.flatnonzero(change)
-        n_people, n_joints = len(starts), layout.n_joints
+        if arranged is None:
+            arranged = _Arrangement.of(body, joint, layout.n_joints)
+        n_people, n_joints = len(arranged.skeleton_ids), layout.n_joints
         markers = np.full((n_people, n_joints, STATE_WIDTH), np.nan)
-        present = np.zeros((n_people, n_joints), dtype=bool)
-        if len(body) == n_people * n_joints:
+        if arranged.flat is None:
             # Strictly increasing keys, at most J joints per body: every body is whole, in order.
             markers[..., :8] = block.reshape(n_people, n_joints, 8)
-            present[:] = True
+            present = np.ones((n_people, n_joints), dtype=bool)
         else:
-            flat = (np.cumsum(change) - 1) * n_joints + joint
-            markers.reshape(-1, STATE_WIDTH)[flat, :8] = block
-            present.reshape(-1)[flat] = True
+            markers.reshape(-1, STATE_WIDTH)[arranged.flat, :8] = block
+            present = np.zeros((n_people, n_joints), dtype=bool)
+            present.reshape(-1)[arranged.flat] = True
         return Skeleton.many_from_rows(
             markers,
             present,
             layout,
-            skeleton_ids=body[starts].tolist(),
+            skeleton_ids=arranged.skeleton_ids,
             src_time_ns=stamp,
             src_frame=frame,
         )
 
-    def _kept_markers(
-        self, data: MarkerArrayData, rows: np.ndarray | None
-    ) -> tuple[Layout, np.ndarray, np.ndarray, np.ndarray]:
-        """The markers that make joints, in (body, joint) order, drops counted.
+    def _id_shape(self, namespace: str, ids: np.ndarray) -> _IdShape:
+        """What a message's namespace and marker ids fix (cached: drivers repeat them)."""
+        key = (namespace, ids.dtype.str, ids.tobytes())
+        found = self._shapes.get(key)
+        if found is None:
+            if len(self._shapes) >= _ID_SHAPE_CAPACITY:
+                self._shapes.clear()
+            found = self._shapes[key] = self._new_id_shape(namespace, ids)
+        return found
 
-        Returns the layout, body ids ``(n,)``, marker ids ``(n,)`` and rows ``(n, 8)`` of
-        [confidence, position, orientation] (NaN orientation where the driver gave none).
-        """
-        layout, table = self._lookup(data.namespaces[0 if rows is None else rows[0]])
-        ids = np.asarray(data.ids, dtype=np.int64)
-        poses = np.asarray(data.poses, dtype=float)
-        texts = data.texts
-        if rows is not None:
-            ids, poses = ids[rows], poses[rows]
-            texts = [texts[i] for i in rows.tolist()]
+    def _new_id_shape(self, namespace: str, raw_ids: np.ndarray) -> _IdShape:
+        layout, table = self._lookup(namespace)
+        ids = np.asarray(raw_ids, dtype=np.int64)
         major, minor = np.divmod(ids, self.params.id_stride)
         body, driver_joint = (
             (major, minor) if self.params.id_scheme == "body_major" else (minor, major)
@@ -329,29 +333,97 @@ class DriverBridge:
             known = (ids >= 0) & (driver_joint < len(table))
             joint = np.where(known, table[np.minimum(driver_joint, len(table) - 1)], -1)
             known &= joint >= 0
+        key = body * layout.n_joints + joint
+        usual = bool(known.all()) and bool((key[1:] > key[:-1]).all()) and len(ids) > 0
+        arranged = _Arrangement.of(body, joint, layout.n_joints) if usual else None
+        return _IdShape(layout, body, joint, known, arranged)
+
+    def _kept_markers(
+        self, data: MarkerArrayData | MarkerFields, rows: np.ndarray | None
+    ) -> tuple[Layout, np.ndarray, np.ndarray, np.ndarray, _Arrangement | None]:
+        """The markers that make joints, in (body, joint) order, drops counted.
+
+        Returns the layout, body ids ``(n,)``, marker ids ``(n,)``, rows ``(n, 8)`` of
+        [confidence, position, orientation] (NaN orientation where the driver gave none) and,
+        for the usual message (every marker kept, in order), how they make people.
+        """
+        ids = np.asarray(data.ids)
+        poses = np.asarray(data.poses, dtype=float)
+        texts = data.texts
+        if rows is not None:
+            ids, poses = ids[rows], poses[rows]
+            texts = [texts[i] for i in rows.tolist()]
+        shape = self._id_shape(data.namespaces[0 if rows is None else rows[0]], ids)
+        layout, body, joint = shape.layout, shape.body, shape.joint
         block = np.empty((len(ids), 8))
         block[:, 1:8] = poses[:, :7]
         if self.params.position_scale != 1.0:
             block[:, 1:4] *= self.params.position_scale
         finite = np.isfinite(block[:, 1:4]).all(axis=1)
-        usable = known & finite
-        if not usable.all():
-            self._count("unknown_joint", int((~known).sum()))
-            self._count("nan_position", int((known & ~finite).sum()))
-            keep = np.flatnonzero(usable)
-            body, joint, block = body[keep], joint[keep], block[keep]
-            texts = [texts[i] for i in keep.tolist()]
-        key = body * layout.n_joints + joint
-        if not (key[1:] > key[:-1]).all():
-            _, first = np.unique(key, return_index=True)
-            self._count("duplicate_marker", len(key) - len(first))
-            body, joint, block = body[first], joint[first], block[first]
-            texts = [texts[i] for i in first.tolist()]
+        arranged = shape.arranged
+        if arranged is None or not finite.all():
+            arranged = None
+            known = shape.known
+            usable = known & finite
+            if not usable.all():
+                self._count("unknown_joint", int((~known).sum()))
+                self._count("nan_position", int((known & ~finite).sum()))
+                keep = np.flatnonzero(usable)
+                body, joint, block = body[keep], joint[keep], block[keep]
+                texts = [texts[i] for i in keep.tolist()]
+            key = body * layout.n_joints + joint
+            if not (key[1:] > key[:-1]).all():
+                _, first = np.unique(key, return_index=True)
+                self._count("duplicate_marker", len(key) - len(first))
+                body, joint, block = body[first], joint[first], block[first]
+                texts = [texts[i] for i in first.tolist()]
         block[:, 0] = np.fromiter(map(_level, texts), float, len(texts))
         block[:, 0] /= self.params.confidence_levels
         unknown = ~(np.einsum("ij,ij->i", block[:, 4:8], block[:, 4:8]) > 0)
         block[unknown, 4:8] = np.nan  # zero or NaN quaternion: no orientation
-        return layout, body, joint, block
+        return layout, body, joint, block, arranged
+
+
+_ID_SHAPE_CAPACITY = 64
+
+
+@dataclass(frozen=True)
+class _Arrangement:
+    """How kept markers (in increasing (body, joint) order) make people.
+
+    ``skeleton_ids`` the body ids in order; ``flat`` each marker's row in the flattened
+    ``(P * J)`` people x joints, or None when every body is whole (rows in order).
+    """
+
+    skeleton_ids: list[int]
+    flat: np.ndarray | None
+
+    @classmethod
+    def of(cls, body: np.ndarray, joint: np.ndarray, n_joints: int) -> _Arrangement:
+        # ``body`` is in increasing order (sorted keys): people start where it changes.
+        change = np.empty(len(body), dtype=bool)
+        change[0] = True
+        np.not_equal(body[1:], body[:-1], out=change[1:])
+        starts = np.flatnonzero(change)
+        flat = None
+        if len(body) != len(starts) * n_joints:
+            flat = (np.cumsum(change) - 1) * n_joints + joint
+        return cls(body[starts].tolist(), flat)
+
+
+@dataclass(frozen=True)
+class _IdShape:
+    """What the marker ids of a message fix (drivers repeat them from frame to frame).
+
+    Layout, body and joint per marker, which markers are known joints, and (every marker
+    known and in increasing order) how they make people.
+    """
+
+    layout: Layout
+    body: np.ndarray
+    joint: np.ndarray
+    known: np.ndarray
+    arranged: _Arrangement | None
 
 
 def group_to_driver_markers(

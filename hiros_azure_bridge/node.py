@@ -1,7 +1,7 @@
 """The ``azure_bridge`` and ``generic_bridge`` nodes: driver MarkerArrays -> SkeletonGroups.
 
-Per camera: ``/<cam>/body_tracking_data`` (raw CDR) -> ``decode_marker_array`` ->
-``DriverBridge.update`` -> ``encode_group`` -> ``/<cam>/skeletons`` (raw CDR), in the camera's
+Per camera: ``/<cam>/body_tracking_data`` (raw CDR) -> ``DriverBridge.update_bytes`` (decode,
+convert) -> ``encode_group`` -> ``/<cam>/skeletons`` (raw CDR), in the camera's
 frame and clock, nothing corrected (DESIGN.md). Topic names are templates in which
 ``{camera}`` is replaced by each name of the ``cameras`` parameter.
 
@@ -28,7 +28,7 @@ from rclpy.parameter import Parameter
 from visualization_msgs.msg import MarkerArray
 
 from hiros_azure_bridge.driver_format import DriverBridge, DriverBridgeParams, load_bridge_params
-from hiros_core.codec import decode_marker_array, encode_group
+from hiros_core.codec import encode_group
 from hiros_ros import HirosNode, run_node
 from hiros_ros.node import camera_qos, pipeline_qos
 
@@ -103,7 +103,7 @@ class BridgeNode(HirosNode):
     def on_markers(self, camera: str, publisher: object, data: bytes) -> None:
         """Decode, convert, publish; a dropped message publishes nothing."""
         bridge = self.bridges[camera]
-        group = bridge.update(decode_marker_array(data))
+        group = bridge.update_bytes(data)
         self.absorb_drops(
             Counter({f"{camera}.{k}": v for k, v in bridge.drops.items()}), self._seen[camera]
         )

@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import struct
 from dataclasses import dataclass, field
+from typing import NamedTuple
 
 import numpy as np
 
@@ -36,9 +37,11 @@ from hiros_core.model import BOX_WIDTH, STATE_WIDTH, Skeleton, SkeletonGroup
 __all__ = [
     "MarkerArrayData",
     "MarkerAttachments",
+    "MarkerFields",
     "clear_plan_caches",
     "decode_group",
     "decode_marker_array",
+    "decode_marker_fields",
     "encode_group",
     "encode_marker_array",
     "marker_array_plan",
@@ -698,6 +701,49 @@ def decode_marker_array(data: bytes | bytearray | memoryview) -> MarkerArrayData
         mesh_use_embedded_materials=(
             plan.gather_aligned(buffer, "embedded", np.uint8).ravel().astype(bool)
         ),
+    )
+
+
+class MarkerFields(NamedTuple):
+    """The columns of a MarkerArray that say where joints are (what a driver bridge reads).
+
+    Same names, types and values as the ``MarkerArrayData`` columns of the same message.
+    """
+
+    stamps_ns: np.ndarray
+    frame_ids: list[str]
+    namespaces: list[str]
+    ids: np.ndarray
+    actions: np.ndarray
+    poses: np.ndarray
+    texts: list[str]
+
+
+def decode_marker_fields(data: bytes | bytearray | memoryview) -> MarkerFields:
+    """``decode_marker_array`` restricted to ``MarkerFields``; CodecError on bad bytes.
+
+    Skips colours, scales, points, lifetimes and media: about half the decoding of a driver
+    message.
+    """
+    size = len(memoryview(data).cast("B"))
+    buffer = aligned_copy(data)
+    plan = _MARKER_PLANS.find_aligned(buffer, size)
+    if plan is None:
+        full = decode_marker_array(data)
+        return MarkerFields(
+            full.stamps_ns, full.frame_ids, full.namespaces, full.ids, full.actions, full.poses,
+            full.texts,
+        )  # fmt: skip
+    shape: _MarkerShape = plan.meta  # type: ignore[assignment]
+    ita = plan.gather_aligned(buffer, "ita", _ITA).ravel()
+    return MarkerFields(
+        stamps_ns=_join_ns(plan.gather_aligned(buffer, "stamp", _TIME).ravel()),
+        frame_ids=list(shape.frame_ids),
+        namespaces=list(shape.namespaces),
+        ids=ita["id"].copy(),
+        actions=ita["action"].copy(),
+        poses=plan.gather_aligned(buffer, "pose_scale", "<f8").reshape(-1, 10)[:, :7].copy(),
+        texts=_gather_texts(plan, buffer, shape),
     )
 
 

@@ -14,7 +14,7 @@ from hiros_skeleton_msgs.msg import SkeletonGroup as SkeletonGroupMsg
 from visualization_msgs.msg import MarkerArray
 
 from hiros_core.calibration import Calibration, load_calibration
-from hiros_core.codec import decode_group, decode_marker_array, encode_group
+from hiros_core.codec import decode_group, encode_group
 from hiros_core.parameters import stage_config_defaults
 from hiros_pipeline.pipeline import STAGES, Pipeline, PipelineParams
 from hiros_ros import HirosNode, declare_params, run_node
@@ -73,7 +73,7 @@ class PipelineNode(HirosNode):
             self.create_raw_subscription(
                 MarkerArray,
                 f"/{camera}/body_tracking_data",
-                lambda data, bridge=bridge: self.on_group(bridge.update(decode_marker_array(data))),
+                lambda data, bridge=bridge: self.on_group(bridge.update_bytes(data)),
                 qos,
             )
         else:

@@ -11,7 +11,7 @@ from collections import Counter
 from collections.abc import Iterable, Iterator
 from pathlib import Path
 
-from hiros_core.codec import decode_group, decode_marker_array
+from hiros_core.codec import decode_group
 from hiros_core.errors import CodecError
 from hiros_core.model import SkeletonGroup
 from hiros_core.recording.reader import RecordingReader
@@ -91,7 +91,7 @@ def iter_groups(
                 bridge = bridges.get(message.topic)
                 if bridge is None:
                     bridge = bridges[message.topic] = DriverBridge(bridge_params)
-                group = bridge.update(decode_marker_array(message.data))
+                group = bridge.update_bytes(message.data)
             except CodecError:
                 drops["undecodable"] += 1
                 continue

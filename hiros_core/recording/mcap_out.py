@@ -56,36 +56,17 @@ _U64 = struct.Struct("<Q")
 _PENDING_CHUNKS = 4  # chunks queued for the writer thread before add_message waits
 
 
-def _compressor(compression: str, level: int) -> tuple[str, Callable[[list[bytes], int], bytes]]:
-    """The chunk record's compression name and a function compressing a chunk's pieces.
-
-    Pieces are compressed as one stream (one frame), never joined into one buffer first: a
-    chunk is megabytes, and the copy cost as much as the compression.
-    """
+def _compressor(compression: str, level: int) -> tuple[str, Callable[[bytes], bytes]]:
+    """The chunk record's compression name and the function compressing a whole chunk."""
     if compression == "zstd":
         import zstandard
 
-        compressor = zstandard.ZstdCompressor(level=level)
-
-        def zstd(pieces: list[bytes], size: int) -> bytes:
-            stream = compressor.compressobj(size=size)
-            out = [stream.compress(piece) for piece in pieces]
-            out.append(stream.flush())
-            return b"".join(out)
-
-        return "zstd", zstd
+        return "zstd", zstandard.ZstdCompressor(level=level).compress
     if compression == "lz4":
         import lz4.frame
 
-        def lz4_frame(pieces: list[bytes], size: int) -> bytes:
-            stream = lz4.frame.LZ4FrameCompressor()
-            out = [stream.begin(size)]
-            out += [stream.compress(piece) for piece in pieces]
-            out.append(stream.flush())
-            return b"".join(out)
-
-        return "lz4", lz4_frame
-    return "", lambda pieces, _: b"".join(pieces)
+        return "lz4", lz4.frame.compress
+    return "", bytes
 
 
 def _record(record: object) -> bytes:
@@ -224,11 +205,12 @@ class McapWriter:
     def _write_chunk(
         self, pieces: list[bytes], start: int, end: int, indexes: dict[int, list[tuple[int, int]]]
     ) -> None:
-        size, crc = 0, 0
-        for piece in pieces:
-            size += len(piece)
-            crc = zlib.crc32(piece, crc)
-        compressed = self._compress(pieces, size)
+        # One call per step, each releasing the GIL for its whole length (join, crc32, the
+        # compressor, the file write): per-piece calls would hand the GIL back and forth with
+        # the producing thread thousands of times per chunk, slowing both.
+        data = b"".join(pieces)
+        size, crc = len(data), zlib.crc32(data)
+        compressed = self._compress(data)
         name = self.compression.encode()
         length = _CHUNK_HEAD.size - 9 + len(name) + 8 + len(compressed)
         head = _CHUNK_HEAD.pack(Opcode.CHUNK, length, start, end, size, crc, len(name))

@@ -208,3 +208,32 @@ def test_bridge_params_defaults_match_driver():
         100,
         "body_major",
     )
+
+
+def test_bytes_path_equals_decoded_path_frame_after_frame():
+    """update_bytes (partial decode, cached id shapes) == update(decode_marker_array(...))."""
+    frames = []
+    for step in range(8):
+        group = _group(3, stamp=STAMP + step * 33_000_000, seed=step)
+        if step in (2, 3):  # a missing joint: the same ids twice in a row, not whole bodies
+            group.skeletons[1].marker_present[7] = False
+            group.skeletons[1].markers[7] = np.nan
+            group.skeletons[1].update_links()
+        data = group_to_driver_markers(group)
+        if step == 4:  # the usual ids, but a NaN position: counted, not taken
+            data.poses[5, 0] = np.nan
+        if step == 5:  # out of order and a duplicate: sorted and counted
+            data.ids[[0, 1]] = data.ids[[1, 0]]
+            data.ids[40] = data.ids[39]
+        if step == 6:  # some DELETE markers among the joints
+            data.actions[10:12] = DELETE
+        frames.append(encode_marker_array(data))
+    frames.append(encode_marker_array(_markers([0], actions=[DELETEALL], stamps=[STAMP + 10**9])))
+    by_bytes, by_columns = DriverBridge(), DriverBridge()
+    for raw in frames + frames[:3]:  # the repeats go back in time: dropped by both
+        fast, slow = by_bytes.update_bytes(raw), by_columns.update(decode_marker_array(raw))
+        assert (fast is None and slow is None) or fast.same_as(slow)
+    assert by_bytes.drops == by_columns.drops
+    assert {"nan_position", "duplicate_marker", "delete_marker"} <= set(by_bytes.drops)
+    with pytest.raises(CodecError):
+        by_bytes.update_bytes(frames[0][:-9])
