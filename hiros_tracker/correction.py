@@ -15,6 +15,7 @@ import numpy as np
 from hiros_core.calibration import Calibration, CameraCalibration
 from hiros_core.geometry import RigidTransform
 from hiros_core.model import Skeleton, SkeletonGroup
+from hiros_tracker import kernels
 
 __all__ = ["CameraCorrection"]
 
@@ -45,7 +46,7 @@ class CameraCorrection:
         self.uncalibrated: set[str] = set()
         self._cameras: dict[str, CameraCalibration] = {}
         self._by_frame: dict[str, str] = {}
-        self._transforms: dict[str, tuple[np.ndarray, np.ndarray]] = {}
+        self._transforms: dict[str, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
         if calibration is not None:
             self.set_calibration(calibration)
 
@@ -98,49 +99,37 @@ class CameraCorrection:
         return SkeletonGroup(camera.to_reference_ns(group.stamp_ns), self.world_frame, skeletons)
 
 
-def _row_transform(extrinsics: RigidTransform) -> tuple[np.ndarray, np.ndarray]:
-    """``(20, 20)`` matrix and ``(20,)`` offset moving a whole marker/link row at once.
+def _row_transform(extrinsics: RigidTransform) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """What moves a whole marker/link row: ``R`` ``(3, 3)``, ``t`` ``(3,)`` and ``(4, 4)``.
 
-    Block diagonal: confidence unchanged, ``R`` on the position (plus ``t``), the quaternion
-    product ``q_R ⊗ q`` on the orientation, ``R`` on each twist and accel vector.
+    ``R`` moves the position (plus ``t``) and each twist and accel vector; the ``(4, 4)``
+    matrix is the quaternion product ``q_R ⊗ q`` on the orientation; the confidence stays.
     """
-    rotation = extrinsics.rotation.as_matrix()
-    matrix = np.zeros((20, 20))
-    matrix[0, 0] = 1.0
-    matrix[4:8, 4:8] = _left_product(extrinsics.rotation.as_quat())
-    for start in (1, 8, 11, 14, 17):
-        matrix[start : start + 3, start : start + 3] = rotation
-    offset = np.zeros(20)
-    offset[1:4] = extrinsics.translation
-    return matrix, offset
+    return (
+        np.ascontiguousarray(extrinsics.rotation.as_matrix(), dtype=float),
+        np.asarray(extrinsics.translation, dtype=float).copy(),
+        _left_product(extrinsics.rotation.as_quat()),
+    )
 
 
-def _moved(skeletons: list[Skeleton], transform: tuple[np.ndarray, np.ndarray]) -> list[Skeleton]:
+def _moved(
+    skeletons: list[Skeleton], transform: tuple[np.ndarray, np.ndarray, np.ndarray]
+) -> list[Skeleton]:
     """New skeletons moved by a ``_row_transform``, all rows of a frame at once.
 
     The result equals ``RigidTransform.apply_to_skeleton`` on each skeleton (a test checks it):
-    a field with any NaN stays all NaN, quaternions are normalised first. Each field of every
-    row of the frame (markers and links of all people) is one small product — a NaN
-    coordinate makes its whole field NaN by itself — and fields that are NaN in every row
-    (drivers without orientations or velocities) are skipped: a few numpy calls per frame,
-    flat in the number of people, which is what the tracker's time budget needs. The new
-    skeletons' rows are views into one array owned by them alone.
+    a field with any NaN stays all NaN, quaternions are normalised first. Every row of the
+    frame (markers and links of all people) is moved by one compiled loop
+    (``kernels.move_rows``): flat in the number of people, which is what the tracker's time
+    budget needs. The new skeletons' rows are views into one array owned by them alone.
     """
     if not skeletons:
         return []
-    matrix, offset = transform
-    rotation, quaternion_product = matrix[1:4, 1:4], matrix[4:8, 4:8]
+    rotation, translation, quaternion_product = transform
     rows = np.concatenate([part for s in skeletons for part in (s.markers, s.links)])
-    known = (~np.isnan(rows)).any(axis=0).tolist()  # per column: any row with a value
-    rows[:, 1:4] = rows[:, 1:4] @ rotation.T + offset[1:4]
-    if any(known[4:8]):
-        rows[:, 4:8] = _unit(rows[:, 4:8]) @ quaternion_product.T
-    if any(known[8:20]):
-        rows[:, 8:20] = (rows[:, 8:20].reshape(-1, 4, 3) @ rotation.T).reshape(-1, 12)
+    kernels.move_rows(rows, rotation, translation, quaternion_product)
     boxes = np.array([s.bounding_box for s in skeletons])
-    if not np.isnan(boxes[:, :7]).all():
-        boxes[:, 0:3] = boxes[:, 0:3] @ rotation.T + offset[1:4]
-        boxes[:, 3:7] = _unit(boxes[:, 3:7]) @ quaternion_product.T
+    kernels.move_boxes(boxes, rotation, translation, quaternion_product)
     moved = []
     start = 0
     for skeleton, box in zip(skeletons, boxes, strict=True):
@@ -170,10 +159,3 @@ def _left_product(rotation: np.ndarray) -> np.ndarray:
     """``(4, 4)`` matrix of the Hamilton product ``rotation ⊗ q`` on quaternions x, y, z, w."""
     x, y, z, w = rotation
     return np.array([[w, -z, y, x], [z, w, -x, y], [-y, x, w, z], [-x, -y, -z, w]])
-
-
-def _unit(quaternions: np.ndarray) -> np.ndarray:
-    """Rows ``(N, 4)`` scaled to unit norm; NaN or all-zero rows become NaN (unknown)."""
-    norm = np.sqrt((quaternions * quaternions).sum(axis=1, keepdims=True))
-    with np.errstate(invalid="ignore", divide="ignore"):
-        return quaternions / norm

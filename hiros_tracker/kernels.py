@@ -465,3 +465,75 @@ def label_rows(  # noqa: PLR0917
             markers[j, 8] = track_velocities[j, 0]
             markers[j, 9] = track_velocities[j, 1]
             markers[j, 10] = track_velocities[j, 2]
+
+
+@njit(cache=True, error_model="numpy")
+def move_rows(
+    rows: np.ndarray, rotation: np.ndarray, translation: np.ndarray, quaternion: np.ndarray
+) -> None:
+    """Marker/link rows ``(N, 20)`` moved in place by a rigid transform.
+
+    ``R p + t`` on the position, ``quaternion`` ``(4, 4)`` (the product ``q_R ⊗ q``) on the
+    orientation normalised first, ``R`` on each twist and acceleration vector; a field with
+    any NaN becomes (stays) all NaN, a zero quaternion becomes NaN.
+    """
+    vector = np.empty(4)
+    for i in range(len(rows)):
+        _rotate(rows, i, 1, rotation, translation)
+        for start in (8, 11, 14, 17):
+            _rotate(rows, i, start, rotation, _ZERO3)
+        norm = math.sqrt(
+            rows[i, 4] * rows[i, 4]
+            + rows[i, 5] * rows[i, 5]
+            + rows[i, 6] * rows[i, 6]
+            + rows[i, 7] * rows[i, 7]
+        )
+        for k in range(4):
+            vector[k] = rows[i, 4 + k] / norm
+        for k in range(4):
+            rows[i, 4 + k] = (
+                quaternion[k, 0] * vector[0]
+                + quaternion[k, 1] * vector[1]
+                + quaternion[k, 2] * vector[2]
+                + quaternion[k, 3] * vector[3]
+            )
+
+
+@njit(cache=True, error_model="numpy")
+def move_boxes(
+    boxes: np.ndarray, rotation: np.ndarray, translation: np.ndarray, quaternion: np.ndarray
+) -> None:
+    """Bounding boxes ``(N, 22)`` moved in place: centre position (0:3), orientation (3:7)."""
+    vector = np.empty(4)
+    for i in range(len(boxes)):
+        _rotate(boxes, i, 0, rotation, translation)
+        norm = math.sqrt(
+            boxes[i, 3] * boxes[i, 3]
+            + boxes[i, 4] * boxes[i, 4]
+            + boxes[i, 5] * boxes[i, 5]
+            + boxes[i, 6] * boxes[i, 6]
+        )
+        for k in range(4):
+            vector[k] = boxes[i, 3 + k] / norm
+        for k in range(4):
+            boxes[i, 3 + k] = (
+                quaternion[k, 0] * vector[0]
+                + quaternion[k, 1] * vector[1]
+                + quaternion[k, 2] * vector[2]
+                + quaternion[k, 3] * vector[3]
+            )
+
+
+_ZERO3 = np.zeros(3)
+
+
+@njit(cache=True, error_model="numpy")
+def _rotate(
+    rows: np.ndarray, i: int, start: int, rotation: np.ndarray, translation: np.ndarray
+) -> None:
+    """``rows[i, start:start + 3]`` replaced by ``R v + t``."""
+    x, y, z = rows[i, start], rows[i, start + 1], rows[i, start + 2]
+    for k in range(3):
+        rows[i, start + k] = (
+            rotation[k, 0] * x + rotation[k, 1] * y + rotation[k, 2] * z + translation[k]
+        )
