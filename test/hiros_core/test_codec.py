@@ -262,3 +262,34 @@ def test_embedded_nul_ends_a_string_as_in_rclpy() -> None:
         ours, theirs, lambda: encode_with_padding_byte(encode_group, group, 0xFF)
     )
     assert decode_group(theirs).frame_id == "k01"
+
+
+@settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(marker_arrays(), st.booleans())
+def test_fast_walk_of_new_shapes_reads_as_the_field_reader(data, media) -> None:
+    """A new shape is walked by ``_walk_marker_array``: same columns as the field-by-field
+    reader, whatever the padding bytes hold; media attachments and bad bytes go the reader's
+    way (same columns, same errors)."""
+    from hiros_core.codec import _parse_marker_array, _walk_marker_array
+
+    if not media:
+        data.attachments = []
+        data.__post_init__()
+    for raw in (
+        encode_marker_array(data),
+        encode_with_padding_byte(encode_marker_array, data, 0xFF),
+    ):
+        walked, read = _walk_marker_array(raw), _parse_marker_array(raw)
+        for name in ("ids", "types", "actions", "stamps_ns", "lifetimes_ns", "frame_locked"):
+            assert np.array_equal(getattr(walked, name), getattr(read, name))
+            assert getattr(walked, name).dtype == getattr(read, name).dtype
+        for name in ("poses", "scales", "colors"):
+            assert np.array_equal(getattr(walked, name), getattr(read, name), equal_nan=True)
+        for name in ("frame_ids", "namespaces", "texts", "attachments"):
+            assert getattr(walked, name) == getattr(read, name)
+        for name in ("points", "point_colors"):
+            pairs = zip(getattr(walked, name), getattr(read, name), strict=True)
+            assert all(a.shape == b.shape and np.array_equal(a, b) for a, b in pairs)
+        for cut in (1, len(raw) // 2):
+            with pytest.raises(CodecError):
+                _walk_marker_array(raw[:-cut])
