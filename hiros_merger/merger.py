@@ -43,7 +43,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from hiros_core.calibration import Calibration, CameraCalibration
-from hiros_core.layouts import Layout
+from hiros_core.layouts import AZURE_KINECT, Layout
 from hiros_core.model import STATE_WIDTH, Skeleton, SkeletonGroup, camera_from_frame
 from hiros_merger import kernels
 
@@ -177,6 +177,7 @@ class Merger:
     def __init__(
         self, params: MergerParams | None = None, calibration: Calibration | None = None
     ) -> None:
+        warm_up()
         self.params = params or MergerParams()
         self.drops: Counter[str] = Counter()
         self.agreement: dict[str, float] = {}
@@ -404,3 +405,41 @@ class Merger:
             self.agreement[name] = (
                 value if previous is None else previous + alpha * (value - previous)
             )
+
+
+_WARM = False
+
+
+def warm_up() -> None:
+    """Compile the fusion kernel (or load it from numba's disk cache) once per process.
+
+    The first ``Merger`` of a process calls it, so that a live node pays the cost (a fraction
+    of a second from the cache, about 10 s on the very first run after an install or a kernel
+    change) before its first frame rather than on it.
+    """
+    global _WARM  # noqa: PLW0603 - once per process
+    if _WARM:
+        return
+    _WARM = True
+    merger = Merger(
+        MergerParams(),
+        Calibration(
+            "warm_up",
+            "world",
+            {"warm_up": CameraCalibration(frame_id="warm_up", translation=np.zeros(3))},
+        ),
+    )
+    positions = np.linspace(0.0, 1.0, AZURE_KINECT.n_joints * 3).reshape(-1, 3) + np.array(
+        [0.0, 0.0, 3.0]
+    )
+    skeletons = [
+        Skeleton.from_positions(
+            positions + np.array([track, 0.0, 0.0]),
+            AZURE_KINECT,
+            skeleton_id=track,
+            src_time_ns=1_000_000_000,
+            src_frame="warm_up",
+        )
+        for track in (0, 1)
+    ]
+    merger.update(SkeletonGroup(1_000_000_000, "world", skeletons))

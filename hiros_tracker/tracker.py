@@ -48,7 +48,7 @@ import numpy as np
 from scipy.optimize import linear_sum_assignment
 
 from hiros_core.calibration import Calibration, CameraCalibration
-from hiros_core.layouts import Layout
+from hiros_core.layouts import AZURE_KINECT, Layout
 from hiros_core.model import Skeleton, SkeletonGroup
 from hiros_tracker import kernels
 from hiros_tracker.correction import CameraCorrection
@@ -439,6 +439,7 @@ class Tracker:
     def __init__(
         self, params: TrackerParams | None = None, calibration: Calibration | None = None
     ) -> None:
+        warm_up()
         self.params = params or TrackerParams()
         self.drops: Counter[str] = Counter()
         self.correction = CameraCorrection(calibration, self.drops)
@@ -997,3 +998,41 @@ def _nan_mean(values: np.ndarray) -> np.ndarray:
     """Mean over the last axis ignoring NaN; 0 where all are NaN."""
     finite = np.isfinite(values)
     return np.where(finite, values, 0.0).sum(axis=-1) / np.maximum(finite.sum(axis=-1), 1)
+
+
+_WARM = False
+
+
+def warm_up() -> None:
+    """Compile the kernels (or load them from numba's disk cache) once per process.
+
+    The first ``Tracker`` of a process calls it, so that a live node pays the cost (about
+    0.3 s from the cache, 10-20 s on the very first run after an install or a kernel change)
+    before its first frame rather than on it: a burst of frames arriving during that first
+    frame would otherwise overflow the subscription queue. A throwaway tracker follows one
+    standing person seen by a calibrated camera through every code path a frame takes.
+    """
+    global _WARM  # noqa: PLW0603 - once per process
+    if _WARM:
+        return
+    _WARM = True
+    offsets = np.zeros((AZURE_KINECT.n_joints, 3))
+    for joint, parent in enumerate(AZURE_KINECT.parents):
+        if parent >= 0:
+            name = AZURE_KINECT.joint_names[joint]
+            side = 0.1 if "Left" in name else -0.1 if "Right" in name else 0.0
+            offsets[joint] = offsets[parent] + [side, -0.12, 0.05]
+    camera = CameraCalibration(frame_id="warm_up", translation=np.array([0.0, 0.0, -3.0]))
+    tracker = Tracker(
+        TrackerParams(max_delay=0.0, min_hits=2, min_cameras=1),
+        Calibration("warm_up", "world", {"warm_up": camera}),
+    )
+    for index in range(3):
+        stamp = 1_000_000_000 + index * 33_333_333
+        skeleton = Skeleton.from_positions(
+            offsets + np.array([0.01 * index, 0.0, 0.0]),
+            AZURE_KINECT,
+            skeleton_id=1,
+            src_time_ns=stamp,
+        )
+        tracker.update(SkeletonGroup(stamp, "warm_up", [skeleton]))
