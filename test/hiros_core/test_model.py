@@ -122,3 +122,24 @@ def test_bad_calibration_files_name_the_problem(tmp_path, text: str, message: st
         load_calibration(path)
     with pytest.raises(CalibrationError, match="cannot read"):
         load_calibration(tmp_path / "missing.yaml")
+
+
+@pytest.mark.parametrize("shape", [(), (4,), (2, 3), (0,)])
+def test_compiled_link_rows_equal_the_numpy_form(shape) -> None:
+    from hiros_core import compiled
+    from hiros_core.layouts import KINECT_V2
+    from hiros_core.model import _numpy_link_rows
+
+    rng = np.random.default_rng(len(shape))
+    for layout in (AZURE_KINECT, KINECT_V2):
+        for strided in (False, True):
+            rows = rng.normal(size=(*shape, layout.n_joints, 40 if strided else 20))
+            markers = rows[..., ::2] if strided else rows
+            markers[rng.random(markers.shape) < 0.1] = np.nan
+            present = rng.random((*shape, layout.n_joints)) < 0.8
+            expected = _numpy_link_rows(markers, present, layout)
+            got = compiled.link_rows(markers, present, layout.link_parents, layout.link_children)
+            assert got[0].shape == expected[0].shape
+            assert np.array_equal(got[0], expected[0], equal_nan=True)
+            assert np.array_equal(got[1], expected[1])
+            assert got[1].shape == expected[1].shape

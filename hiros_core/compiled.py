@@ -1,0 +1,64 @@
+"""Compiled (numba) forms of hiros_core's per-frame numpy helpers, same results bit for bit.
+
+``model.link_rows`` runs for every person of every frame in the bridge and in most stages; its
+dozen small numpy calls cost ~40 us where the arithmetic is a few hundred flops. This module
+imports numba, so nothing imports it at start-up: ``model.link_rows`` calls it only when numba
+is already loaded (the pipeline's stages load it), which keeps light commands light. Kernels
+compile on first call and are cached on disk (``cache=True``).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+__all__ = ["link_rows"]
+
+
+@njit(cache=True)
+def _fmin(a: float, b: float) -> float:
+    """``np.fmin``: the number when one is NaN, else the smaller; ``b`` when equal (-0/+0)."""
+    if math.isnan(b):
+        return a
+    if math.isnan(a):
+        return b
+    return a if a < b else b
+
+
+@njit(cache=True)
+def _link_rows(
+    markers: np.ndarray, present: np.ndarray, parents: np.ndarray, children: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    n_people, n_joints, width = markers.shape
+    links = np.full((n_people, n_joints, width), np.nan)
+    link_present = np.zeros((n_people, n_joints), dtype=np.bool_)
+    for p in range(n_people):
+        for k in range(children.size):
+            parent, child = parents[k], children[k]
+            if not (present[p, parent] and present[p, child]):
+                continue
+            link_present[p, child] = True
+            row, a, c = links[p, child], markers[p, parent], markers[p, child]
+            row[0] = _fmin(a[0], c[0])
+            for i in range(1, 4):
+                row[i] = (c[i] + a[i]) * 0.5
+            for i in range(4, 8):
+                row[i] = c[i]
+    return links, link_present
+
+
+def link_rows(
+    markers: np.ndarray, marker_present: np.ndarray, parents: np.ndarray, children: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """``model.link_rows`` for float64 ``(..., J, 20)`` rows (see there)."""
+    shape = marker_present.shape
+    n_joints, width = markers.shape[-2:]
+    links, present = _link_rows(
+        np.ascontiguousarray(markers).reshape(-1, n_joints, width),
+        np.ascontiguousarray(marker_present).reshape(-1, n_joints),
+        np.asarray(parents, dtype=np.intp),
+        np.asarray(children, dtype=np.intp),
+    )
+    return links.reshape(*shape, width), present.reshape(shape)
