@@ -22,6 +22,8 @@ $(STAMP): $(SETUP_INPUTS)
 	@$(PY) -c "import tf2_msgs.msg" 2>/dev/null || tools/build_interfaces.sh $(VENV) third_party/tf2_msgs
 	$(PY) -m pip install --quiet --disable-pip-version-check --no-deps --no-build-isolation --config-settings editable_mode=compat -e .
 	tools/install_ament_layout.sh $(VENV)
+	@# compile the numba kernels now (cached on disk), not during the first demo or node start
+	$(PY) tools/warm_kernels.py
 	@touch $(STAMP)
 	@echo "hiros is set up in $(VENV)"
 
