@@ -116,6 +116,14 @@ def test_group_bytes_match_rclpy_and_round_trip(group: SkeletonGroup) -> None:
     )
     assert decode_group(ours).same_as(group)
     assert decode_group(theirs).same_as(group)  # rclpy's bytes, whatever their padding
+    padded = encode_with_padding_byte(encode_group, group, 0xFF)  # (clears the caches)
+    for raw in (padded, ours, theirs, padded):  # later reads recognise the learnt shape
+        decoded = decode_group(raw)
+        assert decoded.same_as(group)
+        assert all(
+            s.markers.shape == (s.layout.n_joints, 20) and s.links.shape == s.markers.shape
+            for s in decoded.skeletons
+        )
 
 
 @st.composite
