@@ -2,7 +2,10 @@
 
 Camera topics in (Azure-driver ``/<cam>/body_tracking_data`` or ``/<cam>/skeletons``), every
 stage's output out on ``/hiros/{tracker,merger,optimizer,filter}``. Stages receive the previous
-stage's objects directly; only the published copies are encoded (with the fast codec).
+stage's objects directly; only the published copies are encoded (with the fast codec), and
+only for topics someone subscribes to (the topics are volatile: an unheard message reaches
+nobody, now or later). The filter's output goes out first: it ends the chain, and its
+consumers should not wait while the intermediate stages' outputs are encoded.
 """
 
 from __future__ import annotations
@@ -89,9 +92,10 @@ class PipelineNode(HirosNode):
         if group is None:
             return
         outputs = self.pipeline.update(group)
-        for stage, result in zip(STAGES, outputs, strict=True):
-            if result.skeletons:
-                self.publish_raw(self.publishers_[stage], encode_group(result))
+        for stage, result in reversed(list(zip(STAGES, outputs, strict=True))):
+            publisher = self.publishers_[stage]
+            if result.skeletons and publisher.get_subscription_count():
+                self.publish_raw(publisher, encode_group(result))
         drops = self.pipeline.drops
         for bridge in self._bridges.values():
             drops.update({f"bridge: {k}": v for k, v in bridge.drops.items()})
