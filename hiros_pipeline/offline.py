@@ -131,7 +131,7 @@ def _write(writer: RecordingWriter, outputs: StageOutputs, summary: RunSummary) 
         summary.published[stage] += 1
         if summary.outputs is not None:
             summary.outputs[stage].append(group)
-        summary.people[stage].update(int(i) for i in group.ids)
+        summary.people[stage].update([int(s.id) for s in group.skeletons])
         if stage == "tracker":
             summary.first_ns = group.stamp_ns if summary.first_ns is None else summary.first_ns
             summary.last_ns = group.stamp_ns

@@ -96,6 +96,7 @@ class RecordingWriter:
         self._writer.start(profile="ros2", library="hiros")
         self._schemas: dict[str, int] = {}
         self._channels: dict[tuple[str, str], int] = {}
+        self._routes: dict[tuple[str, str], tuple[int, tuple[str, str]]] = {}
         self._sequence: Counter[int] = Counter()
         self.counts: Counter[tuple[str, str]] = Counter()
         self.start_ns: int | None = None
@@ -133,8 +134,13 @@ class RecordingWriter:
         if self.closed:
             msg = f"recording {self.path} is closed; open a new writer"
             raise RecordingError(msg)
-        msgtype = normalize_msgtype(msgtype)
-        channel = self._channel(topic, msgtype)
+        route = self._routes.get((topic, msgtype))
+        if route is None:  # normalised and registered once per topic and type spelling
+            normalized = normalize_msgtype(msgtype)
+            route = self._routes[(topic, msgtype)] = (
+                self._channel(topic, normalized), (topic, normalized)
+            )  # fmt: skip
+        channel, counted = route
         log_time_ns = int(log_time_ns)
         self._sequence[channel] += 1
         self._writer.add_message(
@@ -144,7 +150,7 @@ class RecordingWriter:
             publish_time=log_time_ns if publish_time_ns is None else int(publish_time_ns),
             sequence=self._sequence[channel],
         )
-        self.counts[(topic, msgtype)] += 1
+        self.counts[counted] += 1
         self.start_ns = log_time_ns if self.start_ns is None else min(self.start_ns, log_time_ns)
         self.end_ns = log_time_ns if self.end_ns is None else max(self.end_ns, log_time_ns)
 
