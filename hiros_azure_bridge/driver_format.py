@@ -27,6 +27,7 @@ stride, joint-major ids, another joint order, millimetres).
 from __future__ import annotations
 
 import math
+import sys
 from collections import Counter
 from dataclasses import dataclass, field
 from functools import cache
@@ -151,6 +152,14 @@ def load_bridge_params(path: str | Path) -> tuple[DriverBridgeParams, dict[str, 
         msg = f"bridge description {path}: {exc}"
         raise ConfigError(msg) from exc
     return params, {k: v for k, v in spec.items() if k not in known}
+
+
+def _compiled_available() -> bool:
+    """Whether the compiled frame path is used: when numba is loaded already.
+
+    The pipeline's stages load it; the bridge node and light commands never import it.
+    """
+    return "numba" in sys.modules
 
 
 @cache
@@ -285,6 +294,14 @@ class DriverBridge:
         usual message (ids increasing, no duplicates, whole bodies) skips the sorting and
         scattering the general case needs.
         """
+        if rows is None and _compiled_available():
+            made = self._compiled_rows(data)
+            if made is not None:
+                layout, arranged, markers, present = made
+                return Skeleton.many_from_rows(
+                    markers, present, layout, skeleton_ids=arranged.skeleton_ids,
+                    src_time_ns=stamp, src_frame=frame,
+                )  # fmt: skip
         layout, body, joint, block, arranged = self._kept_markers(data, rows)
         if len(body) == 0:
             return []
@@ -308,6 +325,32 @@ class DriverBridge:
             src_time_ns=stamp,
             src_frame=frame,
         )
+
+    def _compiled_rows(
+        self, data: MarkerArrayData | MarkerFields
+    ) -> tuple[Layout, _Arrangement, np.ndarray, np.ndarray] | None:
+        """The usual message's people in one compiled call, or None (take the general path).
+
+        Same rows as ``_kept_markers`` + ``_skeletons`` give (``hiros_azure_bridge.compiled``);
+        used when numba is loaded already, so the bridge node never imports it.
+        """
+        from hiros_azure_bridge import compiled
+
+        ids = np.asarray(data.ids)
+        shape = self._id_shape(data.namespaces[0], ids)
+        arranged = shape.arranged
+        if arranged is None:
+            return None
+        markers, present, ok = compiled.driver_rows(
+            np.ascontiguousarray(data.poses, dtype=float)[:, :7],
+            np.fromiter(map(_level, data.texts), float, len(ids)),
+            arranged.rows,
+            len(arranged.skeleton_ids),
+            shape.layout.n_joints,
+            float(self.params.position_scale),
+            float(self.params.confidence_levels),
+        )
+        return (shape.layout, arranged, markers, present) if ok else None
 
     def _id_shape(self, namespace: str, ids: np.ndarray) -> _IdShape:
         """What a message's namespace and marker ids fix (cached: drivers repeat them)."""
@@ -397,6 +440,7 @@ class _Arrangement:
 
     skeleton_ids: list[int]
     flat: np.ndarray | None
+    rows: np.ndarray  # ``flat``, or every row in order when every body is whole
 
     @classmethod
     def of(cls, body: np.ndarray, joint: np.ndarray, n_joints: int) -> _Arrangement:
@@ -408,7 +452,8 @@ class _Arrangement:
         flat = None
         if len(body) != len(starts) * n_joints:
             flat = (np.cumsum(change) - 1) * n_joints + joint
-        return cls(body[starts].tolist(), flat)
+        rows = np.arange(len(body), dtype=np.intp) if flat is None else flat.astype(np.intp)
+        return cls(body[starts].tolist(), flat, rows)
 
 
 @dataclass(frozen=True)

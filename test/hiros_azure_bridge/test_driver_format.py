@@ -237,3 +237,39 @@ def test_bytes_path_equals_decoded_path_frame_after_frame():
     assert {"nan_position", "duplicate_marker", "delete_marker"} <= set(by_bytes.drops)
     with pytest.raises(CodecError):
         by_bytes.update_bytes(frames[0][:-9])
+
+
+def test_compiled_frame_path_equals_the_numpy_path(monkeypatch):
+    """The numba path for usual frames gives the numpy path's groups and drops."""
+    from hiros_azure_bridge import driver_format
+
+    frames = []
+    for step in range(6):
+        group = _group(2, stamp=STAMP + step * 33_000_000, seed=10 + step)
+        group.skeletons[0].orientations[3] = np.nan  # written as a zero quaternion
+        group.skeletons[1].confidences[4] = np.nan  # no level text
+        data = group_to_driver_markers(group)
+        if step == 3:  # not finite: the compiled path hands the frame to the numpy path
+            data.poses[9, 2] = np.inf
+        if step == 4:  # the same ids, a joint missing: people arranged by the cached rows
+            data = group_to_driver_markers(group)
+            keep = np.ones(len(data), dtype=bool)
+            keep[40] = False
+            data = _markers(
+                data.ids[keep], data.poses[keep, :3], stamps=data.stamps_ns[keep],
+                texts=[t for t, k in zip(data.texts, keep, strict=True) if k],
+            )  # fmt: skip
+        frames.append(encode_marker_array(data))
+    results = {}
+    for compiled in (False, True):
+        monkeypatch.setattr(driver_format, "_compiled_available", lambda c=compiled: c)
+        for scale in (1.0, 0.001):
+            bridge = DriverBridge(DriverBridgeParams(position_scale=scale))
+            groups = [bridge.update_bytes(raw) for raw in frames + frames[4:5]]
+            results[compiled, scale] = groups, dict(bridge.drops)
+    for scale in (1.0, 0.001):
+        (fast, fast_drops), (slow, slow_drops) = results[True, scale], results[False, scale]
+        assert fast_drops == slow_drops
+        assert fast_drops["nan_position"] == 1
+        for a, b in zip(fast, slow, strict=True):
+            assert (a is None and b is None) or a.same_as(b)
