@@ -243,9 +243,9 @@ class McapWriter:
         self._position += len(data)
 
     def _raise_error(self) -> None:
+        """Raise the writer thread's error (it stays: the file cannot be finished after it)."""
         if self._error is not None:
-            error, self._error = self._error, None
-            raise error
+            raise self._error
 
     def _drain(self) -> None:
         """Wait until the writer thread has written every queued chunk."""
@@ -262,7 +262,6 @@ class McapWriter:
             self._jobs.put(None)
             self._thread.join()
             self._thread = None
-        self._error = None
 
     def finish(self) -> None:
         """Write the last chunk, the data end, the summary and the footer (stream left open)."""

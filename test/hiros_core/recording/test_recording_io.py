@@ -214,3 +214,31 @@ def test_undecodable_messages_are_counted(tmp_path, samples):
     groups = list(iter_groups(path, drops=drops))
     assert len(groups) == 1
     assert drops["undecodable"] == 2
+
+
+def test_a_write_error_in_the_writer_thread_reaches_the_caller():
+    import io
+
+    from hiros_core.recording.mcap_out import McapWriter
+
+    class FullDisk(io.BytesIO):
+        writes = 0
+
+        def write(self, data):
+            self.writes += 1
+            if self.writes > 3:
+                raise OSError("disk full")
+            return super().write(data)
+
+    writer = McapWriter(FullDisk(), chunk_size=100)
+    writer.start()
+    channel = writer.register_channel("/a", "cdr", writer.register_schema("x/msg/Y", "", b""), {})
+
+    def write_all() -> None:
+        for stamp in range(200):
+            writer.add_message(channel, stamp, b"x" * 50, stamp, stamp)
+        writer.finish()
+
+    with pytest.raises(OSError, match="disk full"):
+        write_all()
+    writer.abort()
