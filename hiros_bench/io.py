@@ -5,10 +5,11 @@ Each figure stands beside a baseline doing the same job with rclpy message objec
 
 * bridge: one Azure-driver MarkerArray (2 people × 32 joints) in CDR -> SkeletonGroup CDR,
   as the official driver publishes it (empty ``text``) and as forks do (confidence level in
-  ``text``, different in every frame). hiros: ``decode_marker_array`` + ``DriverBridge.update``
-  + ``encode_group``. Baseline: what a plain rclpy node does: ``deserialize_message``, a loop
-  over the markers filling hiros_skeleton_msgs objects (positions and confidences only, no
-  links), ``serialize_message``.
+  ``text``, different in every frame). hiros: ``DriverBridge.update_bytes`` (what the bridge
+  node runs: the columns it needs decoded, then converted) + ``encode_group``. Baseline: what
+  a plain rclpy node does: ``deserialize_message``, a loop over the markers filling
+  hiros_skeleton_msgs objects (positions and confidences only, no links),
+  ``serialize_message``.
 * write: a SkeletonGroup -> driver MarkerArray -> MCAP. hiros: ``group_to_driver_markers`` +
   ``encode_marker_array`` + ``RecordingWriter``. Baseline: rclpy Marker objects +
   ``serialize_message`` + the same writer.
@@ -30,7 +31,7 @@ import numpy as np
 
 from hiros_azure_bridge import DriverBridge, group_to_driver_markers
 from hiros_bench.timing import per_call_seconds
-from hiros_core.codec import decode_marker_array, encode_group, encode_marker_array
+from hiros_core.codec import encode_group, encode_marker_array
 from hiros_core.layouts import AZURE_KINECT
 from hiros_core.model import Skeleton, SkeletonGroup
 from hiros_core.recording import MARKER_ARRAY, RecordingWriter, iter_groups
@@ -181,7 +182,7 @@ def measure(quick: bool = False) -> list[tuple[str, float, float]]:
         def ours_bridge(raw: list[bytes] = raw) -> None:
             bridge = DriverBridge()
             for data in raw:
-                encode_group(bridge.update(decode_marker_array(data)))
+                encode_group(bridge.update_bytes(data))
 
         def baseline_bridge(raw: list[bytes] = raw) -> None:
             for data in raw:
