@@ -60,15 +60,19 @@ def _unit3(x: float, y: float, z: float) -> tuple[float, float, float]:
 def _robust(  # noqa: PLR0917 - scalars of one reweighting
     weight: np.ndarray,
     residual: np.ndarray,
+    own: np.ndarray,
     m: int,
     j: int,
     outlier_scale: float,
     outlier_cutoff: float,
+    own_cutoff: float,
     out: np.ndarray,
 ) -> None:
     """Cauchy reweighting of joint ``j`` of track ``m`` into ``out`` ``(C,)``.
 
-    Nothing beyond ``outlier_cutoff`` unless nothing is left within it.
+    The Cauchy weight is of ``residual`` (the joint's own, or its limb's mean); nothing whose
+    ``residual`` is beyond ``outlier_cutoff`` or ``own`` (the joint's, or its limb's farthest
+    joint's) beyond ``own_cutoff``, unless nothing is left.
     """
     n_slots = weight.shape[1]
     inside_total = 0.0
@@ -79,11 +83,11 @@ def _robust(  # noqa: PLR0917 - scalars of one reweighting
         if not math.isfinite(r):
             robust = 0.0
         out[c] = robust
-        if r <= outlier_cutoff:
+        if r <= outlier_cutoff and own[m, c, j] <= own_cutoff:
             inside_total += robust
     if inside_total > 0:
         for c in range(n_slots):
-            if not residual[m, c, j] <= outlier_cutoff:
+            if not (residual[m, c, j] <= outlier_cutoff and own[m, c, j] <= own_cutoff):
                 out[c] = 0.0
 
 
@@ -97,6 +101,43 @@ def _residuals(positions: np.ndarray, fused: np.ndarray, residual: np.ndarray) -
                 dy = positions[m, c, j, 1] - fused[m, j, 1]
                 dz = positions[m, c, j, 2] - fused[m, j, 2]
                 residual[m, c, j] = math.sqrt(dx * dx + dy * dy + dz * dz)
+
+
+@njit(cache=True, error_model="numpy")
+def _limb_means(
+    values: np.ndarray, finite: np.ndarray, groups: np.ndarray, out: np.ndarray, peak: np.ndarray
+) -> None:
+    """``out[m, c, j]`` mean and ``peak[m, c, j]`` max of ``values[m, c, k]`` over j's limb.
+
+    Over the finite joints k of the limb (``groups``) in that detection; a joint that is not
+    finite keeps its own value in both.
+    """
+    n_tracks, n_slots, n_joints = values.shape
+    n_groups = 0
+    for j in range(n_joints):
+        n_groups = max(n_groups, groups[j] + 1)
+    sums = np.zeros(n_groups)
+    counts = np.zeros(n_groups)
+    highest = np.zeros(n_groups)
+    for m in range(n_tracks):
+        for c in range(n_slots):
+            sums[:] = 0.0
+            counts[:] = 0.0
+            highest[:] = 0.0
+            for j in range(n_joints):
+                if finite[m, c, j] and math.isfinite(values[m, c, j]):
+                    g = groups[j]
+                    sums[g] += values[m, c, j]
+                    counts[g] += 1.0
+                    highest[g] = max(highest[g], values[m, c, j])
+            for j in range(n_joints):
+                g = groups[j]
+                if finite[m, c, j] and counts[g] > 0:
+                    out[m, c, j] = sums[g] / counts[g]
+                    peak[m, c, j] = highest[g]
+                else:
+                    out[m, c, j] = values[m, c, j]
+                    peak[m, c, j] = values[m, c, j]
 
 
 @njit(cache=True, error_model="numpy")
@@ -209,6 +250,8 @@ def fuse(  # noqa: PLR0912, PLR0915, PLR0917 - one output's whole fusion
     torso: np.ndarray,
     pointers: np.ndarray,
     has_front: bool,
+    groups: np.ndarray,
+    limb_residuals: bool,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Fuse the detections of every track (see ``Merger._fuse`` for the weights).
 
@@ -239,6 +282,7 @@ def fuse(  # noqa: PLR0912, PLR0915, PLR0917 - one output's whole fusion
         occlusion_weight,
         outlier_scale,
         outlier_cutoff,
+        limb_cutoff,
     ) = (
         params[0],
         params[1],
@@ -252,7 +296,9 @@ def fuse(  # noqa: PLR0912, PLR0915, PLR0917 - one output's whole fusion
         params[9],
         params[10],
         params[11],
+        params[12],
     )
+    own_cutoff = limb_cutoff if limb_residuals else outlier_cutoff
     n_tracks, n_slots = shape
     n_joints = received.shape[1]
     markers = np.full((n_tracks, n_slots, n_joints, 20), np.nan)
@@ -371,14 +417,24 @@ def fuse(  # noqa: PLR0912, PLR0915, PLR0917 - one output's whole fusion
             fused, positions, cameras, known, torso, occlusion_radius, weight, occlusion_weight
         )
 
-    # Robust mean: Cauchy reweighting around the current estimate, a few times.
+    # Robust mean: Cauchy reweighting around the current estimate, a few times; with
+    # ``limb_residuals`` the Cauchy weight is of the mean residual over the joint's limb
+    # (``groups``) in that detection, so a camera's limb is weighed and kept or dropped whole;
+    # a limb one of whose joints is beyond ``limb_cutoff`` is dropped.
     residual = np.empty((n_tracks, n_slots, n_joints))
+    limb = np.empty((n_tracks, n_slots, n_joints))
+    peak = np.empty((n_tracks, n_slots, n_joints))
     robust = np.empty(n_slots)
     for _ in range(iterations):
         _residuals(positions, fused, residual)
+        if limb_residuals:
+            _limb_means(residual, finite, groups, limb, peak)
+        else:
+            limb[:] = residual
+            peak[:] = residual
         for m in range(n_tracks):
             for j in range(n_joints):
-                _robust(weight, residual, m, j, outlier_scale, outlier_cutoff, robust)
+                _robust(weight, limb, peak, m, j, outlier_scale, outlier_cutoff, own_cutoff, robust)
                 total = 0.0
                 sx = sy = sz = 0.0
                 for c in range(n_slots):
@@ -392,12 +448,17 @@ def fuse(  # noqa: PLR0912, PLR0915, PLR0917 - one output's whole fusion
                 fused[m, j, 1] = sy / total if total != 0 else np.nan
                 fused[m, j, 2] = sz / total if total != 0 else np.nan
     _residuals(positions, fused, residual)
+    if limb_residuals:
+        _limb_means(residual, finite, groups, limb, peak)
+    else:
+        limb[:] = residual
+        peak[:] = residual
     final = np.empty((n_tracks, n_slots, n_joints))
     confidence = np.empty((n_tracks, n_joints))
     velocity = np.empty((n_tracks, n_joints, 3))
     for m in range(n_tracks):
         for j in range(n_joints):
-            _robust(weight, residual, m, j, outlier_scale, outlier_cutoff, robust)
+            _robust(weight, limb, peak, m, j, outlier_scale, outlier_cutoff, own_cutoff, robust)
             total_c = total_v = 0.0
             mean_c = 0.0
             vx = vy = vz = 0.0

@@ -28,6 +28,9 @@ weight each camera by confidence, distance and view; the product form is ours)::
 then the robust mean multiplies by a Cauchy weight ``1 / (1 + (r / outlier_scale)²)`` of each
 joint's distance ``r`` to the current estimate (0 beyond ``outlier_cutoff``), starting from the
 weighted median, so that one camera's flipped limb or swapped leg does not pull the result.
+``r`` is the mean over the joint's limb in that detection (``limb_residuals``): a camera's limb
+is weighed whole, so the fused limb is one weighted mean of the cameras' limbs rather than
+joints stitched from different cameras (which bent limbs: 1-2 frame joint-angle spikes).
 
 Output: world frame, ``id`` = track id, ``src_time`` = output time, ``src_frame`` = world frame;
 positions, orientations, confidences (weighted mean) and velocities (weighted mean) per joint.
@@ -80,6 +83,13 @@ class MergerParams:
         outlier_cutoff: metres; a joint farther than this from the estimate gets no weight (as
             long as another camera's joint is within it): a flipped limb is out, not just less.
         iterations: reweighting iterations of the robust mean.
+        limb_residuals: the robust mean weighs each camera's limb (torso, head, each arm, each
+            leg) by its mean joint distance to the estimate instead of each joint by its own:
+            an SDK's errors are coherent along a limb, and joints taken from different
+            cameras' versions of one limb bend it (angle spikes) even when each camera has the
+            angle right.
+        limb_cutoff: metres; with ``limb_residuals``, a camera's limb one of whose joints is
+            this far from the estimate gets no weight (a single joint's blunder).
         track_timeout: seconds; a track unseen this long is forgotten.
 
     """
@@ -99,10 +109,12 @@ class MergerParams:
     agreement_scale: float = 0.1
     agreement_smoothing: float = 0.02
     staleness_scale: float = 0.05
-    outlier_scale: float = 0.25
+    outlier_scale: float = 0.4
     outlier_cutoff: float = 0.4
     iterations: int = 3
     track_timeout: float = 1.0
+    limb_residuals: bool = True
+    limb_cutoff: float = 0.8
 
 
 @dataclass(frozen=True)
@@ -116,6 +128,7 @@ class _BodyAxes:
     torso: np.ndarray  # joints standing for the torso in occlusion tests
     pointers: np.ndarray  # (k, 2) joint pairs pointing forward: ankle -> foot, head -> nose
     has_front: bool  # whether the layout names what the facing direction needs
+    groups: np.ndarray  # (J,) limb of each joint: 0 torso, then one per subtree off the torso
 
     @classmethod
     def of(cls, layout: Layout) -> _BodyAxes:
@@ -132,7 +145,29 @@ class _BodyAxes:
             [(names[a], names[b]) for a, b in pairs if a in names and b in names], dtype=np.int64
         ).reshape(-1, 2)
         has_front = neck >= 0 and bool((left >= 0).all() and (right >= 0).all())
-        return cls(root, neck, left, right, torso, pointers, has_front)
+        return cls(root, neck, left, right, torso, pointers, has_front, _limbs(layout, torso))
+
+
+def _limbs(layout: Layout, torso: np.ndarray) -> np.ndarray:
+    """``(J,)`` limb index of each joint: 0 for the torso, then one per subtree hanging off it.
+
+    A body-tracking SDK fits one model per frame, so its mistakes (a flipped or swapped leg,
+    an occluded arm it guessed) and its noise are coherent along a limb: the merger weighs a
+    camera's limb as a whole, so that a fused limb is not stitched from different cameras'
+    joints (which bends it even when every camera has its angles right).
+    """
+    parents = layout.parents
+    in_torso = set(torso.tolist())
+    groups = np.zeros(layout.n_joints, dtype=np.int64)
+    starts: dict[int, int] = {}
+    for j in range(layout.n_joints):
+        if j in in_torso:
+            continue
+        start = j
+        while parents[start] >= 0 and parents[start] not in in_torso:
+            start = parents[start]
+        groups[j] = starts.setdefault(start, len(starts) + 1)
+    return groups
 
 
 _AXES: dict[str, _BodyAxes] = {}
@@ -330,6 +365,7 @@ class Merger:
                     params.occlusion_weight,
                     params.outlier_scale,
                     params.outlier_cutoff,
+                    params.limb_cutoff,
                 ],
                 dtype=float,
             ),
@@ -342,6 +378,8 @@ class Merger:
             axes.torso,
             axes.pointers,
             axes.has_front,
+            axes.groups,
+            params.limb_residuals,
         )
         self._update_agreement(disagreement, rows_of, slots, [c for _, c, _ in entries])
         orientations = markers[..., 4:8]

@@ -74,7 +74,7 @@ def test_one_camera_outlier_limb_does_not_pull_the_result():
     pose = _person()
     rng = np.random.default_rng(1)
     views = [pose + rng.normal(0.0, 0.01, pose.shape) for _ in range(3)]
-    views[2][WRIST] += [0.0, -0.5, 0.0]  # k03 puts the left wrist on the other side
+    views[2][WRIST] += [0.0, -1.0, 0.0]  # k03 puts the left wrist far on the other side
     group = _group([_detection(v, f"k0{i + 1}") for i, v in enumerate(views)])
     merged = Merger().update(group).skeletons[0]
     plain_mean = np.mean([v[WRIST] for v in views], axis=0)
@@ -222,11 +222,42 @@ def test_a_front_back_flipped_view_counts_less():
     pose[feet] = pose[ankles] + np.array([0.12, 0.0, -0.02])
     flipped = pose.copy()
     flipped[:, 0] = 2 * pose[0, 0] - pose[:, 0]  # reflected through the frontal plane
-    params = MergerParams(outlier_scale=10.0, outlier_cutoff=10.0)
+    params = MergerParams(outlier_scale=10.0, outlier_cutoff=10.0, limb_cutoff=10.0)
     group = _group([_detection(pose, "k01"), _detection(flipped, "k02")])
     merged = Merger(params).update(group).skeletons[0]
     gap = np.abs(merged.positions[feet, 0] - pose[feet, 0]).max()
     assert gap < 0.25 * np.abs(flipped[feet, 0] - pose[feet, 0]).max()
-    even = Merger(MergerParams(outlier_scale=10.0, outlier_cutoff=10.0, flipped_weight=1.0))
+    even = Merger(
+        MergerParams(outlier_scale=10.0, outlier_cutoff=10.0, limb_cutoff=10.0, flipped_weight=1.0)
+    )
     midway = even.update(group).skeletons[0]
     np.testing.assert_allclose(midway.positions, (pose + flipped) / 2, atol=1e-6)
+
+
+def test_limbs_are_the_subtrees_off_the_torso():
+    from hiros_merger.merger import _axes
+
+    groups = _axes(AZURE_KINECT).groups
+    name = AZURE_KINECT.index
+    assert groups[name("Pelvis")] == groups[name("Neck")] == 0
+    arm = {groups[name(n)] for n in ("ClavicleLeft", "ShoulderLeft", "ElbowLeft", "ThumbLeft")}
+    leg = {groups[name(n)] for n in ("HipRight", "KneeRight", "AnkleRight", "FootRight")}
+    assert len(arm) == len(leg) == 1
+    assert len({*arm, *leg, groups[name("ElbowRight")], groups[name("Head")], 0}) == 5
+
+
+def test_a_camera_limb_is_kept_or_dropped_whole():
+    """A camera whose arm drifts away along the chain (its shoulder and elbow still near the
+    others') loses the whole arm, so the fused arm is not bent by its shoulder and elbow."""
+    pose = _person()
+    bent = pose.copy()
+    drift = {"ShoulderLeft": 0.05, "ElbowLeft": 0.3, "WristLeft": 0.6, "HandLeft": 0.7,
+             "HandTipLeft": 0.8, "ThumbLeft": 0.7}  # fmt: skip
+    for joint, offset in drift.items():
+        bent[AZURE_KINECT.index(joint)] += np.array([0.0, 0.0, offset])
+    group = _group([_detection(pose, "k01"), _detection(pose, "k02"), _detection(bent, "k03")])
+    whole = Merger(MergerParams()).update(group).skeletons[0]
+    np.testing.assert_allclose(whole.positions, pose, atol=1e-9)
+    per_joint = Merger(MergerParams(limb_residuals=False)).update(group).skeletons[0]
+    elbow = AZURE_KINECT.index("ElbowLeft")
+    assert abs(per_joint.positions[elbow, 2] - pose[elbow, 2]) > 0.01
