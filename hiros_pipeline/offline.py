@@ -47,6 +47,10 @@ class RunSummary:
     first_ns: int | None = None
     last_ns: int | None = None
     wall_time: float = 0.0
+    seconds: dict[str, float] = field(default_factory=dict)
+    """Wall seconds by part: ``read`` (reading, decoding, bridging), ``stages`` (the four
+    stages), ``write`` (encoding, drawing, writing; compression runs in a helper thread and
+    shows here only when it holds the run up), ``finish`` (the last chunks and the index)."""
     outputs: dict[str, list] | None = None
     """stage -> its output groups, when ``run_recording(keep_outputs=True)``."""
 
@@ -105,18 +109,31 @@ def run_recording(
     pipeline = Pipeline(params, calibration)
     started = time.perf_counter()
     reader_drops: Counter[str] = Counter()
+    clock, parts = time.perf_counter, [0.0, 0.0, 0.0]  # read, stages, write
     with RecordingWriter(out) as writer:
         first_stamp: int | None = None
+        mark = clock()
         for source, group in iter_groups(recording, drops=reader_drops):
             summary.frames_in[source] += 1
             if first_stamp is None:
                 first_stamp = group.stamp_ns
                 writer.write("/hiros/calibration", "std_msgs/msg/String",
                              _calibration_message(calibration), 0)  # fmt: skip
-            _write(writer, pipeline.update(group), summary)
+            read = clock()
+            outputs = pipeline.update(group)
+            computed = clock()
+            _write(writer, outputs, summary)
             if progress is not None:
                 progress(1)
+            done = clock()
+            parts[0] += read - mark
+            parts[1] += computed - read
+            parts[2] += done - computed
+            mark = done
+        finishing = clock()
         _write(writer, pipeline.flush(), summary)
+    summary.seconds = dict(zip(("read", "stages", "write"), parts, strict=True))
+    summary.seconds["finish"] = clock() - finishing
     summary.dropped.update({f"reader: {k}": v for k, v in reader_drops.items()})
     summary.dropped.update(pipeline.drops)
     summary.wall_time = time.perf_counter() - started
