@@ -162,6 +162,20 @@ def _compiled_available() -> bool:
     return "numba" in sys.modules
 
 
+def warm_up() -> None:
+    """Load the compiled frame path before the first frame, when numba is loaded.
+
+    From numba's disk cache this takes ~20 ms; the very first time after an install or a
+    change of the kernel, ~2 s of compilation, which a live node should not spend on its
+    first camera message.
+    """
+    if not _compiled_available():
+        return
+    positions = np.zeros((1, AZURE_KINECT.n_joints, 3))
+    people = Skeleton.many_from_positions(positions, AZURE_KINECT, skeleton_ids=[1])
+    DriverBridge().update(group_to_driver_markers(SkeletonGroup(1, "warm_up", people)))
+
+
 @cache
 def _level(text: str) -> float:
     """Confidence level written in a marker's text, NaN when there is none."""

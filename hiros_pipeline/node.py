@@ -70,6 +70,9 @@ class PipelineNode(HirosNode):
         qos = camera_qos(self.params.camera_qos)
         if self.params.input == "driver":
             from hiros_azure_bridge import DriverBridge, DriverBridgeParams
+            from hiros_azure_bridge.driver_format import warm_up
+
+            warm_up()  # numba is loaded (the stages'): the bridge's compiled path too
 
             bridge = DriverBridge(DriverBridgeParams())
             self._bridges[camera] = bridge

@@ -16,6 +16,7 @@ from pathlib import Path
 
 import yaml
 
+from hiros_azure_bridge.driver_format import warm_up
 from hiros_core.calibration import Calibration
 from hiros_core.recording import MARKER_ARRAY, RecordingWriter, iter_groups
 from hiros_pipeline.pipeline import STAGES, Pipeline, PipelineParams, StageOutputs
@@ -107,6 +108,7 @@ def run_recording(
     """
     summary = RunSummary(outputs={stage: [] for stage in STAGES} if keep_outputs else None)
     pipeline = Pipeline(params, calibration)
+    warm_up()  # like the stages' kernels, loaded before the clock starts (~20 ms)
     started = time.perf_counter()
     reader_drops: Counter[str] = Counter()
     clock, parts = time.perf_counter, [0.0, 0.0, 0.0]  # read, stages, write
