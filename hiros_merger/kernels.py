@@ -16,7 +16,7 @@ import math
 import numpy as np
 from numba import njit
 
-__all__ = ["fuse"]
+__all__ = ["follow_directions", "fuse"]
 
 
 @njit(cache=True, error_model="numpy")
@@ -231,6 +231,137 @@ def _occluded(  # noqa: PLR0917
 
 
 @njit(cache=True, error_model="numpy")
+def _link_direction(  # noqa: PLR0917 - one link's scalars
+    positions: np.ndarray,
+    finite: np.ndarray,
+    final: np.ndarray,
+    m: int,
+    j: int,
+    p: int,
+    iterations: int,
+    eps: float,
+    units: np.ndarray,
+    weights: np.ndarray,
+    out: np.ndarray,
+) -> bool:
+    """Robust mean direction of link ``p -> j`` over the cameras of track ``m`` into ``out``.
+
+    Each camera's unit vector counts with ``sqrt(final[j] · final[p])``; the start is the
+    normalised weighted mean, then ``iterations`` Weiszfeld steps on the sphere (weight over
+    ``max(angle, eps)``) move it to the weighted spherical median. False: no camera has it.
+    """
+    n_slots = positions.shape[1]
+    total = 0.0
+    sx = sy = sz = 0.0
+    for c in range(n_slots):
+        weights[c] = 0.0
+        if not (finite[m, c, j] and finite[m, c, p]):
+            continue
+        w = math.sqrt(final[m, c, j] * final[m, c, p])
+        dx = positions[m, c, j, 0] - positions[m, c, p, 0]
+        dy = positions[m, c, j, 1] - positions[m, c, p, 1]
+        dz = positions[m, c, j, 2] - positions[m, c, p, 2]
+        norm = math.sqrt(dx * dx + dy * dy + dz * dz)
+        if not (w > 0 and norm > 0):
+            continue
+        units[c, 0], units[c, 1], units[c, 2] = dx / norm, dy / norm, dz / norm
+        weights[c] = w
+        total += w
+        sx += w * units[c, 0]
+        sy += w * units[c, 1]
+        sz += w * units[c, 2]
+    norm = math.sqrt(sx * sx + sy * sy + sz * sz)
+    if not (total > 0 and norm > 0):
+        return False
+    ux, uy, uz = sx / norm, sy / norm, sz / norm
+    for _ in range(iterations):
+        sx = sy = sz = 0.0
+        for c in range(n_slots):
+            if weights[c] > 0:
+                cx = uy * units[c, 2] - uz * units[c, 1]
+                cy = uz * units[c, 0] - ux * units[c, 2]
+                cz = ux * units[c, 1] - uy * units[c, 0]
+                dot = ux * units[c, 0] + uy * units[c, 1] + uz * units[c, 2]
+                angle = math.atan2(math.sqrt(cx * cx + cy * cy + cz * cz), dot)
+                w = weights[c] / max(angle, eps)
+                sx += w * units[c, 0]
+                sy += w * units[c, 1]
+                sz += w * units[c, 2]
+        norm = math.sqrt(sx * sx + sy * sy + sz * sz)
+        if not norm > 0:
+            break
+        ux, uy, uz = sx / norm, sy / norm, sz / norm
+    out[0], out[1], out[2] = ux, uy, uz
+    return True
+
+
+@njit(cache=True, error_model="numpy")
+def follow_directions(  # noqa: PLR0917 - the fusion's arrays and the layout's
+    positions: np.ndarray,
+    finite: np.ndarray,
+    final: np.ndarray,
+    fused: np.ndarray,
+    parents: np.ndarray,
+    order: np.ndarray,
+    groups: np.ndarray,
+    iterations: int,
+    eps: float,
+) -> np.ndarray:
+    """Fused skeletons ``(M, J, 3)`` whose links point along the cameras' robust directions.
+
+    Per limb (``groups``), joints are placed root-outward (``order``: parents first): the
+    limb's first joint at its fused position, each further joint at its parent plus the fused
+    link length (``|fused[j] - fused[p]|``) along the link's robust mean direction over the
+    cameras (``_link_direction``, weights ``final`` ``(M, C, J)``); then the limb is shifted so
+    that its mean joint is the fused one. A link that no camera sees keeps its fused offset;
+    a limb's links across to another limb are not rebuilt (the limbs are placed apart).
+    """
+    n_tracks, n_slots, n_joints = positions.shape[:3]
+    n_groups = 0
+    for j in range(n_joints):
+        n_groups = max(n_groups, groups[j] + 1)
+    out = fused.copy()
+    units = np.empty((n_slots, 3))
+    weights = np.empty(n_slots)
+    direction = np.empty(3)
+    shift = np.zeros((n_groups, 3))
+    counts = np.zeros(n_groups)
+    for m in range(n_tracks):
+        for k in range(n_joints):
+            j = order[k]
+            p = parents[j]
+            if p < 0 or groups[p] != groups[j]:
+                continue
+            dx = fused[m, j, 0] - fused[m, p, 0]
+            dy = fused[m, j, 1] - fused[m, p, 1]
+            dz = fused[m, j, 2] - fused[m, p, 2]
+            length = math.sqrt(dx * dx + dy * dy + dz * dz)
+            if not math.isfinite(length):
+                continue
+            if _link_direction(
+                positions, finite, final, m, j, p, iterations, eps, units, weights, direction
+            ):
+                dx, dy, dz = length * direction[0], length * direction[1], length * direction[2]
+            out[m, j, 0] = out[m, p, 0] + dx
+            out[m, j, 1] = out[m, p, 1] + dy
+            out[m, j, 2] = out[m, p, 2] + dz
+        shift[:] = 0.0
+        counts[:] = 0.0
+        for j in range(n_joints):
+            if math.isfinite(fused[m, j, 0]) and math.isfinite(out[m, j, 0]):
+                g = groups[j]
+                counts[g] += 1.0
+                for a in range(3):
+                    shift[g, a] += fused[m, j, a] - out[m, j, a]
+        for j in range(n_joints):
+            g = groups[j]
+            if counts[g] > 0:
+                for a in range(3):
+                    out[m, j, a] += shift[g, a] / counts[g]
+    return out
+
+
+@njit(cache=True, error_model="numpy")
 def fuse(  # noqa: PLR0912, PLR0915, PLR0917 - one output's whole fusion
     received: np.ndarray,
     present: np.ndarray,
@@ -252,6 +383,11 @@ def fuse(  # noqa: PLR0912, PLR0915, PLR0917 - one output's whole fusion
     has_front: bool,
     groups: np.ndarray,
     limb_residuals: bool,
+    parents: np.ndarray,
+    order: np.ndarray,
+    directions: bool,
+    direction_iterations: int,
+    direction_eps: float,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Fuse the detections of every track (see ``Merger._fuse`` for the weights).
 
@@ -260,7 +396,9 @@ def fuse(  # noqa: PLR0912, PLR0915, PLR0917 - one output's whole fusion
     output time, ``cameras_in`` ``(N, 3)`` camera positions (NaN unknown), ``agreement_in``
     ``(N,)`` each camera's agreement factor; ``params`` the float parameters in the order of
     ``Merger._kernel_params``; the layout's ``root``, ``neck``, ``left``/``right`` (hip,
-    shoulder), ``torso`` and forward ``pointers`` joints.
+    shoulder), ``torso`` and forward ``pointers`` joints; with ``directions`` the fused
+    skeletons follow the cameras' robust link directions (``follow_directions``, over the
+    layout's ``parents`` in ``order``).
 
     Returns:
         ``markers`` ``(M, C, J, 20)`` padded rows (NaN where absent), ``fused`` ``(M, J, 3)``,
@@ -283,6 +421,7 @@ def fuse(  # noqa: PLR0912, PLR0915, PLR0917 - one output's whole fusion
         outlier_scale,
         outlier_cutoff,
         limb_cutoff,
+        oblique_gain,
     ) = (
         params[0],
         params[1],
@@ -297,6 +436,7 @@ def fuse(  # noqa: PLR0912, PLR0915, PLR0917 - one output's whole fusion
         params[10],
         params[11],
         params[12],
+        params[13],
     )
     own_cutoff = limb_cutoff if limb_residuals else outlier_cutoff
     n_tracks, n_slots = shape
@@ -410,6 +550,9 @@ def fuse(  # noqa: PLR0912, PLR0915, PLR0917 - one output's whole fusion
                     view = _power((1.0 + cosine) / 2.0, view_power)
                     if math.isfinite(view):  # (a NaN view leaves the weight as it is)
                         view = max(view, view_weight_min)
+                        if oblique_gain > 0:
+                            sine = math.sqrt(max(1.0 - cosine * cosine, 0.0))
+                            view = view / _power(1.0 + oblique_gain * sine, 2.0)
                         for j in range(n_joints):
                             weight[m, c, j] = weight[m, c, j] * view
     if occlusion_radius > 0 and n_tracks > 1 and any_known:
@@ -494,4 +637,16 @@ def fuse(  # noqa: PLR0912, PLR0915, PLR0917 - one output's whole fusion
                     capped[j] = 0.0
             if count:
                 disagreement[m, c] = _pairwise_sum(capped, n_joints) / count
+    if directions:
+        fused = follow_directions(
+            positions,
+            finite,
+            final,
+            fused,
+            parents,
+            order,
+            groups,
+            direction_iterations,
+            direction_eps,
+        )
     return markers, fused, final, confidence, velocity, disagreement

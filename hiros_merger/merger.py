@@ -70,6 +70,9 @@ class MergerParams:
         view_weight_min: weight of a camera behind the person; facing it gives 1, the weight is
             ``max(view_weight_min, ((1 + cos θ) / 2)^view_power)``.
         view_power: exponent of the view weight.
+        oblique_gain: the view weight is further divided by ``(1 + oblique_gain · |sin θ|)²``:
+            a body seen from the side has its limbs along the camera's noisy depth axis
+            (0 turns it off).
         flipped_weight: weight factor of a detection whose feet and nose point backwards
             against the body's front (a front/back flip the tracker relabelled but whose limbs
             are still reflected).
@@ -91,6 +94,14 @@ class MergerParams:
         limb_cutoff: metres; with ``limb_residuals``, a camera's limb one of whose joints is
             this far from the estimate gets no weight (a single joint's blunder).
         track_timeout: seconds; a track unseen this long is forgotten.
+        fuse_directions: after the robust mean, place each limb's joints root-outward along
+            the cameras' robust mean link directions (weighted spherical median), with the
+            fused link lengths, and shift the limb back onto its fused mean joint: the angles
+            come from a consensus of directions rather than from stitched positions.
+        direction_iterations: Weiszfeld steps on the sphere from the weighted mean direction
+            towards the weighted spherical median (0: the weighted mean direction).
+        direction_eps: radians; the spherical median's weight is ``w / max(angle, eps)``.
+        direction_torso: ``fuse_directions`` rebuilds the torso's links too (else the limbs').
 
     """
 
@@ -103,6 +114,7 @@ class MergerParams:
     depth_gain: float = 0.33
     view_weight_min: float = 0.3
     view_power: float = 1.0
+    oblique_gain: float = 0.0
     flipped_weight: float = 0.1
     occlusion_radius: float = 0.2
     occlusion_weight: float = 0.5
@@ -115,6 +127,10 @@ class MergerParams:
     track_timeout: float = 1.0
     limb_residuals: bool = True
     limb_cutoff: float = 0.8
+    fuse_directions: bool = False
+    direction_iterations: int = 5
+    direction_eps: float = 0.02
+    direction_torso: bool = True
 
 
 @dataclass(frozen=True)
@@ -129,6 +145,9 @@ class _BodyAxes:
     pointers: np.ndarray  # (k, 2) joint pairs pointing forward: ankle -> foot, head -> nose
     has_front: bool  # whether the layout names what the facing direction needs
     groups: np.ndarray  # (J,) limb of each joint: 0 torso, then one per subtree off the torso
+    parents: np.ndarray  # (J,) the layout's parents (-1 at the root)
+    order: np.ndarray  # (J,) joints with every parent before its children
+    limb_parents: np.ndarray  # (J,) parents, -1 for the torso's joints
 
     @classmethod
     def of(cls, layout: Layout) -> _BodyAxes:
@@ -145,7 +164,27 @@ class _BodyAxes:
             [(names[a], names[b]) for a, b in pairs if a in names and b in names], dtype=np.int64
         ).reshape(-1, 2)
         has_front = neck >= 0 and bool((left >= 0).all() and (right >= 0).all())
-        return cls(root, neck, left, right, torso, pointers, has_front, _limbs(layout, torso))
+        parents = np.array(layout.parents, dtype=np.int64)
+        depth = np.zeros(layout.n_joints, dtype=np.int64)
+        for j in range(layout.n_joints):  # once per layout
+            k = j
+            while parents[k] >= 0:
+                k = parents[k]
+                depth[j] += 1
+        order = np.argsort(depth, kind="stable").astype(np.int64)
+        return cls(
+            root,
+            neck,
+            left,
+            right,
+            torso,
+            pointers,
+            has_front,
+            _limbs(layout, torso),
+            parents,
+            order,
+            np.where(np.isin(np.arange(layout.n_joints), torso), -1, parents),
+        )
 
 
 def _limbs(layout: Layout, torso: np.ndarray) -> np.ndarray:
@@ -366,6 +405,7 @@ class Merger:
                     params.outlier_scale,
                     params.outlier_cutoff,
                     params.limb_cutoff,
+                    params.oblique_gain,
                 ],
                 dtype=float,
             ),
@@ -380,6 +420,11 @@ class Merger:
             axes.has_front,
             axes.groups,
             params.limb_residuals,
+            axes.parents if params.direction_torso else axes.limb_parents,
+            axes.order,
+            params.fuse_directions,
+            params.direction_iterations,
+            params.direction_eps,
         )
         self._update_agreement(disagreement, rows_of, slots, [c for _, c, _ in entries])
         orientations = markers[..., 4:8]

@@ -261,3 +261,100 @@ def test_a_camera_limb_is_kept_or_dropped_whole():
     per_joint = Merger(MergerParams(limb_residuals=False)).update(group).skeletons[0]
     elbow = AZURE_KINECT.index("ElbowLeft")
     assert abs(per_joint.positions[elbow, 2] - pose[elbow, 2]) > 0.01
+
+
+def _link_angle(positions: np.ndarray, other: np.ndarray, child: str) -> float:
+    """Degrees between link parent -> ``child`` of two poses."""
+    j = AZURE_KINECT.index(child)
+    p = AZURE_KINECT.parents[j]
+    a, b = positions[j] - positions[p], other[j] - other[p]
+    return float(
+        np.degrees(np.arccos(np.clip(a @ b / np.linalg.norm(a) / np.linalg.norm(b), -1, 1)))
+    )
+
+
+def _turn_shank(pose: np.ndarray, degrees: float) -> np.ndarray:
+    """The pose with the left shank (knee -> ankle -> foot) turned sideways about the knee
+    (about the forward axis x, so that the foot still points forward: not a flip)."""
+    bent = pose.copy()
+    knee = AZURE_KINECT.index("KneeLeft")
+    rotation = Rotation.from_euler("x", degrees, degrees=True)
+    for name in ("AnkleLeft", "FootLeft"):
+        j = AZURE_KINECT.index(name)
+        bent[j] = pose[knee] + rotation.apply(pose[j] - pose[knee])
+    return bent
+
+
+def test_fused_directions_follow_cameras_that_agree_on_them_when_offset():
+    """Cameras that see the same pose shifted give that pose's link directions, lengths and
+    the positions' consensus (their weighted mean position)."""
+    pose = _person()
+    shifts = {"k01": (0.05, 0.0, 0.0), "k02": (0.0, -0.04, 0.02), "k03": (-0.03, 0.03, -0.04)}
+    group = _group(
+        [
+            _detection(pose + np.array(shift), cam, confidence=confidence)
+            for (cam, shift), confidence in zip(shifts.items(), (2 / 3, 1 / 3, 2 / 3), strict=True)
+        ]
+    )
+    by_position = Merger(MergerParams()).update(group).skeletons[0].positions
+    fused = Merger(MergerParams(fuse_directions=True)).update(group).skeletons[0].positions
+    from hiros_merger.merger import _axes
+
+    groups = _axes(AZURE_KINECT).groups
+    for g in np.unique(groups):  # each limb a shifted copy of the pose
+        offset = fused[groups == g] - pose[groups == g]
+        np.testing.assert_allclose(offset, np.broadcast_to(offset[0], offset.shape), atol=1e-9)
+    np.testing.assert_allclose(fused.mean(axis=0), by_position.mean(axis=0), atol=1e-9)
+
+
+def test_one_camera_bent_limb_is_outvoted_in_direction():
+    """Two cameras see the straight shank, one sees it turned 25 degrees (not far enough for
+    the outlier cut): the fused shank follows the two, the fused positions bend it (the
+    front/back flip check is off: the turned foot may point backwards)."""
+    pose = _person()
+    bent = _turn_shank(pose, 25.0)
+    group = _group([_detection(pose, "k01"), _detection(pose, "k02"), _detection(bent, "k03")])
+    by_position = Merger(MergerParams(flipped_weight=1.0)).update(group).skeletons[0].positions
+    fused = (
+        Merger(MergerParams(fuse_directions=True, flipped_weight=1.0))
+        .update(group)
+        .skeletons[0]
+        .positions
+    )
+    assert _link_angle(by_position, pose, "AnkleLeft") > 5.0
+    assert _link_angle(fused, pose, "AnkleLeft") < 1.0
+    assert _link_angle(fused, pose, "KneeLeft") < 1e-6
+    # Lengths of the position fusion, and each limb's mean joint where the positions put it.
+    from hiros_merger.merger import _axes
+
+    groups = _axes(AZURE_KINECT).groups
+    parents = np.array(AZURE_KINECT.parents)
+    inside = (parents >= 0) & (groups[np.maximum(parents, 0)] == groups)
+    lengths = np.linalg.norm(fused - fused[np.maximum(parents, 0)], axis=1)
+    expected = np.linalg.norm(by_position - by_position[np.maximum(parents, 0)], axis=1)
+    np.testing.assert_allclose(lengths[inside], expected[inside], atol=1e-9)
+    for g in np.unique(groups):
+        np.testing.assert_allclose(
+            fused[groups == g].mean(axis=0), by_position[groups == g].mean(axis=0), atol=1e-9
+        )
+
+
+def test_fused_directions_weighted_mean_without_iterations():
+    """With no median steps, two equally weighted cameras (no Cauchy weights) give the
+    bisecting direction, where the fused positions lean to the longer shank."""
+    pose = _person()
+    views = [_turn_shank(pose, 10.0), _turn_shank(pose, -30.0)]
+    ankle, knee = AZURE_KINECT.index("AnkleLeft"), AZURE_KINECT.index("KneeLeft")
+    views[1][ankle] = pose[knee] + 1.5 * (views[1][ankle] - pose[knee])  # a longer shank
+    group = _group([_detection(view, cam) for view, cam in zip(views, ("k01", "k02"), strict=True)])
+    params = MergerParams(
+        fuse_directions=True, direction_iterations=0, flipped_weight=1.0, outlier_scale=1e6
+    )
+    fused = Merger(params).update(group).skeletons[0].positions
+    units = [(v[ankle] - v[knee]) / np.linalg.norm(v[ankle] - v[knee]) for v in views]
+    expected = pose.copy()
+    expected[ankle] = pose[knee] + units[0] + units[1]
+    assert _link_angle(fused, expected, "AnkleLeft") < 1e-6
+    by_position = Merger(MergerParams(flipped_weight=1.0, outlier_scale=1e6)).update(group)
+    by_position = by_position.skeletons[0].positions
+    assert _link_angle(by_position, expected, "AnkleLeft") > 0.1  # (the two differ)
