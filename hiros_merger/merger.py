@@ -68,7 +68,9 @@ class MergerParams:
         confidence_floor: smallest confidence used (a NONE joint still counts a little).
         depth_gain: per metre; the depth weight is ``(1 + depth_gain · depth)^-2``.
         view_weight_min: weight of a camera behind the person; facing it gives 1, the weight is
-            ``max(view_weight_min, ((1 + cos θ) / 2)^view_power)``.
+            ``max(view_weight_min, ((1 + cos θ) / 2)^view_power)``; 1 turns it off (the
+            default: the back view is as precise as the front, ``oblique_gain`` weighs the
+            side views; flips have ``flipped_weight``).
         view_power: exponent of the view weight.
         oblique_gain: the view weight is further divided by ``(1 + oblique_gain · |sin θ|)²``:
             a body seen from the side has its limbs along the camera's noisy depth axis
@@ -112,9 +114,9 @@ class MergerParams:
     confidence_power: float = 2.0
     confidence_floor: float = 0.05
     depth_gain: float = 0.33
-    view_weight_min: float = 0.3
+    view_weight_min: float = 1.0
     view_power: float = 1.0
-    oblique_gain: float = 0.0
+    oblique_gain: float = 1.0
     flipped_weight: float = 0.1
     occlusion_radius: float = 0.2
     occlusion_weight: float = 0.5

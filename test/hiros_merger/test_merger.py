@@ -122,11 +122,27 @@ def test_camera_facing_the_front_outweighs_one_behind():
     np.testing.assert_allclose(blind.positions[:, 2] - pose[:, 2], 0.05, atol=1e-9)
 
 
+def test_camera_seeing_the_side_counts_less():
+    """``oblique_gain`` 1: a camera at the person's side weighs less than one in front (down
+    to (1 + 1)^-2 = 1/4 exactly at the side; the random pose's front is skewed a little)."""
+    pose = _person()  # faces +x
+    calibration = _calibration({"k01": (4.0, 0.0, 1.0), "k02": (0.0, 4.0, 1.0)})
+    params = MergerParams(outlier_scale=100.0, depth_gain=0.0, view_weight_min=1.0)
+    front = _detection(pose, "k01")
+    side = _detection(pose + np.array([0.0, 0.0, 0.1]), "k02")
+    merged = Merger(params, calibration).update(_group([front, side])).skeletons[0]
+    offset = np.median(merged.positions[:, 2] - pose[:, 2])
+    assert 0.0 < offset < 0.045
+    params.oblique_gain = 0.0
+    merged = Merger(params, calibration).update(_group([front, side])).skeletons[0]
+    assert np.median(merged.positions[:, 2] - pose[:, 2]) == pytest.approx(0.05, abs=1e-6)
+
+
 def test_occluded_joints_count_less():
     pose = _person()
     other = pose + np.array([2.0, 0.0, 0.0])  # a second person between k01 and the first one
     calibration = _calibration({"k01": (4.0, 0.0, 1.5), "k02": (0.0, 4.0, 1.5)})
-    params = MergerParams(outlier_scale=10.0, depth_gain=0.0, view_weight_min=1.0)
+    params = MergerParams(outlier_scale=10.0, depth_gain=0.0, view_weight_min=1.0, oblique_gain=0.0)
     through = _detection(pose + np.array([0.0, 0.0, 0.1]), "k01")
     clear = _detection(pose, "k02")
     group = _group(
@@ -136,7 +152,13 @@ def test_occluded_joints_count_less():
     torso = AZURE_KINECT.index("SpineChest")
     assert merged.positions[torso, 2] - pose[torso, 2] < 0.05 - 1e-3
     free = Merger(
-        MergerParams(outlier_scale=10.0, depth_gain=0.0, view_weight_min=1.0, occlusion_radius=0.0),
+        MergerParams(
+            outlier_scale=10.0,
+            depth_gain=0.0,
+            view_weight_min=1.0,
+            occlusion_radius=0.0,
+            oblique_gain=0.0,
+        ),
         calibration,
     )
     same = free.update(group).skeletons[0]
