@@ -82,9 +82,13 @@ class _Probe:
         from hiros_skeleton_msgs.msg import SkeletonGroup as SkeletonGroupMsg
         from rclpy.qos import QoSProfile, qos_profile_sensor_data
 
+        from hiros_ros import make_executor
+
         rclpy.init()
         self.rclpy = rclpy
         self.node = rclpy.create_node("hiros_latency_probe")
+        self.executor = make_executor()  # the nodes' own executor, for the same wake-up cost
+        self.executor.add_node(self.node)
         self.latencies: list[float] = []
         self.node.create_subscription(
             SkeletonGroupMsg, "/hiros/filter", self.on_output, QoSProfile(depth=100), raw=True
@@ -108,7 +112,7 @@ class _Probe:
 
     def spin_until(self, deadline: float) -> None:
         while time.monotonic() < deadline:
-            self.rclpy.spin_once(self.node, timeout_sec=max(0.0, deadline - time.monotonic()))
+            self.executor.spin_once(timeout_sec=max(0.0, deadline - time.monotonic()))
 
     def stream(self, seconds: float, warmup: float = 2.0) -> None:
         from hiros_core.codec import encode_group

@@ -4,7 +4,7 @@ from hiros_ros.environment import prepare_ros_environment
 
 prepare_ros_environment()
 
-from hiros_ros.node import HirosNode, run_node  # noqa: E402 - environment first
+from hiros_ros.node import HirosNode, make_executor, run_node  # noqa: E402 - environment first
 from hiros_ros.params import declare_params, load_config_defaults  # noqa: E402
 from hiros_ros.stage_node import StageNode, stage_main  # noqa: E402
 
@@ -13,6 +13,7 @@ __all__ = [
     "StageNode",
     "declare_params",
     "load_config_defaults",
+    "make_executor",
     "prepare_ros_environment",
     "run_node",
     "stage_main",

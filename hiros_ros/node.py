@@ -8,6 +8,7 @@ interval, and the counts go out on ``/diagnostics`` every second.
 
 from __future__ import annotations
 
+import os
 import signal
 import time
 from collections import Counter
@@ -16,7 +17,7 @@ from typing import Any, TypeVar
 
 import rclpy
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
-from rclpy.executors import ExternalShutdownException
+from rclpy.executors import Executor, ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, qos_profile_sensor_data
 
@@ -126,6 +127,24 @@ def _interrupt(signum: int, frame: object) -> None:
     raise KeyboardInterrupt
 
 
+def make_executor() -> Executor:
+    """The C++ events executor of rclpy where available, else its single-threaded one.
+
+    The events executor dispatches a callback in a few microseconds where the Python one
+    spends a few hundred (it rebuilds its wait set in Python every time), which is most of a
+    stage's latency at 90 camera frames per second. ``HIROS_EXECUTOR=single`` forces the
+    Python executor.
+    """
+    if os.environ.get("HIROS_EXECUTOR", "events") != "single":
+        try:
+            from rclpy.experimental import EventsExecutor
+        except ImportError:  # rclpy before Jazzy's backport
+            pass
+        else:
+            return EventsExecutor()
+    return SingleThreadedExecutor()
+
+
 def run_node(node_factory: Callable[[], Node], args: list[str] | None = None) -> None:
     """``rclpy.init``, spin until Ctrl-C or SIGTERM, clean up without a traceback.
 
@@ -141,7 +160,11 @@ def run_node(node_factory: Callable[[], Node], args: list[str] | None = None) ->
     node = None
     try:
         node = node_factory()
-        rclpy.spin(node)
+        executor = make_executor()
+        executor.add_node(node)
+        while rclpy.ok():
+            # short waits, so that SIGINT/SIGTERM (raised between waits) stop the node promptly
+            executor.spin_once(timeout_sec=0.2)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     finally:
