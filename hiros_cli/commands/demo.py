@@ -100,6 +100,19 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
+def _add_chain_rows(table: Table, evaluation: RunEvaluation) -> None:
+    """What the whole chain gains over the tracker alone and the best camera (issue targets)."""
+    stages = evaluation.stages
+    if "tracker" not in stages or "filter" not in stages:
+        return
+    before = stages["tracker"].angle_rmse.get("mean", float("nan"))
+    after = stages["filter"].angle_rmse.get("mean", float("nan"))
+    table.add_row("joint-angle RMSE, filter vs tracker", f"{100.0 * (after / before - 1.0):+.1f} %")
+    if evaluation.cameras:
+        best = min(evaluation.cameras.values())
+        table.add_row("MPJPE, filter / best single camera", f"{stages['filter'].mpjpe / best:.2f}")
+
+
 def _print_summary(  # noqa: PLR0917 - the four results of the demo and where they went
     console: Console,
     evaluation: RunEvaluation,
@@ -129,6 +142,7 @@ def _print_summary(  # noqa: PLR0917 - the four results of the demo and where th
             f"{figures.mpjpe * 100:.1f} cm / {figures.angle_rmse.get('mean', float('nan')):.1f}° / "
             f"{figures.identity.id_switches}",
         )
+    _add_chain_rows(table, evaluation)
     frames = sum(summary.frames_in.values())
     dropped = sum(summary.dropped.values())
     table.add_row("camera frames in / dropped with a reason", f"{frames} / {dropped}")
