@@ -45,7 +45,8 @@ def _error_per_joint(plt, evaluation: RunEvaluation):  # noqa: ANN001, ANN202
     width = 0.8 / max(len(evaluation.stages), 1)
     for k, (stage, figures) in enumerate(evaluation.stages.items()):
         ax.bar(np.arange(32) + k * width, figures.per_joint * 100, width, label=stage)
-    ax.set_xticks(np.arange(32) + 0.4, AZURE_KINECT.joint_names, rotation=90, fontsize=7)
+    centre = (len(evaluation.stages) - 1) * width / 2
+    ax.set_xticks(np.arange(32) + centre, AZURE_KINECT.joint_names, rotation=90, fontsize=7)
     ax.set_ylabel("MPJPE (cm)")
     ax.legend(fontsize=8)
     ax.set_title("Joint error per joint")
@@ -78,6 +79,59 @@ def _angle_curves(plt, evaluation: RunEvaluation):  # noqa: ANN001, ANN202
     return fig
 
 
+TIMELINE_BIN = 0.1
+"""Seconds per point of the error timeline."""
+
+
+def _angle_per_stage(plt, evaluation: RunEvaluation):  # noqa: ANN001, ANN202
+    fig, ax = plt.subplots(figsize=(10, 3.5))
+    stages = list(evaluation.stages.items())
+    names = [n for n in (stages[0][1].angle_rmse if stages else {}) if n != "mean"]
+    width = 0.8 / max(len(stages), 1)
+    for k, (stage, figures) in enumerate(stages):
+        values = [figures.angle_rmse.get(name, np.nan) for name in names]
+        ax.bar(np.arange(len(names)) + k * width, values, width, label=stage)
+    centre = (len(stages) - 1) * width / 2
+    ax.set_xticks(np.arange(len(names)) + centre, [n.replace("_", " ") for n in names], fontsize=8)
+    ax.set_ylabel("RMSE (degrees)")
+    ax.legend(fontsize=8)
+    ax.set_title("Joint-angle error per angle and stage")
+    return fig
+
+
+def _error_timeline(plt, evaluation: RunEvaluation):  # noqa: ANN001, ANN202
+    """Each true person's joint error over time, per stage: where and when the chain helps."""
+    people = sorted({p for figures in evaluation.stages.values() for p in figures.person_series})[
+        :4
+    ]
+    fig, axes = plt.subplots(
+        max(len(people), 1), 1, figsize=(10, 1.9 * max(len(people), 1) + 0.6),
+        sharex=True, squeeze=False,
+    )  # fmt: skip
+    start = min(
+        (s[0].min() for f in evaluation.stages.values() for s in f.person_series.values()),
+        default=0.0,
+    )
+    for ax, person in zip(axes[:, 0], people, strict=False):
+        for stage in ("tracker", "merger", "filter"):
+            figures = evaluation.stages.get(stage)
+            if not figures or person not in figures.person_series:
+                continue
+            times, estimate, truth = figures.person_series[person]
+            error = np.nanmean(np.linalg.norm(estimate - truth, axis=-1), axis=-1)
+            # 0.1 s bins: the tracker has one track per camera, interleaved in time
+            bins = np.floor((times - start) / TIMELINE_BIN).astype(np.int64)
+            count = np.bincount(bins)
+            mean = np.bincount(bins, np.nan_to_num(error)) / np.maximum(count, 1)
+            seen = count > 0
+            ax.plot(np.flatnonzero(seen) * TIMELINE_BIN, mean[seen] * 100, lw=0.7, label=stage)
+        ax.set_ylabel(f"person {person}\nMPJPE (cm)", fontsize=8)
+    axes[0, 0].legend(fontsize=8, loc="upper right")
+    axes[0, 0].set_title("Joint error over time (mean over joints, 0.1 s means)")
+    axes[-1, 0].set_xlabel("time (s)")
+    return fig
+
+
 def _table(headers: list[str], rows: list[list[str]]) -> str:
     head = "".join(f"<th>{html.escape(h)}</th>" for h in headers)
     body = "".join(
@@ -95,7 +149,9 @@ def write_report(
     images = [
         _figure(directory / "error_per_stage.png", lambda plt: _error_per_stage(plt, evaluation)),
         _figure(directory / "error_per_joint.png", lambda plt: _error_per_joint(plt, evaluation)),
+        _figure(directory / "angle_error.png", lambda plt: _angle_per_stage(plt, evaluation)),
         _figure(directory / "joint_angles.png", lambda plt: _angle_curves(plt, evaluation)),
+        _figure(directory / "error_timeline.png", lambda plt: _error_timeline(plt, evaluation)),
     ]
     sections = "".join(
         f"<h2>{html.escape(title)}</h2>{_table(headers, rows)}"

@@ -89,7 +89,13 @@ def test_report_and_exports_are_written(run, tmp_path: Path) -> None:
     assert "pipeline stages against the truth" in page
     assert all(
         (tmp_path / "report" / name).stat().st_size > 1000
-        for name in ("error_per_stage.png", "error_per_joint.png", "joint_angles.png")
+        for name in (
+            "error_per_stage.png",
+            "error_per_joint.png",
+            "angle_error.png",
+            "joint_angles.png",
+            "error_timeline.png",
+        )
     )
     people = person_series(summary.outputs["filter"])
     _person, (times, positions) = next(iter(people.items()))
