@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import os
 import signal
+import threading
 import time
 from collections import Counter
 from collections.abc import Callable
@@ -123,8 +124,12 @@ class HirosNode(Node):
         self._diagnostics.publish(array)
 
 
-def _interrupt(signum: int, frame: object) -> None:
-    raise KeyboardInterrupt
+_STOP = threading.Event()
+"""Set by SIGINT/SIGTERM; the spin loop of ``run_node`` checks it between waits."""
+
+
+def _request_stop(signum: int, frame: object) -> None:
+    _STOP.set()
 
 
 def make_executor() -> Executor:
@@ -150,21 +155,22 @@ def run_node(node_factory: Callable[[], Node], args: list[str] | None = None) ->
 
     rclpy's own signal handler would shut the context down before we could run the node's
     ``on_shutdown`` (the calib node saves its file there, and logs it); so SIGINT and SIGTERM
-    become KeyboardInterrupt here, and the context is shut down last.
+    only ask the loop to stop, which it does after the callback under way (an exception
+    raised inside a callback would reach the C++ executor and be logged as a fatal error),
+    and the context is shut down last.
     """
     from rclpy.signals import SignalHandlerOptions
 
     rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
-    signal.signal(signal.SIGINT, _interrupt)
-    signal.signal(signal.SIGTERM, _interrupt)
+    signal.signal(signal.SIGINT, _request_stop)
+    signal.signal(signal.SIGTERM, _request_stop)
     node = None
     try:
         node = node_factory()
         executor = make_executor()
         executor.add_node(node)
-        while rclpy.ok():
-            # short waits, so that SIGINT/SIGTERM (raised between waits) stop the node promptly
-            executor.spin_once(timeout_sec=0.2)
+        while rclpy.ok() and not _STOP.is_set():
+            executor.spin_once(timeout_sec=0.2)  # short waits: a stop request is seen promptly
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     finally:

@@ -40,7 +40,7 @@ def main() -> int:
     rclpy.init()
     node = rclpy.create_node("hiros_body_client")
     received: list[SkeletonGroup] = []
-    node.create_subscription(
+    subscription = node.create_subscription(
         SkeletonGroupMsg,
         "/hiros/filter",
         lambda d: received.append(decode_group(d)),
@@ -53,7 +53,7 @@ def main() -> int:
     deadline = time.monotonic() + 60
     while (
         publisher.get_subscription_count() == 0
-        or node.count_publishers("/hiros/filter") == 0
+        or subscription.get_publisher_count() == 0  # the filter's writer matched our reader
         or not calibrate.service_is_ready()
         or not change_id.service_is_ready()
         or node.count_subscribers("/hiros/optimizer") == 0  # the filter, between the nodes
@@ -62,7 +62,7 @@ def main() -> int:
         if time.monotonic() > deadline:
             print("nodes not discovered", file=sys.stderr)
             return 1
-    settle = time.monotonic() + 1.0  # let the optimizer -> filter link match too
+    settle = time.monotonic() + 2.0  # let the optimizer -> filter link match too
     while time.monotonic() < settle:
         rclpy.spin_once(node, timeout_sec=0.1)
 
