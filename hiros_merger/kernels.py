@@ -104,6 +104,30 @@ def _residuals(positions: np.ndarray, fused: np.ndarray, residual: np.ndarray) -
 
 
 @njit(cache=True, error_model="numpy")
+def _judged_residuals(  # noqa: PLR0917
+    positions: np.ndarray,
+    fused: np.ndarray,
+    finite: np.ndarray,
+    groups: np.ndarray,
+    limb_residuals: bool,
+    residual: np.ndarray,
+    limb: np.ndarray,
+    peak: np.ndarray,
+) -> None:
+    """Each detection's joint distances to ``fused``, and what the weights judge them by.
+
+    ``limb``/``peak``: the mean/max over each joint's limb with ``limb_residuals``, else the
+    joint's own distance in both.
+    """
+    _residuals(positions, fused, residual)
+    if limb_residuals:
+        _limb_means(residual, finite, groups, limb, peak)
+    else:
+        limb[:] = residual
+        peak[:] = residual
+
+
+@njit(cache=True, error_model="numpy")
 def _limb_means(
     values: np.ndarray, finite: np.ndarray, groups: np.ndarray, out: np.ndarray, peak: np.ndarray
 ) -> None:
@@ -569,12 +593,7 @@ def fuse(  # noqa: PLR0912, PLR0915, PLR0917 - one output's whole fusion
     peak = np.empty((n_tracks, n_slots, n_joints))
     robust = np.empty(n_slots)
     for _ in range(iterations):
-        _residuals(positions, fused, residual)
-        if limb_residuals:
-            _limb_means(residual, finite, groups, limb, peak)
-        else:
-            limb[:] = residual
-            peak[:] = residual
+        _judged_residuals(positions, fused, finite, groups, limb_residuals, residual, limb, peak)
         for m in range(n_tracks):
             for j in range(n_joints):
                 _robust(weight, limb, peak, m, j, outlier_scale, outlier_cutoff, own_cutoff, robust)
@@ -590,12 +609,7 @@ def fuse(  # noqa: PLR0912, PLR0915, PLR0917 - one output's whole fusion
                 fused[m, j, 0] = sx / total if total != 0 else np.nan
                 fused[m, j, 1] = sy / total if total != 0 else np.nan
                 fused[m, j, 2] = sz / total if total != 0 else np.nan
-    _residuals(positions, fused, residual)
-    if limb_residuals:
-        _limb_means(residual, finite, groups, limb, peak)
-    else:
-        limb[:] = residual
-        peak[:] = residual
+    _judged_residuals(positions, fused, finite, groups, limb_residuals, residual, limb, peak)
     final = np.empty((n_tracks, n_slots, n_joints))
     confidence = np.empty((n_tracks, n_joints))
     velocity = np.empty((n_tracks, n_joints, 3))

@@ -482,21 +482,7 @@ def move_rows(
         _rotate(rows, i, 1, rotation, translation)
         for start in (8, 11, 14, 17):
             _rotate(rows, i, start, rotation, _ZERO3)
-        norm = math.sqrt(
-            rows[i, 4] * rows[i, 4]
-            + rows[i, 5] * rows[i, 5]
-            + rows[i, 6] * rows[i, 6]
-            + rows[i, 7] * rows[i, 7]
-        )
-        for k in range(4):
-            vector[k] = rows[i, 4 + k] / norm
-        for k in range(4):
-            rows[i, 4 + k] = (
-                quaternion[k, 0] * vector[0]
-                + quaternion[k, 1] * vector[1]
-                + quaternion[k, 2] * vector[2]
-                + quaternion[k, 3] * vector[3]
-            )
+        _turn_quaternion(rows, i, 4, quaternion, vector)
 
 
 @njit(cache=True, error_model="numpy")
@@ -507,24 +493,35 @@ def move_boxes(
     vector = np.empty(4)
     for i in range(len(boxes)):
         _rotate(boxes, i, 0, rotation, translation)
-        norm = math.sqrt(
-            boxes[i, 3] * boxes[i, 3]
-            + boxes[i, 4] * boxes[i, 4]
-            + boxes[i, 5] * boxes[i, 5]
-            + boxes[i, 6] * boxes[i, 6]
-        )
-        for k in range(4):
-            vector[k] = boxes[i, 3 + k] / norm
-        for k in range(4):
-            boxes[i, 3 + k] = (
-                quaternion[k, 0] * vector[0]
-                + quaternion[k, 1] * vector[1]
-                + quaternion[k, 2] * vector[2]
-                + quaternion[k, 3] * vector[3]
-            )
+        _turn_quaternion(boxes, i, 3, quaternion, vector)
 
 
 _ZERO3 = np.zeros(3)
+
+
+@njit(cache=True, error_model="numpy")
+def _turn_quaternion(
+    rows: np.ndarray, i: int, start: int, quaternion: np.ndarray, vector: np.ndarray
+) -> None:
+    """``rows[i, start:start + 4]`` normalised, then multiplied by ``quaternion`` (4, 4).
+
+    ``vector`` (4,) is scratch space, so that the per-row loop allocates nothing.
+    """
+    norm = math.sqrt(
+        rows[i, start] * rows[i, start]
+        + rows[i, start + 1] * rows[i, start + 1]
+        + rows[i, start + 2] * rows[i, start + 2]
+        + rows[i, start + 3] * rows[i, start + 3]
+    )
+    for k in range(4):
+        vector[k] = rows[i, start + k] / norm
+    for k in range(4):
+        rows[i, start + k] = (
+            quaternion[k, 0] * vector[0]
+            + quaternion[k, 1] * vector[1]
+            + quaternion[k, 2] * vector[2]
+            + quaternion[k, 3] * vector[3]
+        )
 
 
 @njit(cache=True, error_model="numpy")

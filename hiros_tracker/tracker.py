@@ -666,9 +666,7 @@ class Tracker:
         params = self.params
         parts = info.parts
         cost, flips = kernels.match_costs(
-            np.array([t.positions for t in tracks]),
-            np.array([t.velocity for t in tracks]),
-            np.array([t.time_ns for t in tracks], dtype=np.int64),
+            *_motion_state(tracks),
             stamp,
             params.max_prediction,
             positions if len(free) == len(positions) else positions[free],
@@ -941,9 +939,7 @@ class Tracker:
         confirmed = [t for t in self._tracks if t.confirmed]
         if confirmed:
             distance, _ = kernels.match_costs(
-                np.array([t.positions for t in confirmed]),
-                np.array([t.velocity for t in confirmed]),
-                np.array([t.time_ns for t in confirmed], dtype=np.int64),
+                *_motion_state(confirmed),
                 time_ns,
                 params.max_prediction,
                 track.positions[None],
@@ -992,6 +988,15 @@ class Tracker:
         )
         detection.id = track.id
         return detection
+
+
+def _motion_state(tracks: list[_Track]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Poses, body velocities and times (ns): what ``kernels.match_costs`` predicts from."""
+    return (
+        np.array([t.positions for t in tracks]),
+        np.array([t.velocity for t in tracks]),
+        np.array([t.time_ns for t in tracks], dtype=np.int64),
+    )
 
 
 def _nan_mean(values: np.ndarray) -> np.ndarray:
