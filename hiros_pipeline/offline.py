@@ -8,21 +8,28 @@ same recording and parameters give the same bytes.
 
 from __future__ import annotations
 
+import multiprocessing as mp
+import os
 import time
 from collections import Counter
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass, field
+from multiprocessing.connection import Connection
 from pathlib import Path
 
 import yaml
 
 from hiros_azure_bridge.driver_format import warm_up
 from hiros_core.calibration import Calibration
+from hiros_core.errors import RecordingError
+from hiros_core.model import SkeletonGroup
 from hiros_core.recording import MARKER_ARRAY, RecordingWriter, iter_groups
 from hiros_pipeline.pipeline import STAGES, Pipeline, PipelineParams, StageOutputs
+from hiros_tracker import Tracker
 from hiros_visualizer.markers import encode_skeleton_markers
 
-__all__ = ["RunSummary", "message_count", "run_recording"]
+__all__ = ["RunSummary", "default_processes", "message_count", "run_recording"]
 
 DRAWN_STAGES = ("merger", "filter")
 
@@ -92,6 +99,12 @@ def _calibration_message(calibration: Calibration) -> bytes:
     return bytes(store.serialize_cdr(string, "std_msgs/msg/String"))
 
 
+def default_processes() -> int:
+    """2 (reading and tracking beside the other stages) where a second core and fork exist."""
+    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
+    return 2 if (cores or 1) >= 2 and "fork" in mp.get_all_start_methods() else 1
+
+
 def run_recording(
     recording: str | Path,
     calibration: Calibration,
@@ -100,46 +113,153 @@ def run_recording(
     progress: Callable[[int], None] | None = None,
     *,
     keep_outputs: bool = False,
+    processes: int | None = None,
 ) -> RunSummary:
     """Run the pipeline over ``recording``; write ``out`` (MCAP); return the summary.
 
     ``keep_outputs`` also keeps every stage's groups in ``summary.outputs`` (what the demo
-    evaluates, without reading the MCAP back).
+    evaluates, without reading the MCAP back). ``processes`` 2 reads and tracks in a child
+    process while this one merges, optimises, filters and writes (the stages are sequential
+    per frame, so the pipeline splits across cores like an assembly line); 1 runs all here.
+    Both give the same bytes. Default: :func:`default_processes`.
     """
     summary = RunSummary(outputs={stage: [] for stage in STAGES} if keep_outputs else None)
     pipeline = Pipeline(params, calibration)
     warm_up()  # like the stages' kernels, loaded before the clock starts (~20 ms)
     started = time.perf_counter()
-    reader_drops: Counter[str] = Counter()
-    clock, parts = time.perf_counter, [0.0, 0.0, 0.0]  # read, stages, write
-    with RecordingWriter(out) as writer:
-        first_stamp: int | None = None
-        mark = clock()
-        for source, group in iter_groups(recording, drops=reader_drops):
+    processes = default_processes() if processes is None else processes
+    clock, parts = time.perf_counter, {"stages": 0.0, "write": 0.0}
+    with (
+        _tracking(recording, pipeline.tracker, processes) as tracked,
+        RecordingWriter(out) as writer,
+    ):
+        writer.write("/hiros/calibration", "std_msgs/msg/String",
+                     _calibration_message(calibration), 0)  # fmt: skip
+        for item in tracked:
+            if isinstance(item, _TrackingEnd):
+                break
+            source, group = item
             summary.frames_in[source] += 1
-            if first_stamp is None:
-                first_stamp = group.stamp_ns
-                writer.write("/hiros/calibration", "std_msgs/msg/String",
-                             _calibration_message(calibration), 0)  # fmt: skip
-            read = clock()
-            outputs = pipeline.update(group)
             computed = clock()
+            outputs = pipeline.downstream(group)
+            written = clock()
             _write(writer, outputs, summary)
             if progress is not None:
                 progress(1)
-            done = clock()
-            parts[0] += read - mark
-            parts[1] += computed - read
-            parts[2] += done - computed
-            mark = done
+            parts["stages"] += written - computed
+            parts["write"] += clock() - written
         finishing = clock()
-        _write(writer, pipeline.flush(), summary)
-    summary.seconds = dict(zip(("read", "stages", "write"), parts, strict=True))
-    summary.seconds["finish"] = clock() - finishing
-    summary.dropped.update({f"reader: {k}": v for k, v in reader_drops.items()})
-    summary.dropped.update(pipeline.drops)
+        _write(writer, pipeline.downstream(item.flushed), summary)
+    summary.seconds = {**item.seconds, **parts, "finish": clock() - finishing}
+    summary.dropped.update({f"reader: {k}": v for k, v in item.reader_drops.items()})
+    summary.dropped.update({f"tracker: {k}": v for k, v in item.tracker_drops.items()})
+    summary.dropped.update(pipeline.downstream_drops)
     summary.wall_time = time.perf_counter() - started
     return summary
+
+
+@dataclass
+class _TrackingEnd:
+    """Last item of a tracked stream: what the tracker still held, and the accounting."""
+
+    flushed: SkeletonGroup
+    reader_drops: Counter[str]
+    tracker_drops: Counter[str]
+    seconds: dict[str, float]
+
+
+def _tracked_frames(
+    recording: str | Path, tracker: Tracker
+) -> Iterator[tuple[str, SkeletonGroup] | _TrackingEnd]:
+    """``(camera, tracker output)`` per camera frame read, then a ``_TrackingEnd``."""
+    reader_drops: Counter[str] = Counter()
+    clock, read, tracking = time.perf_counter, 0.0, 0.0
+    mark = clock()
+    for source, group in iter_groups(recording, drops=reader_drops):
+        tracked_at = clock()
+        tracked = tracker.update(group)
+        done = clock()
+        read += tracked_at - mark
+        tracking += done - tracked_at
+        yield source, tracked
+        mark = clock()
+    flushed = tracker.flush()
+    yield _TrackingEnd(flushed, reader_drops, tracker.drops, {"read": read, "tracker": tracking})
+
+
+_BATCH = 32
+"""Camera frames per message from the reading process (fewer, larger pipe writes)."""
+
+
+@contextmanager
+def _tracking(
+    recording: str | Path, tracker: Tracker, processes: int
+) -> Iterator[Iterator[tuple[str, SkeletonGroup] | _TrackingEnd]]:
+    """The tracked stream: ``_tracked_frames`` here, or in a forked child process.
+
+    With ``processes`` 2 the child owns the tracker from the fork on (this process's copy
+    stays unused) and passes its items back in batches; groups cross the pipe as stacked
+    arrays (``SkeletonGroup.__reduce__``). The child starts on entry, before the caller
+    starts any thread, and is stopped on an early exit.
+    """
+    if processes < 2:
+        yield _tracked_frames(recording, tracker)
+        return
+    context = mp.get_context("fork")
+    receiver, sender = context.Pipe(duplex=False)
+    child = context.Process(target=_track_and_send, args=(recording, tracker, sender))
+    child.daemon = True
+    child.start()
+    sender.close()
+    try:
+        yield _received(receiver, child)
+    except BaseException:
+        child.terminate()
+        raise
+    finally:
+        receiver.close()
+        child.join()
+
+
+def _received(
+    receiver: Connection, child: mp.process.BaseProcess
+) -> Iterator[tuple[str, SkeletonGroup] | _TrackingEnd]:
+    """The child's items; its exception raised here, its unexpected end reported."""
+    waiting, clock = 0.0, time.perf_counter
+    while True:
+        asked = clock()
+        try:
+            batch = receiver.recv()
+        except EOFError:
+            child.join(5.0)
+            code = child.exitcode
+            msg = f"the reading and tracking process ended unexpectedly (exit code {code})"
+            raise RecordingError(msg) from None
+        waiting += clock() - asked
+        if isinstance(batch, BaseException):
+            raise batch
+        if isinstance(batch[-1], _TrackingEnd):
+            batch[-1].seconds["waiting"] = waiting
+            yield from batch
+            return
+        yield from batch
+
+
+def _track_and_send(recording: str | Path, tracker: Tracker, sender: Connection) -> None:
+    """Child process: read and track ``recording``, send the items in batches."""
+    batch: list = []
+    try:
+        for item in _tracked_frames(recording, tracker):
+            batch.append(item)
+            if len(batch) >= _BATCH or isinstance(item, _TrackingEnd):
+                sender.send(batch)
+                batch = []
+    except (BrokenPipeError, EOFError):
+        pass  # the parent stopped reading (its own error or an interrupt): nothing to report
+    except Exception as error:  # raised again in the parent, which reports it
+        sender.send(error)
+    finally:
+        sender.close()
 
 
 def _write(writer: RecordingWriter, outputs: StageOutputs, summary: RunSummary) -> None:

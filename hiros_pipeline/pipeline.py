@@ -66,13 +66,17 @@ class Pipeline:
 
     def update(self, camera_group: SkeletonGroup) -> StageOutputs:
         """One camera frame (camera frame and clock) through all four stages."""
-        return self._downstream(self.tracker.update(camera_group))
+        return self.downstream(self.tracker.update(camera_group))
 
     def flush(self) -> StageOutputs:
         """Release what the tracker still buffers (end of a recording)."""
-        return self._downstream(self.tracker.flush())
+        return self.downstream(self.tracker.flush())
 
-    def _downstream(self, tracked: SkeletonGroup) -> StageOutputs:
+    def downstream(self, tracked: SkeletonGroup) -> StageOutputs:
+        """The tracker's output through merger, optimizer and filter.
+
+        The tracker may have run elsewhere, e.g. in the offline runner's reading process.
+        """
         merged = self.merger.update(tracked)
         optimized = self.optimizer.update(merged)
         return StageOutputs(tracked, merged, optimized, self.filter.update(optimized))
@@ -80,8 +84,16 @@ class Pipeline:
     @property
     def drops(self) -> Counter[str]:
         """Every stage's drop reasons, prefixed with the stage name."""
+        return self._drops(STAGES)
+
+    @property
+    def downstream_drops(self) -> Counter[str]:
+        """The drop reasons of the stages after the tracker (see :meth:`downstream`)."""
+        return self._drops(STAGES[1:])
+
+    def _drops(self, stages: tuple[str, ...]) -> Counter[str]:
         total: Counter[str] = Counter()
-        for name in STAGES:
+        for name in stages:
             for reason, count in getattr(getattr(self, name), "drops", Counter()).items():
                 total[f"{name}: {reason}"] += count
         return total

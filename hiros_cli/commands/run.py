@@ -42,6 +42,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         default=30.0,
         help="merger output rate in Hz offline (default 30; 0: on every camera frame, as live)",
     )
+    parser.add_argument(
+        "--processes",
+        type=int,
+        choices=(1, 2),
+        help="2: read and track in a second process beside the other stages (default where "
+        "a second core exists); 1: everything in this process. Same output either way",
+    )
 
 
 def load_pipeline_params(path: Path | None):  # noqa: ANN201 - PipelineParams, imported lazily
@@ -92,7 +99,9 @@ def run(args: argparse.Namespace) -> int:
     params.merger.output_rate = args.merge_rate
     calibration = resolve_calibration(args.calibration, args.recording, args.out, console)
     with progress_bar(f"hiros run {args.recording.name}", message_count(args.recording)) as advance:
-        summary = run_recording(args.recording, calibration, args.out, params, advance)
+        summary = run_recording(
+            args.recording, calibration, args.out, params, advance, processes=args.processes
+        )
     print_summary(console, summary, args.out)
     return 0
 

@@ -1,5 +1,7 @@
 from __future__ import annotations
 
+import pickle
+
 import numpy as np
 import pytest
 
@@ -143,3 +145,32 @@ def test_compiled_link_rows_equal_the_numpy_form(shape) -> None:
             assert np.array_equal(got[0], expected[0], equal_nan=True)
             assert np.array_equal(got[1], expected[1])
             assert got[1].shape == expected[1].shape
+
+
+def test_groups_pickle_as_stacked_arrays_and_come_back_equal() -> None:
+    rng = np.random.default_rng(4)
+    people = [
+        Skeleton.from_positions(rng.normal(size=(32, 3)), skeleton_id=i, src_time_ns=7 + i,
+                                src_frame=f"k0{i}_depth_camera_link")
+        for i in range(3)
+    ]  # fmt: skip
+    people[1].positions[5] = np.nan
+    people[1].marker_present[5] = False
+    people[2].confidence = 0.25
+    group = SkeletonGroup(123, "world", people)
+    back = pickle.loads(pickle.dumps(group))
+    assert back.same_as(group)
+    assert back.skeletons[0].layout is AZURE_KINECT
+    back.skeletons[0].positions[:] = 0.0  # rows of one skeleton are its own
+    assert np.isfinite(back.skeletons[1].positions[0]).all()
+    assert back.skeletons[1].positions[0, 0] == group.skeletons[1].positions[0, 0]
+
+
+def test_groups_of_mixed_layouts_pickle_skeleton_by_skeleton() -> None:
+    group = SkeletonGroup(
+        5, "world", [Skeleton.empty(AZURE_KINECT, skeleton_id=1), Skeleton.empty(KINECT_V2)]
+    )
+    back = pickle.loads(pickle.dumps(group))
+    assert back.same_as(group)
+    assert back.skeletons[1].layout.name == "kinect_v2"
+    assert pickle.loads(pickle.dumps(SkeletonGroup(1, "w"))).skeletons == []

@@ -6,7 +6,8 @@ from pathlib import Path
 
 import pytest
 
-from hiros_core.calibration import load_calibration
+from hiros_core.calibration import Calibration, load_calibration
+from hiros_core.errors import RecordingError
 from hiros_core.recording import RecordingReader
 from hiros_pipeline import STAGES, PipelineParams, run_recording
 from hiros_sim import SimParams, simulate, write_recording
@@ -39,10 +40,28 @@ def test_every_stage_writes_and_every_frame_is_accounted_for(
     assert 1 <= len(summary.people["merger"]) <= 4
 
 
-def test_runs_are_deterministic(short_recording: Path, tmp_path: Path) -> None:
+def test_runs_are_deterministic_in_one_process_or_two(
+    short_recording: Path, tmp_path: Path
+) -> None:
     calibration = load_calibration(short_recording / "calibration.yaml")
-    first, second = tmp_path / "a.mcap", tmp_path / "b.mcap"
-    run_recording(short_recording / "recording.mcap", calibration, first)
-    run_recording(short_recording / "recording.mcap", calibration, second)
-    with RecordingReader(first) as a, RecordingReader(second) as b:
-        assert [m.data for m in a.messages()] == [m.data for m in b.messages()]
+    runs = {
+        name: run_recording(short_recording / "recording.mcap", calibration,
+                            tmp_path / f"{name}.mcap", processes=processes)
+        for name, processes in (("one", 1), ("again", 1), ("two", 2))
+    }  # fmt: skip
+    messages = {}
+    for name in runs:
+        with RecordingReader(tmp_path / f"{name}.mcap") as reader:
+            messages[name] = [(m.topic, m.log_time_ns, m.data) for m in reader.messages()]
+    assert messages["one"] == messages["again"] == messages["two"]
+    assert runs["one"].dropped == runs["two"].dropped
+    assert runs["one"].frames_in == runs["two"].frames_in
+    assert runs["one"].published == runs["two"].published
+    assert "waiting" in runs["two"].seconds
+
+
+def test_an_unreadable_recording_raises_from_the_reading_process(tmp_path: Path) -> None:
+    broken = tmp_path / "broken.mcap"
+    broken.write_bytes(b"not a recording at all")
+    with pytest.raises(RecordingError):
+        run_recording(broken, Calibration("k01"), tmp_path / "out.mcap", processes=2)
