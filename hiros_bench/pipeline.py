@@ -1,7 +1,8 @@
 """Pipeline speed: offline throughput (multiple of real time) and end-to-end DDS latency.
 
 Offline: a simulated recording of 3 cameras x 30 Hz x 4 people through ``hiros run``'s runner
-(reading, bridging, all four stages, writing), as recording seconds per wall-clock second.
+(reading, bridging, all four stages, writing), as recording seconds per wall-clock second, in
+one process and in two (reading and tracking in a child, the default where two cores exist).
 Latency: camera message published -> filter output received, over real DDS, for the composed
 ``pipeline`` node and for the four stages as separate nodes (see ``hiros_bench.latency``); the
 processes run in a loopback-only network namespace.
@@ -20,23 +21,31 @@ from hiros_core.isolation import isolated, isolated_env
 TARGET_REAL_TIME = 100.0
 
 
-def offline_throughput(duration: float) -> tuple[float, float, float, dict[str, float]]:
-    """``run_recording`` on 3 cameras x 30 Hz x 4 people, simulated.
+def offline_throughput(
+    duration: float, processes: tuple[int, ...] = (1, 2)
+) -> dict[int, tuple[float, float, float, dict[str, float]]]:
+    """``run_recording`` on 3 cameras x 30 Hz x 4 people, simulated, per process count.
 
-    Returns recording seconds, wall seconds, the real-time factor and the wall seconds by part
-    (``RunSummary.seconds``).
+    Returns, for each entry of ``processes``: recording seconds, wall seconds, the real-time
+    factor and the wall seconds by part (``RunSummary.seconds``).
     """
     from hiros_pipeline import run_recording
     from hiros_sim import SimParams, simulate, write_recording
 
+    results = {}
     with tempfile.TemporaryDirectory() as folder:
         sim = Path(folder) / "sim"
         write_recording(
             simulate(SimParams(n_cameras=3, n_people=4, duration=duration, seed=11)), sim
         )
         calibration = load_calibration(sim / "calibration.yaml")
-        summary = run_recording(sim / "recording.mcap", calibration, Path(folder) / "out.mcap")
-    return summary.duration, summary.wall_time, summary.real_time_factor, summary.seconds
+        for count in processes:
+            out = Path(folder) / f"out{count}.mcap"
+            summary = run_recording(sim / "recording.mcap", calibration, out, processes=count)
+            results[count] = (
+                summary.duration, summary.wall_time, summary.real_time_factor, summary.seconds
+            )  # fmt: skip
+    return results
 
 
 def latency(mode: str, seconds: float) -> str:
@@ -63,12 +72,14 @@ def latency(mode: str, seconds: float) -> str:
 def run(console, quick: bool = False) -> list[str]:  # noqa: ANN001 - rich Console
     """Print the offline throughput and both latencies."""
     duration = 20.0 if quick else 60.0
-    recorded, wall, factor, parts = offline_throughput(duration)
-    lines = [
-        f"offline hiros run, 3 cameras x 30 Hz x 4 people: {recorded:.1f} s of recording in "
-        f"{wall:.2f} s = {factor:.1f}x real time (target {TARGET_REAL_TIME:.0f}x)",
-        "  of which " + ", ".join(f"{part} {seconds:.2f} s" for part, seconds in parts.items()),
-    ]
+    lines = []
+    for count, (recorded, wall, factor, parts) in offline_throughput(duration).items():
+        lines += [
+            f"offline hiros run, 3 cameras x 30 Hz x 4 people, {count} process"
+            f"{'es' if count > 1 else ''}: {recorded:.1f} s of recording in {wall:.2f} s = "
+            f"{factor:.1f}x real time (target {TARGET_REAL_TIME:.0f}x)",
+            "  of which " + ", ".join(f"{part} {seconds:.2f} s" for part, seconds in parts.items()),
+        ]
     for mode in ("composed", "nodes"):
         lines.append(latency(mode, 10.0 if quick else 20.0))
     for line in lines:

@@ -56,9 +56,11 @@ class RunSummary:
     last_ns: int | None = None
     wall_time: float = 0.0
     seconds: dict[str, float] = field(default_factory=dict)
-    """Wall seconds by part: ``read`` (reading, decoding, bridging), ``stages`` (the four
-    stages), ``write`` (encoding, drawing, writing; compression runs in a helper thread and
-    shows here only when it holds the run up), ``finish`` (the last chunks and the index)."""
+    """Wall seconds by part: ``read`` (reading, decoding, bridging) and ``tracker`` (in the
+    child process when there are two), ``stages`` (merger, optimizer, filter), ``write``
+    (encoding, drawing, writing; compression runs in a helper thread and shows here only when
+    it holds the run up), ``finish`` (the last chunks and the index), and with two processes
+    ``waiting`` (this process idle, waiting for the child's frames)."""
     outputs: dict[str, list] | None = None
     """stage -> its output groups, when ``run_recording(keep_outputs=True)``."""
 
