@@ -46,7 +46,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     """The four steps with timings, then the summary."""
     from hiros_cli.commands.calibrate import calibrate_recording
-    from hiros_cli.commands.run import load_pipeline_params
+    from hiros_cli.commands.run import OFFLINE_MERGE_RATE, load_pipeline_params
     from hiros_cli.progress import progress_bar
     from hiros_core.calibration import save_calibration
     from hiros_eval.report import write_report
@@ -79,7 +79,7 @@ def run(args: argparse.Namespace) -> int:
 
     start = time.perf_counter()
     demo_params = load_pipeline_params(None)
-    demo_params.merger.output_rate = 30.0  # offline: one fused output per camera period
+    demo_params.merger.output_rate = OFFLINE_MERGE_RATE
     with progress_bar(
         "running the pipeline", sum(map(len, result.camera_groups.values()))
     ) as advance:

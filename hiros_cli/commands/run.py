@@ -23,6 +23,9 @@ from hiros_core.calibration import Calibration, load_calibration, save_calibrati
 from hiros_core.errors import ConfigError
 
 HELP = "offline pipeline over a recording -> one MCAP with every stage's output"
+OFFLINE_MERGE_RATE = 30.0
+"""The merger's output rate offline, Hz: one fused output per camera period (live: on each
+camera frame)."""
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -39,7 +42,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--merge-rate",
         type=float,
-        default=30.0,
+        default=OFFLINE_MERGE_RATE,
         help="merger output rate in Hz offline (default 30; 0: on every camera frame, as live)",
     )
     parser.add_argument(
