@@ -53,32 +53,47 @@ def _read_recorded(path: Path) -> list:
     return groups
 
 
+def _start_recorder(
+    out: Path, idle: float, timeout: float, env: dict[str, str]
+) -> subprocess.Popen:
+    """The filter output recorder (recorder.py), once it is subscribed, plus 3 s of discovery."""
+    recorder = subprocess.Popen(
+        [sys.executable, str(HERE / "recorder.py"), str(out), str(idle), str(timeout)],
+        env=env,
+        stdout=subprocess.PIPE,
+        text=True,
+    )
+    assert recorder.stdout is not None
+    assert "ready" in recorder.stdout.readline()
+    time.sleep(3.0)  # discovery
+    return recorder
+
+
+def _play_command(scene: Path, rate: float) -> list[str]:
+    """``hiros play`` of the scene onto live topics after 10 s, without /clock."""
+    recording = str(scene / "recording.mcap")
+    return [
+        str(BIN / "hiros"),
+        "play",
+        recording,
+        "--delay",
+        "10",
+        "--no-clock",
+        "--rate",
+        str(rate),
+    ]
+
+
 def _live_run(scene: Path, commands: list[list[str]], env: dict[str, str], out: Path) -> list:
     nodes = [
         subprocess.Popen(c, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
         for c in commands
     ]
-    recorder = subprocess.Popen(
-        [sys.executable, str(HERE / "recorder.py"), str(out), "3.0", "90"],
-        env=env,
-        stdout=subprocess.PIPE,
-        text=True,
-    )
     try:
-        assert recorder.stdout is not None
-        assert "ready" in recorder.stdout.readline()
-        time.sleep(3.0)  # discovery
+        recorder = _start_recorder(out, 3.0, 90.0, env)
         play = subprocess.run(
-            [
-                str(BIN / "hiros"),
-                "play",
-                str(scene / "recording.mcap"),
-                "--delay",
-                "10",
-                "--no-clock",
-                "--rate",
-                "0.5",  # half speed: five node processes share two cores with the player
-            ],
+            # half speed: five node processes share two cores with the player
+            _play_command(scene, 0.5),
             env=env,
             capture_output=True,
             text=True,
@@ -153,30 +168,10 @@ def test_a_killed_node_restarts_and_the_pipeline_resumes(
     merger_command = commands[2]
     nodes = [subprocess.Popen(c, env=ros_env, stdout=subprocess.DEVNULL) for c in commands]
     out = tmp_path / "live.bin"
-    recorder = subprocess.Popen(
-        [sys.executable, str(HERE / "recorder.py"), str(out), "12.0", "120"],
-        env=ros_env,
-        stdout=subprocess.PIPE,
-        text=True,
-    )
     try:
+        recorder = _start_recorder(out, 12.0, 120.0, ros_env)
+        play = subprocess.Popen(_play_command(scene, 0.4), env=ros_env, stdout=subprocess.DEVNULL)
         assert recorder.stdout is not None
-        assert "ready" in recorder.stdout.readline()
-        time.sleep(3.0)
-        play = subprocess.Popen(
-            [
-                str(BIN / "hiros"),
-                "play",
-                str(scene / "recording.mcap"),
-                "--delay",
-                "10",
-                "--no-clock",
-                "--rate",
-                "0.4",
-            ],
-            env=ros_env,
-            stdout=subprocess.DEVNULL,
-        )
         assert "first output" in recorder.stdout.readline()
         time.sleep(1.5)
         killed_wall = time.time()
