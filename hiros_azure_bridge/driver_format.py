@@ -37,10 +37,15 @@ from typing import Any
 import numpy as np
 import yaml
 
-from hiros_core.codec import MarkerArrayData, MarkerFields, decode_marker_fields
+from hiros_core.codec import (
+    MarkerArrayData,
+    MarkerFields,
+    decode_marker_fields,
+    encode_marker_array,
+)
 from hiros_core.errors import CodecError, ConfigError, LayoutError
 from hiros_core.layouts import AZURE_KINECT, Layout, get_layout
-from hiros_core.model import STATE_WIDTH, Skeleton, SkeletonGroup
+from hiros_core.model import BOX_WIDTH, STATE_WIDTH, Skeleton, SkeletonGroup, link_rows
 
 __all__ = [
     "ADD",
@@ -163,7 +168,7 @@ def _compiled_available() -> bool:
 
 
 def warm_up() -> None:
-    """Load the compiled frame path before the first frame, when numba is loaded.
+    """Load the compiled frame paths (live and recording) before the first frame, with numba.
 
     From numba's disk cache this takes ~20 ms; the very first time after an install or a
     change of the kernel, ~2 s of compilation, which a live node should not spend on its
@@ -173,7 +178,10 @@ def warm_up() -> None:
         return
     positions = np.zeros((1, AZURE_KINECT.n_joints, 3))
     people = Skeleton.many_from_positions(positions, AZURE_KINECT, skeleton_ids=[1])
-    DriverBridge().update(group_to_driver_markers(SkeletonGroup(1, "warm_up", people)))
+    markers = group_to_driver_markers(SkeletonGroup(1, "warm_up", people))
+    DriverBridge().update(markers)
+    raw = encode_marker_array(markers)  # the batch kernel of recordings
+    DriverBridge().update_batch(raw, np.array([0]), np.array([len(raw)]))
 
 
 @cache
@@ -253,6 +261,84 @@ class DriverBridge:
 
         """
         return self.update(decode_marker_fields(data))
+
+    def update_batch(
+        self, buffer: bytes, starts: np.ndarray, ends: np.ndarray
+    ) -> list[SkeletonGroup | None]:
+        """``update_bytes`` of the messages ``buffer[starts[i]:ends[i]]``, in order, at once.
+
+        For a recording: with numba loaded, the usual driver messages of the batch (see
+        ``_batch_people``) are decoded by one compiled call and their people built together;
+        every other message takes ``update_bytes``. Same groups and drops as ``update_bytes``
+        message after message, except that bytes the codec rejects give None and count
+        ``undecodable`` here instead of raising.
+        """
+        if not _compiled_available():
+            return [self._update_counted(buffer[a:b]) for a, b in zip(starts, ends, strict=True)]
+        from hiros_azure_bridge import compiled
+
+        raw = np.frombuffer(buffer, dtype=np.uint8)
+        first, usual, mixed, ids, stamps, spans, block = compiled.driver_messages(
+            raw, starts, ends, float(self.params.position_scale),
+            float(self.params.confidence_levels),
+        )  # fmt: skip
+        starts_of = first[:-1].tolist()
+        strings = _Strings(buffer)
+        people = self._batch_people(
+            first=first, usual=usual, ids=ids, spans=spans, block=block, strings=strings
+        )
+        out: list[SkeletonGroup | None] = []
+        for m, (start, end) in enumerate(zip(starts.tolist(), ends.tolist(), strict=True)):
+            if people.shapes[m] is None:
+                out.append(self._update_counted(buffer[start:end]))
+                continue
+            marker = starts_of[m]
+            stamp = int(stamps[marker])
+            if not self._accept_stamp(stamp):
+                out.append(None)
+                continue
+            if mixed[m]:
+                self.drops["mixed_stamps"] += 1
+            frame = self.params.frame_id or strings.get(spans[marker, 0], spans[marker, 1])
+            out.append(SkeletonGroup(stamp, frame, people.skeletons(m, stamp, frame)))
+        return out
+
+    def _update_counted(self, data: bytes) -> SkeletonGroup | None:
+        """``update_bytes``, counting ``undecodable`` instead of raising."""
+        try:
+            return self.update_bytes(data)
+        except CodecError:
+            self.drops["undecodable"] += 1
+            return None
+
+    def _batch_people(
+        self,
+        *,
+        first: np.ndarray,
+        usual: np.ndarray,
+        ids: np.ndarray,
+        spans: np.ndarray,
+        block: np.ndarray,
+        strings: _Strings,
+    ) -> _BatchPeople:
+        """The people of a batch's usual messages, all in one set of arrays.
+
+        A message is usual when the kernel read it whole (see ``compiled.driver_messages``)
+        and its namespace and ids make whole ordered people of the batch's layout (the first
+        usual message's), as ``_compiled_rows`` requires of a single message.
+        """
+        shapes: list[_IdShape | None] = []
+        layout: Layout | None = None
+        for m, marker in enumerate(first[:-1].tolist()):
+            shape = None
+            if usual[m]:
+                namespace = strings.get(spans[marker, 2], spans[marker, 3])
+                shape = self._id_shape(namespace, ids[marker : first[m + 1]])
+                layout = shape.layout if layout is None else layout
+                if shape.arranged is None or shape.layout is not layout:
+                    shape = None
+            shapes.append(shape)
+        return _BatchPeople.of(layout or self.layout, shapes, first, block)
 
     def update(self, data: MarkerArrayData | MarkerFields) -> SkeletonGroup | None:
         """Convert one MarkerArray; None when the whole message is dropped (see ``drops``)."""
@@ -442,6 +528,69 @@ class DriverBridge:
 
 
 _ID_SHAPE_CAPACITY = 64
+
+
+class _Strings:
+    """ASCII strings of a batch's buffer by byte span, decoded once per distinct text."""
+
+    def __init__(self, buffer: bytes) -> None:
+        self.buffer = buffer
+        self.found: dict[bytes, str] = {}
+
+    def get(self, first: int, stop: int) -> str:
+        raw = self.buffer[first:stop]
+        text = self.found.get(raw)
+        if text is None:
+            text = self.found[raw] = raw.decode("ascii")
+        return text
+
+
+@dataclass(frozen=True)
+class _BatchPeople:
+    """Marker and link rows of every person of a batch's usual messages, and who is where.
+
+    ``offsets[m]`` is message ``m``'s first person, ``shapes[m]`` its ids' shape (None: not
+    a usual message). Each skeleton's arrays are views of distinct rows of the batch arrays,
+    as ``Skeleton.many_from_rows`` gives for one message.
+    """
+
+    layout: Layout
+    shapes: list[_IdShape | None]
+    offsets: list[int]
+    rows: tuple[list[np.ndarray], ...]  # per person: markers, links, present, link present, box
+
+    @classmethod
+    def of(
+        cls, layout: Layout, shapes: list[_IdShape | None], first: np.ndarray, block: np.ndarray
+    ) -> _BatchPeople:
+        n_joints = layout.n_joints
+        counts = [0 if s is None else len(s.arranged.skeleton_ids) for s in shapes]  # type: ignore[union-attr]
+        offsets = np.concatenate([[0], np.cumsum(counts)]).astype(np.intp)
+        usual = [m for m, s in enumerate(shapes) if s is not None]
+        markers = np.full((int(offsets[-1]), n_joints, STATE_WIDTH), np.nan)
+        present = np.zeros((int(offsets[-1]), n_joints), dtype=bool)
+        if usual:
+            rows = np.concatenate(
+                [shapes[m].arranged.rows + offsets[m] * n_joints for m in usual]  # type: ignore[union-attr]
+            )
+            taken = np.concatenate([np.arange(first[m], first[m + 1]) for m in usual])
+            markers.reshape(-1, STATE_WIDTH)[rows, :8] = block[taken]
+            present.reshape(-1)[rows] = True
+        links, link_present = link_rows(markers, present, layout)
+        boxes = np.full((len(markers), BOX_WIDTH), np.nan)
+        people = (list(markers), list(links), list(present), list(link_present), list(boxes))
+        return cls(layout, shapes, offsets.tolist(), people)
+
+    def skeletons(self, m: int, stamp: int, frame: str) -> list[Skeleton]:
+        """The skeletons of usual message ``m``, as ``Skeleton.many_from_rows`` makes them."""
+        shape, offset, layout = self.shapes[m], self.offsets[m], self.layout
+        markers, links, present, link_present, boxes = self.rows
+        fields = (math.nan, layout.n_joints, layout.n_links)
+        return [
+            Skeleton(i, stamp, frame, layout, markers[p], links[p], present[p], link_present[p],
+                     fields[0], boxes[p], *fields[1:])
+            for p, i in enumerate(shape.arranged.skeleton_ids, offset)  # type: ignore[union-attr]
+        ]  # fmt: skip
 
 
 @dataclass(frozen=True)
