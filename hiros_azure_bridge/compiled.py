@@ -20,7 +20,7 @@ import math
 import numpy as np
 from numba import njit
 
-__all__ = ["driver_messages", "driver_rows"]
+__all__ = ["driver_messages", "driver_people", "driver_rows"]
 
 _MIN_MARKER_BYTES = 150
 """The codec's lower bound on a Marker's CDR size: more markers than this allows is bad data."""
@@ -175,6 +175,18 @@ def _media(buf: np.ndarray, start: int, r: int, size: int) -> int:
 
 
 @njit(cache=True, inline="always")
+def _finite_position(pose: np.ndarray, position_scale: float) -> bool:
+    """Whether the scaled position is finite (as ``_fill_row`` requires)."""
+    for k in range(3):
+        value = pose[k]
+        if position_scale != 1.0:
+            value *= position_scale
+        if not math.isfinite(value):
+            return False
+    return True
+
+
+@njit(cache=True, inline="always")
 def _marker(  # noqa: PLR0911, PLR0917 - one flat walk over a Marker's fields
     buf: np.ndarray,
     start: int,
@@ -183,17 +195,18 @@ def _marker(  # noqa: PLR0911, PLR0917 - one flat walk over a Marker's fields
     out: int,
     ids: np.ndarray,
     stamps: np.ndarray,
-    block: np.ndarray,
     spans: np.ndarray,
+    poses: np.ndarray,
+    levels: np.ndarray,
     position_scale: float,
-    levels: float,
 ) -> int:
     """Read the marker at relative offset ``r`` into row ``out``; the next offset, or -1.
 
-    Row ``out`` of ``ids``, ``stamps``, ``block`` (``_fill_row``'s 8 values) and ``spans``
-    (frame and namespace byte spans). -1 also when the marker is not a usual driver joint (not
-    an ADD, texture or mesh fields set, non-ASCII strings, a text that is no level, a position
-    that is not finite): the caller leaves such a message to the codec and the bridge.
+    Row ``out`` of ``ids``, ``stamps``, ``spans`` (byte spans of frame and namespace),
+    ``poses`` (where its 7 pose floats start in ``buf``) and ``levels`` (its confidence level,
+    NaN: none). -1 also when the marker is not a usual driver joint (not an ADD, texture or mesh
+    fields set, non-ASCII strings, a text that is no level, a position that is not finite):
+    the caller leaves such a message to the codec and the bridge.
     """
     r += -r & 3
     if r + 8 > size:
@@ -214,7 +227,9 @@ def _marker(  # noqa: PLR0911, PLR0917 - one flat walk over a Marker's fields
     r += (4 - r) & 7  # the pose is 8-aligned in the payload (which starts at offset 4)
     if r + 105 > size or buf[start + r + 104] > 1:  # pose, scale, colour, lifetime, locked
         return -1
-    pose = buf[start + r : start + r + 56].view(np.float64)
+    poses[out] = start + r
+    if not _finite_position(buf[start + r : start + r + 24].view(np.float64), position_scale):
+        return -1
     r = _sequence(buf, start, r + 105, size, 24, 8)  # points
     r = _sequence(buf, start, r, size, 16, 4)  # colors
     text_first, text_stop, r = _string(buf, start, _media(buf, start, r, size), size)
@@ -222,36 +237,29 @@ def _marker(  # noqa: PLR0911, PLR0917 - one flat walk over a Marker's fields
     r += -r & 3
     if text_first < 0 or r + 5 > size or _u32(buf, start + r) != 0 or buf[start + r + 4] > 1:
         return -1  # mesh data empty, mesh_use_embedded_materials a bool
-    level, ok = _level(buf, text_first, text_stop)
-    if not ok or not _fill_row(block[out], pose, level, position_scale, levels):
-        return -1
-    return r + 5
+    levels[out], ok = _level(buf, text_first, text_stop)
+    return r + 5 if ok else -1
 
 
 @njit(cache=True)
 def driver_messages(
-    buf: np.ndarray,
-    starts: np.ndarray,
-    ends: np.ndarray,
-    position_scale: float,
-    confidence_levels: float,
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    buf: np.ndarray, starts: np.ndarray, ends: np.ndarray, position_scale: float
+) -> tuple[np.ndarray, ...]:
     """Read many driver MarkerArrays (CDR bytes ``buf[starts[m]:ends[m]]``) in one call.
 
     Returns per message ``first`` ``(M + 1,)`` (message ``m``'s markers are rows
     ``first[m]:first[m + 1]``), ``usual`` ``(M,)``: every marker read as a usual driver joint
     (see ``_marker``) and at least one, and ``mixed`` ``(M,)``: its markers' stamps differ;
-    per marker ``ids`` ``(N,)``, ``stamps`` ``(N,)`` ns, ``spans`` ``(N, 4)`` byte spans in
-    ``buf`` of the frame id and namespace, and ``block`` ``(N, 8)`` the first eight values of
-    its marker row (as ``driver_rows`` writes them). The rows of a message that is not usual
-    mean nothing: the caller hands such a message to the codec and the bridge.
+    per marker ``ids``, ``stamps`` (ns), ``spans`` ``(N, 4)``, ``poses`` and ``levels`` as
+    ``_marker`` writes them. The rows of a message that is not usual mean nothing: the caller
+    hands such a message to the codec and the bridge.
     """
     n_messages = starts.size
     first = np.zeros(n_messages + 1, dtype=np.int64)
     for m in range(n_messages):
         start, size = starts[m], ends[m] - starts[m]
         n = 0
-        if size >= 8 and buf[start] == 0 and buf[start + 1] == 1:
+        if size >= 8 and buf[start] == 0 and buf[start + 1] == 1:  # the CDR header, LE
             n = _u32(buf, start + 4)
             if n * _MIN_MARKER_BYTES > size - 8:
                 n = 0
@@ -260,18 +268,125 @@ def driver_messages(
     ids = np.zeros(total, dtype=np.int32)
     stamps = np.zeros(total, dtype=np.int64)
     spans = np.zeros((total, 4), dtype=np.int64)
-    block = np.full((total, 8), np.nan)
+    poses = np.zeros(total, dtype=np.int64)
+    levels = np.zeros(total)
     usual = np.zeros(n_messages, dtype=np.bool_)
     mixed = np.zeros(n_messages, dtype=np.bool_)
     for m in range(n_messages):
         start, size = starts[m], ends[m] - starts[m]
         r = 8
         for out in range(first[m], first[m + 1]):
-            r = _marker(buf, start, r, size, out, ids, stamps, block, spans, position_scale,
-                        confidence_levels)  # fmt: skip
+            r = _marker(buf, start, r, size, out, ids, stamps, spans, poses, levels,
+                        position_scale)  # fmt: skip
             if r < 0:
                 break
         usual[m] = first[m + 1] > first[m] and r >= 0 and size - r <= 3
         for out in range(first[m] + 1, first[m + 1] if usual[m] else 0):
             mixed[m] |= stamps[out] != stamps[first[m]]
-    return first, usual, mixed, ids, stamps, spans, block
+    return first, usual, mixed, ids, stamps, spans, poses, levels
+
+
+@njit(cache=True, inline="always")
+def _body_joint(
+    marker_id: int, n_joints: int, id_stride: int, joint_major: bool, table: np.ndarray
+) -> tuple[int, int]:
+    """Body and marker id of a driver marker id; marker id -1 when it is no joint of the layout.
+
+    ``table`` maps driver joint index -> marker id (empty: the same), as
+    ``DriverBridge._new_id_shape`` reads ids.
+    """
+    if marker_id < 0:
+        return -1, -1
+    major, minor = marker_id // id_stride, marker_id % id_stride
+    body, joint = (minor, major) if joint_major else (major, minor)
+    if table.size == 0:
+        return body, joint if joint < n_joints else -1
+    return body, table[joint] if joint < table.size else -1
+
+
+@njit(cache=True, inline="always")
+def _count_people(  # noqa: PLR0917 - a compiled kernel takes plain positional values
+    ids: np.ndarray,
+    first: int,
+    stop: int,
+    n_joints: int,
+    id_stride: int,
+    joint_major: bool,
+    table: np.ndarray,
+) -> int:
+    """People of the markers ``first:stop``; -1 unless they are usual.
+
+    Usual: every marker a joint of the layout and (body, joint) strictly increasing, what
+    ``_Arrangement`` requires of a usual message.
+    """
+    people, last = 0, -1
+    for i in range(first, stop):
+        body, joint = _body_joint(ids[i], n_joints, id_stride, joint_major, table)
+        key = body * n_joints + joint
+        if joint < 0 or key <= last:
+            return -1
+        if i == first or key // n_joints != last // n_joints:
+            people += 1
+        last = key
+    return people if stop > first else -1
+
+
+@njit(cache=True, inline="always")
+def _same_bytes(buf: np.ndarray, first: int, stop: int, other: int, other_stop: int) -> bool:
+    """Whether ``buf[first:stop]`` and ``buf[other:other_stop]`` hold the same bytes."""
+    if stop - first != other_stop - other:
+        return False
+    for k in range(stop - first):  # noqa: SIM110 - a compiled loop, no generator
+        if buf[first + k] != buf[other + k]:
+            return False
+    return True
+
+
+@njit(cache=True)
+def driver_people(  # noqa: PLR0917 - a compiled kernel takes plain positional values
+    buf: np.ndarray,
+    parsed: tuple[np.ndarray, ...],
+    namespace: np.ndarray,
+    n_joints: int,
+    id_stride: int,
+    joint_major: bool,
+    table: np.ndarray,
+    position_scale: float,
+    confidence_levels: float,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The people of ``driver_messages``' usual messages (``parsed``), in one set of rows.
+
+    A message makes people here when it is usual, its first marker's namespace is the bytes
+    ``buf[namespace[0]:namespace[1]]`` (the one layout of the batch) and its ids make ordered
+    people (``_count_people``). Returns ``made`` ``(M,)`` those messages, ``people``
+    ``(M + 1,)`` each one's first person (messages ``m`` has ``people[m]:people[m + 1]``),
+    ``bodies`` ``(P,)`` body ids, and ``(P, J, 20)`` marker rows with ``(P, J)`` presence,
+    rows as ``driver_rows`` writes them.
+    """
+    first, usual, _, ids, _, spans, poses, levels = parsed
+    n_messages = first.size - 1
+    made = usual.copy()
+    people = np.zeros(n_messages + 1, dtype=np.int64)
+    for m in range(n_messages):
+        count = 0
+        if made[m]:
+            count = _count_people(ids, first[m], first[m + 1], n_joints, id_stride, joint_major,
+                                  table)  # fmt: skip
+            name = spans[first[m]]
+            if count < 0 or not _same_bytes(buf, name[2], name[3], namespace[0], namespace[1]):
+                made[m], count = False, 0
+        people[m + 1] = people[m] + count
+    markers = np.full((people[n_messages], n_joints, 20), np.nan)
+    present = np.zeros((people[n_messages], n_joints), dtype=np.bool_)
+    bodies = np.zeros(people[n_messages], dtype=np.int64)
+    for m in range(n_messages):
+        person = people[m] - 1
+        for i in range(first[m], first[m + 1] if made[m] else 0):
+            body, joint = _body_joint(ids[i], n_joints, id_stride, joint_major, table)
+            if person < people[m] or body != bodies[person]:
+                person += 1
+                bodies[person] = body
+            pose = buf[poses[i] : poses[i] + 56].view(np.float64)
+            _fill_row(markers[person, joint], pose, levels[i], position_scale, confidence_levels)
+            present[person, joint] = True
+    return made, people, bodies, markers, present

@@ -267,40 +267,26 @@ class DriverBridge:
     ) -> list[SkeletonGroup | None]:
         """``update_bytes`` of the messages ``buffer[starts[i]:ends[i]]``, in order, at once.
 
-        For a recording: with numba loaded, the usual driver messages of the batch (see
-        ``_batch_people``) are decoded by one compiled call and their people built together;
-        every other message takes ``update_bytes``. Same groups and drops as ``update_bytes``
-        message after message, except that bytes the codec rejects give None and count
-        ``undecodable`` here instead of raising.
+        For a recording: with numba loaded, the batch's usual driver messages (see
+        ``compiled.driver_people``) are read by two compiled calls and their people built in
+        one set of arrays; every other message takes ``update_bytes``. Same groups and drops
+        as ``update_bytes`` message after message, except that bytes the codec rejects give
+        None and count ``undecodable`` here instead of raising.
         """
         if not _compiled_available():
             return [self._update_counted(buffer[a:b]) for a, b in zip(starts, ends, strict=True)]
-        from hiros_azure_bridge import compiled
-
-        raw = np.frombuffer(buffer, dtype=np.uint8)
-        first, usual, mixed, ids, stamps, spans, block = compiled.driver_messages(
-            raw, starts, ends, float(self.params.position_scale),
-            float(self.params.confidence_levels),
-        )  # fmt: skip
-        starts_of = first[:-1].tolist()
-        strings = _Strings(buffer)
-        people = self._batch_people(
-            first=first, usual=usual, ids=ids, spans=spans, block=block, strings=strings
-        )
+        people = _BatchPeople(self, buffer, starts, ends)
         out: list[SkeletonGroup | None] = []
         for m, (start, end) in enumerate(zip(starts.tolist(), ends.tolist(), strict=True)):
-            if people.shapes[m] is None:
+            if not people.made[m]:
                 out.append(self._update_counted(buffer[start:end]))
-                continue
-            marker = starts_of[m]
-            stamp = int(stamps[marker])
-            if not self._accept_stamp(stamp):
+            elif not self._accept_stamp(stamp := people.stamps[m]):
                 out.append(None)
-                continue
-            if mixed[m]:
-                self.drops["mixed_stamps"] += 1
-            frame = self.params.frame_id or strings.get(spans[marker, 0], spans[marker, 1])
-            out.append(SkeletonGroup(stamp, frame, people.skeletons(m, stamp, frame)))
+            else:
+                if people.mixed[m]:
+                    self.drops["mixed_stamps"] += 1
+                frame = self.params.frame_id or people.frame(m)
+                out.append(SkeletonGroup(stamp, frame, people.skeletons(m, stamp, frame)))
         return out
 
     def _update_counted(self, data: bytes) -> SkeletonGroup | None:
@@ -310,35 +296,6 @@ class DriverBridge:
         except CodecError:
             self.drops["undecodable"] += 1
             return None
-
-    def _batch_people(
-        self,
-        *,
-        first: np.ndarray,
-        usual: np.ndarray,
-        ids: np.ndarray,
-        spans: np.ndarray,
-        block: np.ndarray,
-        strings: _Strings,
-    ) -> _BatchPeople:
-        """The people of a batch's usual messages, all in one set of arrays.
-
-        A message is usual when the kernel read it whole (see ``compiled.driver_messages``)
-        and its namespace and ids make whole ordered people of the batch's layout (the first
-        usual message's), as ``_compiled_rows`` requires of a single message.
-        """
-        shapes: list[_IdShape | None] = []
-        layout: Layout | None = None
-        for m, marker in enumerate(first[:-1].tolist()):
-            shape = None
-            if usual[m]:
-                namespace = strings.get(spans[marker, 2], spans[marker, 3])
-                shape = self._id_shape(namespace, ids[marker : first[m + 1]])
-                layout = shape.layout if layout is None else layout
-                if shape.arranged is None or shape.layout is not layout:
-                    shape = None
-            shapes.append(shape)
-        return _BatchPeople.of(layout or self.layout, shapes, first, block)
 
     def update(self, data: MarkerArrayData | MarkerFields) -> SkeletonGroup | None:
         """Convert one MarkerArray; None when the whole message is dropped (see ``drops``)."""
@@ -530,66 +487,64 @@ class DriverBridge:
 _ID_SHAPE_CAPACITY = 64
 
 
-class _Strings:
-    """ASCII strings of a batch's buffer by byte span, decoded once per distinct text."""
-
-    def __init__(self, buffer: bytes) -> None:
-        self.buffer = buffer
-        self.found: dict[bytes, str] = {}
-
-    def get(self, first: int, stop: int) -> str:
-        raw = self.buffer[first:stop]
-        text = self.found.get(raw)
-        if text is None:
-            text = self.found[raw] = raw.decode("ascii")
-        return text
-
-
-@dataclass(frozen=True)
 class _BatchPeople:
-    """Marker and link rows of every person of a batch's usual messages, and who is where.
+    """The people of a batch's usual driver messages (``DriverBridge.update_batch``).
 
-    ``offsets[m]`` is message ``m``'s first person, ``shapes[m]`` its ids' shape (None: not
-    a usual message). Each skeleton's arrays are views of distinct rows of the batch arrays,
-    as ``Skeleton.many_from_rows`` gives for one message.
+    Read by ``compiled.driver_messages`` and ``compiled.driver_people``; per message ``made``
+    (its people are here), ``stamps`` and ``mixed`` (markers with other stamps). Each
+    skeleton's arrays are views of distinct rows of the batch's arrays, as
+    ``Skeleton.many_from_rows`` gives for one message.
     """
 
-    layout: Layout
-    shapes: list[_IdShape | None]
-    offsets: list[int]
-    rows: tuple[list[np.ndarray], ...]  # per person: markers, links, present, link present, box
+    def __init__(
+        self, bridge: DriverBridge, buffer: bytes, starts: np.ndarray, ends: np.ndarray
+    ) -> None:
+        from hiros_azure_bridge import compiled
 
-    @classmethod
-    def of(
-        cls, layout: Layout, shapes: list[_IdShape | None], first: np.ndarray, block: np.ndarray
-    ) -> _BatchPeople:
-        n_joints = layout.n_joints
-        counts = [0 if s is None else len(s.arranged.skeleton_ids) for s in shapes]  # type: ignore[union-attr]
-        offsets = np.concatenate([[0], np.cumsum(counts)]).astype(np.intp)
-        usual = [m for m, s in enumerate(shapes) if s is not None]
-        markers = np.full((int(offsets[-1]), n_joints, STATE_WIDTH), np.nan)
-        present = np.zeros((int(offsets[-1]), n_joints), dtype=bool)
-        if usual:
-            rows = np.concatenate(
-                [shapes[m].arranged.rows + offsets[m] * n_joints for m in usual]  # type: ignore[union-attr]
-            )
-            taken = np.concatenate([np.arange(first[m], first[m + 1]) for m in usual])
-            markers.reshape(-1, STATE_WIDTH)[rows, :8] = block[taken]
-            present.reshape(-1)[rows] = True
-        links, link_present = link_rows(markers, present, layout)
+        raw = np.frombuffer(buffer, dtype=np.uint8)
+        params = bridge.params
+        parsed = compiled.driver_messages(raw, starts, ends, float(params.position_scale))
+        first, usual, mixed, _, stamps, spans = parsed[:6]
+        self.buffer, self.spans, self.first = buffer, spans, first[:-1].tolist()
+        self.texts: dict[bytes, str] = {}
+        found = np.flatnonzero(usual)
+        namespace = spans[first[found[0]], 2:] if len(found) else np.zeros(2, dtype=np.int64)
+        self.layout, table = bridge._lookup(self._text(*namespace.tolist()))
+        made, people, bodies, markers, present = compiled.driver_people(
+            raw, parsed, namespace, self.layout.n_joints, params.id_stride,
+            params.id_scheme == "joint_major",
+            np.empty(0, dtype=np.int64) if table is None else table.astype(np.int64),
+            float(params.position_scale), float(params.confidence_levels),
+        )  # fmt: skip
+        links, link_present = link_rows(markers, present, self.layout)
         boxes = np.full((len(markers), BOX_WIDTH), np.nan)
-        people = (list(markers), list(links), list(present), list(link_present), list(boxes))
-        return cls(layout, shapes, offsets.tolist(), people)
+        self.made, self.mixed = made.tolist(), mixed.tolist()
+        self.stamps = stamps[first[:-1]].tolist()
+        self.people, self.bodies = people.tolist(), bodies.tolist()
+        self.rows = (list(markers), list(links), list(present), list(link_present), list(boxes))
+
+    def _text(self, first: int, stop: int) -> str:
+        """The ASCII text at ``buffer[first:stop]``, decoded once per distinct text."""
+        raw = self.buffer[first:stop]
+        text = self.texts.get(raw)
+        if text is None:
+            text = self.texts[raw] = raw.decode("ascii")
+        return text
+
+    def frame(self, m: int) -> str:
+        """Frame id of message ``m``'s first marker."""
+        span = self.spans[self.first[m]]
+        return self._text(int(span[0]), int(span[1]))
 
     def skeletons(self, m: int, stamp: int, frame: str) -> list[Skeleton]:
-        """The skeletons of usual message ``m``, as ``Skeleton.many_from_rows`` makes them."""
-        shape, offset, layout = self.shapes[m], self.offsets[m], self.layout
+        """The skeletons of message ``m`` (one with ``made[m]``), ``many_from_rows``' way."""
+        layout = self.layout
         markers, links, present, link_present, boxes = self.rows
         fields = (math.nan, layout.n_joints, layout.n_links)
         return [
-            Skeleton(i, stamp, frame, layout, markers[p], links[p], present[p], link_present[p],
-                     fields[0], boxes[p], *fields[1:])
-            for p, i in enumerate(shape.arranged.skeleton_ids, offset)  # type: ignore[union-attr]
+            Skeleton(self.bodies[p], stamp, frame, layout, markers[p], links[p], present[p],
+                     link_present[p], fields[0], boxes[p], *fields[1:])
+            for p in range(self.people[m], self.people[m + 1])
         ]  # fmt: skip
 
 
