@@ -265,7 +265,8 @@ class _McapSource(_Source):
         )  # fmt: skip
         waiting = _Located(b"", np.empty((0, _COLUMNS), dtype=np.int64))
         for k, chunk in enumerate(chunks):
-            located = waiting.join(self._chunk_messages(chunk.chunk_start_offset, table))
+            records = self._chunk_records(chunk.chunk_start_offset)
+            located = waiting.join(self._locate(records, chunk.chunk_start_offset, table))
             ready, waiting = located.split(
                 (chunks[k + 1].message_start_time, chunks[k + 1].chunk_start_offset)
                 if k + 1 < len(chunks) else None
@@ -273,8 +274,8 @@ class _McapSource(_Source):
             if len(ready.rows):
                 yield ready.batch(tuple(names), tuple(types))
 
-    def _chunk_messages(self, offset: int, table: dict[int, int]) -> _Located:
-        """The messages of the chunk record at ``offset`` whose channel is in ``table``."""
+    def _chunk_records(self, offset: int) -> bytes:
+        """The decompressed records of the chunk record at ``offset``."""
         self.stream.seek(offset)
         head = self.stream.read(_CHUNK_HEAD.size)
         if len(head) < _CHUNK_HEAD.size or head[0] != _CHUNK_OPCODE:
@@ -285,7 +286,10 @@ class _McapSource(_Source):
         compression = rest[:name_length].decode("utf-8", "replace")
         (data_length,) = _U64.unpack_from(rest, name_length)
         data = memoryview(rest)[name_length + 8 : name_length + 8 + data_length]
-        records = self._decompress(compression, data, size, offset)
+        return self._decompress(compression, data, size, offset)
+
+    def _locate(self, records: bytes, offset: int, table: dict[int, int]) -> _Located:
+        """The messages in the records of the chunk at ``offset`` whose channel is in ``table``."""
         rows = []
         pos, end = 0, len(records)
         channels = self.summary.channels if self.summary is not None else {}
