@@ -37,10 +37,15 @@ from typing import Any
 import numpy as np
 import yaml
 
-from hiros_core.codec import MarkerArrayData, MarkerFields, decode_marker_fields
+from hiros_core.codec import (
+    MarkerArrayData,
+    MarkerFields,
+    decode_marker_fields,
+    encode_marker_array,
+)
 from hiros_core.errors import CodecError, ConfigError, LayoutError
 from hiros_core.layouts import AZURE_KINECT, Layout, get_layout
-from hiros_core.model import STATE_WIDTH, Skeleton, SkeletonGroup
+from hiros_core.model import BOX_WIDTH, STATE_WIDTH, Skeleton, SkeletonGroup, link_rows
 
 __all__ = [
     "ADD",
@@ -163,7 +168,7 @@ def _compiled_available() -> bool:
 
 
 def warm_up() -> None:
-    """Load the compiled frame path before the first frame, when numba is loaded.
+    """Load the compiled frame paths (live and recording) before the first frame, with numba.
 
     From numba's disk cache this takes ~20 ms; the very first time after an install or a
     change of the kernel, ~2 s of compilation, which a live node should not spend on its
@@ -173,7 +178,10 @@ def warm_up() -> None:
         return
     positions = np.zeros((1, AZURE_KINECT.n_joints, 3))
     people = Skeleton.many_from_positions(positions, AZURE_KINECT, skeleton_ids=[1])
-    DriverBridge().update(group_to_driver_markers(SkeletonGroup(1, "warm_up", people)))
+    markers = group_to_driver_markers(SkeletonGroup(1, "warm_up", people))
+    DriverBridge().update(markers)
+    raw = encode_marker_array(markers)  # the batch kernel of recordings
+    DriverBridge().update_batch(raw, np.array([0]), np.array([len(raw)]))
 
 
 @cache
@@ -253,6 +261,41 @@ class DriverBridge:
 
         """
         return self.update(decode_marker_fields(data))
+
+    def update_batch(
+        self, buffer: bytes, starts: np.ndarray, ends: np.ndarray
+    ) -> list[SkeletonGroup | None]:
+        """``update_bytes`` of the messages ``buffer[starts[i]:ends[i]]``, in order, at once.
+
+        For a recording: with numba loaded, the batch's usual driver messages (see
+        ``compiled.driver_people``) are read by two compiled calls and their people built in
+        one set of arrays; every other message takes ``update_bytes``. Same groups and drops
+        as ``update_bytes`` message after message, except that bytes the codec rejects give
+        None and count ``undecodable`` here instead of raising.
+        """
+        if not _compiled_available():
+            return [self._update_counted(buffer[a:b]) for a, b in zip(starts, ends, strict=True)]
+        people = _BatchPeople(self, buffer, starts, ends)
+        out: list[SkeletonGroup | None] = []
+        for m, (start, end) in enumerate(zip(starts.tolist(), ends.tolist(), strict=True)):
+            if not people.made[m]:
+                out.append(self._update_counted(buffer[start:end]))
+            elif not self._accept_stamp(stamp := people.stamps[m]):
+                out.append(None)
+            else:
+                if people.mixed[m]:
+                    self.drops["mixed_stamps"] += 1
+                frame = self.params.frame_id or people.frame(m)
+                out.append(SkeletonGroup(stamp, frame, people.skeletons(m, stamp, frame)))
+        return out
+
+    def _update_counted(self, data: bytes) -> SkeletonGroup | None:
+        """``update_bytes``, counting ``undecodable`` instead of raising."""
+        try:
+            return self.update_bytes(data)
+        except CodecError:
+            self.drops["undecodable"] += 1
+            return None
 
     def update(self, data: MarkerArrayData | MarkerFields) -> SkeletonGroup | None:
         """Convert one MarkerArray; None when the whole message is dropped (see ``drops``)."""
@@ -442,6 +485,67 @@ class DriverBridge:
 
 
 _ID_SHAPE_CAPACITY = 64
+
+
+class _BatchPeople:
+    """The people of a batch's usual driver messages (``DriverBridge.update_batch``).
+
+    Read by ``compiled.driver_messages`` and ``compiled.driver_people``; per message ``made``
+    (its people are here), ``stamps`` and ``mixed`` (markers with other stamps). Each
+    skeleton's arrays are views of distinct rows of the batch's arrays, as
+    ``Skeleton.many_from_rows`` gives for one message.
+    """
+
+    def __init__(
+        self, bridge: DriverBridge, buffer: bytes, starts: np.ndarray, ends: np.ndarray
+    ) -> None:
+        from hiros_azure_bridge import compiled
+
+        raw = np.frombuffer(buffer, dtype=np.uint8)
+        params = bridge.params
+        parsed = compiled.driver_messages(raw, starts, ends, float(params.position_scale))
+        first, usual, mixed, _, stamps, spans = parsed[:6]
+        self.buffer, self.spans, self.first = buffer, spans, first[:-1].tolist()
+        self.texts: dict[bytes, str] = {}
+        found = np.flatnonzero(usual)
+        namespace = spans[first[found[0]], 2:] if len(found) else np.zeros(2, dtype=np.int64)
+        self.layout, table = bridge._lookup(self._text(*namespace.tolist()))
+        made, people, bodies, markers, present = compiled.driver_people(
+            raw, parsed, namespace, self.layout.n_joints, params.id_stride,
+            params.id_scheme == "joint_major",
+            np.empty(0, dtype=np.int64) if table is None else table.astype(np.int64),
+            float(params.position_scale), float(params.confidence_levels),
+        )  # fmt: skip
+        links, link_present = link_rows(markers, present, self.layout)
+        boxes = np.full((len(markers), BOX_WIDTH), np.nan)
+        self.made, self.mixed = made.tolist(), mixed.tolist()
+        self.stamps = stamps[first[:-1]].tolist()
+        self.people, self.bodies = people.tolist(), bodies.tolist()
+        self.rows = (list(markers), list(links), list(present), list(link_present), list(boxes))
+
+    def _text(self, first: int, stop: int) -> str:
+        """The ASCII text at ``buffer[first:stop]``, decoded once per distinct text."""
+        raw = self.buffer[first:stop]
+        text = self.texts.get(raw)
+        if text is None:
+            text = self.texts[raw] = raw.decode("ascii")
+        return text
+
+    def frame(self, m: int) -> str:
+        """Frame id of message ``m``'s first marker."""
+        span = self.spans[self.first[m]]
+        return self._text(int(span[0]), int(span[1]))
+
+    def skeletons(self, m: int, stamp: int, frame: str) -> list[Skeleton]:
+        """The skeletons of message ``m`` (one with ``made[m]``), ``many_from_rows``' way."""
+        layout = self.layout
+        markers, links, present, link_present, boxes = self.rows
+        fields = (math.nan, layout.n_joints, layout.n_links)
+        return [
+            Skeleton(self.bodies[p], stamp, frame, layout, markers[p], links[p], present[p],
+                     link_present[p], fields[0], boxes[p], *fields[1:])
+            for p in range(self.people[m], self.people[m + 1])
+        ]  # fmt: skip
 
 
 @dataclass(frozen=True)

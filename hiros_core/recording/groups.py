@@ -1,23 +1,39 @@
 """Skeleton streams of a recording: SkeletonGroup topics and Azure-driver MarkerArray topics.
 
 The one place where recorded bytes become the model offline: SkeletonGroup messages are
-decoded by the codec, driver MarkerArrays by the codec and then a ``DriverBridge`` per topic,
-exactly what the bridge node does live, so offline and live runs see the same groups.
+decoded by the codec, driver MarkerArrays by a ``DriverBridge`` per topic, exactly what the
+bridge node does live, so offline and live runs see the same groups. Messages are read a batch
+(an MCAP chunk) at a time, and each topic's driver messages of a batch go to its bridge
+together (``DriverBridge.update_batch``): bridges of different topics share no state, so this
+gives the groups of a message-by-message reading, in the same order.
 """
 
 from __future__ import annotations
 
+import contextlib
 from collections import Counter
 from collections.abc import Iterable, Iterator
 from pathlib import Path
+from typing import TYPE_CHECKING
+
+import numpy as np
 
 from hiros_core.codec import decode_group
 from hiros_core.errors import CodecError
 from hiros_core.model import SkeletonGroup
-from hiros_core.recording.reader import RecordingReader
+from hiros_core.recording.reader import MessageBatch, RecordingReader
 from hiros_core.recording.writer import MARKER_ARRAY, SKELETON_GROUP
 
-__all__ = ["DRIVER_TOPIC_SUFFIX", "group_topics", "iter_groups", "source_name"]
+if TYPE_CHECKING:
+    from hiros_azure_bridge.driver_format import DriverBridge, DriverBridgeParams
+
+__all__ = [
+    "DRIVER_TOPIC_SUFFIX",
+    "group_topics",
+    "iter_groups",
+    "iter_logged_groups",
+    "source_name",
+]
 
 DRIVER_TOPIC_SUFFIX = "body_tracking_data"
 """Last name of the Azure Kinect driver's skeleton topic (``/<cam>/body_tracking_data``)."""
@@ -50,7 +66,7 @@ def iter_groups(
     recording: str | Path | RecordingReader,
     *,
     topics: Iterable[str] | None = None,
-    bridge_params: object | None = None,
+    bridge_params: DriverBridgeParams | None = None,
     drops: Counter[str] | None = None,
 ) -> Iterator[tuple[str, SkeletonGroup]]:
     """``(source, group)`` for every skeleton message, in log-time order.
@@ -68,8 +84,25 @@ def iter_groups(
         ``/<cam>/skeletons``, else the topic; ``group`` is in the message's frame and clock.
 
     """
-    from hiros_azure_bridge.driver_format import DriverBridge
+    logged = iter_logged_groups(recording, topics=topics, bridge_params=bridge_params, drops=drops)
+    with contextlib.closing(logged):
+        for source, group, _ in logged:
+            yield source, group
 
+
+def iter_logged_groups(
+    recording: str | Path | RecordingReader,
+    *,
+    topics: Iterable[str] | None = None,
+    bridge_params: DriverBridgeParams | None = None,
+    drops: Counter[str] | None = None,
+) -> Iterator[tuple[str, SkeletonGroup, int]]:
+    """``iter_groups`` with each group's log time (when the recorder received it), in ns.
+
+    A reader whose ``messages`` method was replaced on the instance (to watch each message
+    go by) is read through it, one message at a time, so that it sees each message just
+    before its group is yielded.
+    """
     reader = recording if isinstance(recording, RecordingReader) else RecordingReader(recording)
     drops = drops if drops is not None else Counter()
     wanted = (
@@ -78,27 +111,51 @@ def iter_groups(
         else {t: reader.topics[t] for t in topics if t in reader.topics}
     )
     bridges: dict[str, DriverBridge] = {}
+    batches = (
+        (MessageBatch.of([message]) for message in reader.messages(wanted))
+        if "messages" in vars(reader)
+        else reader.batches(wanted)
+    )
     try:
-        for message in reader.messages(wanted):
-            source = source_name(message.topic)
-            try:
-                if message.msgtype == SKELETON_GROUP:
-                    yield source, decode_group(message.data)
-                    continue
-                if message.msgtype != MARKER_ARRAY:
-                    drops["not_skeletons"] += 1
-                    continue
-                bridge = bridges.get(message.topic)
-                if bridge is None:
-                    bridge = bridges[message.topic] = DriverBridge(bridge_params)
-                group = bridge.update_bytes(message.data)
-            except CodecError:
-                drops["undecodable"] += 1
-                continue
-            if group is not None:
-                yield source, group
+        for batch in batches:
+            groups = _batch_groups(batch, bridges, bridge_params, drops)
+            sources = [source_name(topic) for topic in batch.topics]
+            found = zip(batch.channels.tolist(), batch.log_times_ns.tolist(), groups, strict=True)
+            for channel, log_time, group in found:
+                if group is not None:
+                    yield sources[channel], group, log_time
     finally:
         for counter in (reader.drops, *(b.drops for b in bridges.values())):
             drops.update({reason: n for reason, n in counter.items() if n})
         if reader is not recording:
             reader.close()
+
+
+def _batch_groups(
+    batch: MessageBatch,
+    bridges: dict[str, DriverBridge],
+    bridge_params: DriverBridgeParams | None,
+    drops: Counter[str],
+) -> list[SkeletonGroup | None]:
+    """The group of each message of ``batch`` (None: dropped, the reason counted)."""
+    from hiros_azure_bridge.driver_format import DriverBridge
+
+    groups: list[SkeletonGroup | None] = [None] * len(batch)
+    for channel, (topic, msgtype) in enumerate(zip(batch.topics, batch.msgtypes, strict=True)):
+        rows = np.flatnonzero(batch.channels == channel)
+        if msgtype == SKELETON_GROUP:
+            for i in rows.tolist():
+                try:
+                    groups[i] = decode_group(batch.data(i))
+                except CodecError:
+                    drops["undecodable"] += 1
+        elif msgtype == MARKER_ARRAY:
+            bridge = bridges.get(topic)
+            if bridge is None:
+                bridge = bridges[topic] = DriverBridge(bridge_params)
+            made = bridge.update_batch(batch.buffer, batch.starts[rows], batch.ends[rows])
+            for i, group in zip(rows.tolist(), made, strict=True):
+                groups[i] = group
+        else:
+            drops["not_skeletons"] += len(rows)
+    return groups

@@ -3,13 +3,19 @@
 ``RecordingReader`` streams every message as raw CDR bytes with its topic, type and log time,
 in log-time order across topics and files, holding only a few chunks in memory at once:
 
-* MCAP (single file or a rosbag2 folder's files) is read with the ``mcap`` library through its
-  chunk index. A file without a valid summary (the recorder was killed) is read straight
-  through, in file order, up to its last complete record; what could not be read is counted
-  ``truncated`` in ``drops`` and described in ``problems``.
+* MCAP (single file or a rosbag2 folder's files) is read through its chunk index: each chunk
+  is read and decompressed once and its message records located without a Python object per
+  message, in the order the ``mcap`` library's reader gives (log time, then chunk position,
+  then position in the chunk). A file without a valid summary (the recorder was killed) is
+  read straight through by the ``mcap`` library, in file order, up to its last complete
+  record; what could not be read is counted ``truncated`` in ``drops`` and described in
+  ``problems``.
 * sqlite3 (``.db3``) and ROS 1 bags are read with ``rosbags``' ``AnyReader``. ROS 1 messages
   are converted to ROS 2 CDR of the ROS 2 Jazzy type of the same name (a ROS 1 header's
   ``seq`` goes, newer fields get defaults), so every consumer sees one wire format.
+
+``RecordingReader.batches`` gives the same messages as ``MessageBatch``es (one MCAP chunk's
+messages in one buffer), for consumers that decode many messages per call.
 """
 
 from __future__ import annotations
@@ -19,18 +25,22 @@ import heapq
 import io
 import struct
 from collections import Counter
-from collections.abc import Callable, Iterable, Iterator
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from types import TracebackType
 from typing import Any
 
+import numpy as np
 import yaml
 
 from hiros_core.errors import RecordingError
 from hiros_core.recording.msgdefs import normalize_msgtype
 
-__all__ = ["RecordedMessage", "RecordingReader"]
+__all__ = ["MessageBatch", "RecordedMessage", "RecordingReader"]
+
+_BATCH_SIZE = 256
+"""Messages per batch of a recording read one message at a time (not an indexed MCAP)."""
 
 
 @dataclass(frozen=True)
@@ -51,6 +61,78 @@ class RecordedMessage:
     data: bytes
 
 
+@dataclass(frozen=True, eq=False)
+class MessageBatch:
+    """Consecutive messages of a recording, in log-time order, whose bytes share one buffer.
+
+    An MCAP chunk's messages come as one batch without a Python object per message, so a
+    consumer can decode many of them per call (``iter_groups`` does).
+
+    Attributes:
+        topics: topic of each channel index.
+        msgtypes: ``package/msg/Type`` of each channel index.
+        channels: ``(n,)`` channel index of each message.
+        log_times_ns: ``(n,)`` int64 log times.
+        buffer: the bytes holding every message's data.
+        starts: ``(n,)`` int64 where each message's CDR bytes start in ``buffer``.
+        ends: ``(n,)`` int64 where they end.
+
+    """
+
+    topics: tuple[str, ...]
+    msgtypes: tuple[str, ...]
+    channels: np.ndarray
+    log_times_ns: np.ndarray
+    buffer: bytes
+    starts: np.ndarray
+    ends: np.ndarray
+
+    def __len__(self) -> int:
+        return len(self.channels)
+
+    def data(self, index: int) -> bytes:
+        """The CDR bytes of message ``index``."""
+        return self.buffer[self.starts[index] : self.ends[index]]
+
+    def messages(self) -> Iterator[RecordedMessage]:
+        """The batch as ``RecordedMessage``s."""
+        topics, msgtypes, buffer = self.topics, self.msgtypes, self.buffer
+        rows = zip(
+            self.channels.tolist(), self.log_times_ns.tolist(), self.starts.tolist(),
+            self.ends.tolist(), strict=True,
+        )  # fmt: skip
+        for channel, log_time, start, end in rows:
+            yield RecordedMessage(topics[channel], msgtypes[channel], log_time, buffer[start:end])
+
+    @classmethod
+    def of(cls, messages: Sequence[RecordedMessage]) -> MessageBatch:
+        """A batch of ``messages`` (their bytes copied into one buffer)."""
+        table: dict[tuple[str, str], int] = {}
+        channels = [table.setdefault((m.topic, m.msgtype), len(table)) for m in messages]
+        ends = np.cumsum([len(m.data) for m in messages], dtype=np.int64)
+        return cls(
+            topics=tuple(topic for topic, _ in table),
+            msgtypes=tuple(msgtype for _, msgtype in table),
+            channels=np.array(channels, dtype=np.intp),
+            log_times_ns=np.array([m.log_time_ns for m in messages], dtype=np.int64),
+            buffer=b"".join(m.data for m in messages),
+            starts=ends - [len(m.data) for m in messages],
+            ends=ends,
+        )
+
+
+def _batched(messages: Iterable[RecordedMessage]) -> Iterator[MessageBatch]:
+    """Messages read one at a time, as batches of up to ``_BATCH_SIZE``."""
+    batch: list[RecordedMessage] = []
+    for message in messages:
+        batch.append(message)
+        if len(batch) == _BATCH_SIZE:
+            yield MessageBatch.of(batch)
+            batch = []
+    if batch:
+        yield MessageBatch.of(batch)
+
+
 class _Source:
     """One readable file or folder: topics up front, then a time-ordered message stream."""
 
@@ -58,6 +140,10 @@ class _Source:
 
     def messages(self, topics: set[str] | None) -> Iterator[RecordedMessage]:
         raise NotImplementedError
+
+    def batches(self, topics: set[str] | None) -> Iterator[MessageBatch]:
+        """``messages`` as batches."""
+        return _batched(self.messages(topics))
 
     def close(self) -> None:
         """Release open files."""
@@ -144,13 +230,155 @@ class _McapSource(_Source):
         if self.summary is None or not self.summary.chunk_indexes:
             yield from self._scan(topics)
             return
-        wanted = list(topics) if topics is not None else None
-        for schema, channel, message in self.reader.iter_messages(topics=wanted):
-            msgtype = normalize_msgtype(schema.name) if schema else "unknown/msg/Unknown"
-            yield RecordedMessage(channel.topic, msgtype, message.log_time, message.data)
+        for batch in self._chunk_batches(topics):
+            yield from batch.messages()
+
+    def batches(self, topics: set[str] | None) -> Iterator[MessageBatch]:
+        if self.summary is None or not self.summary.chunk_indexes:
+            return super().batches(topics)
+        return self._chunk_batches(topics)
+
+    def _chunk_batches(self, topics: set[str] | None) -> Iterator[MessageBatch]:
+        """The messages of ``topics``, a chunk at a time, in the ``mcap`` reader's order.
+
+        That order is (log time, chunk offset, position in the chunk). Chunks are read by
+        start time; the messages of the chunks read so far that come before the next chunk's
+        start are complete and go out; the rest (chunks that overlap in time) wait for it.
+        """
+        summary = self.summary
+        assert summary is not None
+        table: dict[int, int] = {}
+        names: list[str] = []
+        types: list[str] = []
+        for channel_id, channel in summary.channels.items():
+            if topics is None or channel.topic in topics:
+                schema = summary.schemas.get(channel.schema_id)
+                table[channel_id] = len(names)
+                names.append(channel.topic)
+                types.append(normalize_msgtype(schema.name) if schema else "unknown/msg/Unknown")
+        chunks = sorted(
+            (
+                c for c in summary.chunk_indexes
+                if not c.message_index_offsets or any(i in table for i in c.message_index_offsets)
+            ),
+            key=lambda c: (c.message_start_time, c.chunk_start_offset),
+        )  # fmt: skip
+        waiting = _Located(b"", np.empty((0, _COLUMNS), dtype=np.int64))
+        for k, chunk in enumerate(chunks):
+            records = self._chunk_records(chunk.chunk_start_offset)
+            located = waiting.join(self._locate(records, chunk.chunk_start_offset, table))
+            ready, waiting = located.split(
+                (chunks[k + 1].message_start_time, chunks[k + 1].chunk_start_offset)
+                if k + 1 < len(chunks) else None
+            )  # fmt: skip
+            if len(ready.rows):
+                yield ready.batch(tuple(names), tuple(types))
+
+    def _chunk_records(self, offset: int) -> bytes:
+        """The decompressed records of the chunk record at ``offset``."""
+        self.stream.seek(offset)
+        head = self.stream.read(_CHUNK_HEAD.size)
+        if len(head) < _CHUNK_HEAD.size or head[0] != _CHUNK_OPCODE:
+            msg = f"{self.path}: its index points at byte {offset}, where no chunk starts"
+            raise RecordingError(msg)
+        _, length, _, _, size, _, name_length = _CHUNK_HEAD.unpack(head)
+        rest = self.stream.read(length - _CHUNK_HEAD.size + 9)
+        compression = rest[:name_length].decode("utf-8", "replace")
+        (data_length,) = _U64.unpack_from(rest, name_length)
+        data = memoryview(rest)[name_length + 8 : name_length + 8 + data_length]
+        return self._decompress(compression, data, size, offset)
+
+    def _locate(self, records: bytes, offset: int, table: dict[int, int]) -> _Located:
+        """The messages in the records of the chunk at ``offset`` whose channel is in ``table``."""
+        rows = []
+        pos, end = 0, len(records)
+        channels = self.summary.channels if self.summary is not None else {}
+        while pos < end:
+            if pos + 9 > end:
+                break
+            opcode, length = _RECORD_HEAD.unpack_from(records, pos)
+            body = pos + 9
+            pos = body + length
+            if opcode != _MESSAGE_OPCODE or pos > end or length < _MESSAGE_HEAD.size:
+                continue
+            channel_id, _, log_time, _ = _MESSAGE_HEAD.unpack_from(records, body)
+            index = table.get(channel_id)
+            if index is not None:
+                rows.append((log_time, offset, body, index, body + _MESSAGE_HEAD.size, pos))
+            elif channel_id not in channels:
+                self.drops["unknown_channel"] += 1
+        if pos != end:
+            msg = f"{self.path}: the chunk at byte {offset} is damaged (a record runs past its end)"
+            raise RecordingError(msg)
+        return _Located(records, np.array(rows, dtype=np.int64).reshape(-1, _COLUMNS))
+
+    def _decompress(self, compression: str, data: memoryview, size: int, offset: int) -> bytes:
+        """A chunk's records, as the ``mcap`` library decompresses them."""
+        try:
+            if compression == "zstd":
+                import zstandard
+
+                return zstandard.decompress(data, max_output_size=size)
+            if compression == "lz4":
+                import lz4.frame
+
+                return lz4.frame.decompress(data)
+        except Exception as exc:  # zstandard and lz4 raise their own error types
+            msg = f"{self.path}: cannot decompress the chunk at byte {offset}: {exc}"
+            raise RecordingError(msg) from exc
+        if compression:
+            msg = f"{self.path}: chunk compression {compression!r} is not supported (zstd or lz4)"
+            raise RecordingError(msg)
+        return bytes(data)
 
     def close(self) -> None:
         self.stream.close()
+
+
+_CHUNK_OPCODE = 0x06
+_MESSAGE_OPCODE = 0x05
+_RECORD_HEAD = struct.Struct("<BQ")  # opcode, record length
+# chunk: opcode, length, message start/end time, uncompressed size, crc, compression length
+_CHUNK_HEAD = struct.Struct("<BQQQQII")
+_MESSAGE_HEAD = struct.Struct("<HIQQ")  # channel id, sequence, log time, publish time
+_U64 = struct.Struct("<Q")
+_COLUMNS = 6  # log time, chunk offset, record position, channel index, data start, data end
+
+
+@dataclass(frozen=True)
+class _Located:
+    """Messages found in decompressed chunk records: the bytes and one row per message."""
+
+    records: bytes
+    rows: np.ndarray  # (n, _COLUMNS) int64
+
+    def join(self, other: _Located) -> _Located:
+        """Both sets of messages, with one buffer holding both."""
+        if not len(self.rows):
+            return other
+        shifted = other.rows.copy()
+        shifted[:, 4:] += len(self.records)
+        return _Located(self.records + other.records, np.concatenate([self.rows, shifted]))
+
+    def split(self, limit: tuple[int, int] | None) -> tuple[_Located, _Located]:
+        """Sorted messages before ``limit`` (log time, chunk offset), and the others."""
+        rows = self.rows[np.lexsort((self.rows[:, 2], self.rows[:, 1], self.rows[:, 0]))]
+        if limit is None:
+            return _Located(self.records, rows), _Located(b"", rows[:0])
+        time, offset = limit
+        ready = (rows[:, 0] < time) | ((rows[:, 0] == time) & (rows[:, 1] < offset))
+        later = rows[~ready]
+        kept = b"".join(self.records[a:b] for a, b in later[:, 4:].tolist())
+        ends = np.cumsum(later[:, 5] - later[:, 4])
+        later[:, 4], later[:, 5] = ends - (later[:, 5] - later[:, 4]), ends
+        return _Located(self.records, rows[ready]), _Located(kept, later)
+
+    def batch(self, topics: tuple[str, ...], msgtypes: tuple[str, ...]) -> MessageBatch:
+        """The messages as a batch, in row order."""
+        return MessageBatch(
+            topics, msgtypes, self.rows[:, 3].astype(np.intp), self.rows[:, 0].copy(),
+            self.records, self.rows[:, 4].copy(), self.rows[:, 5].copy(),
+        )  # fmt: skip
 
 
 class _RosbagsSource(_Source):
@@ -302,6 +530,17 @@ class RecordingReader:
             yield from streams[0]
         else:
             yield from heapq.merge(*streams, key=lambda m: m.log_time_ns)
+
+    def batches(self, topics: Iterable[str] | None = None) -> Iterator[MessageBatch]:
+        """``messages(topics)`` as ``MessageBatch``es, same messages in the same order.
+
+        A recording of one indexed MCAP file comes a chunk at a time without per-message
+        objects; any other recording comes ``messages`` grouped a few hundred at a time.
+        """
+        wanted = set(topics) if topics is not None else None
+        if len(self._sources) == 1:
+            return self._sources[0].batches(wanted)
+        return _batched(self.messages(wanted))
 
     def __iter__(self) -> Iterator[RecordedMessage]:
         return self.messages()

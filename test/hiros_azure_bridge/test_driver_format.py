@@ -273,3 +273,92 @@ def test_compiled_frame_path_equals_the_numpy_path(monkeypatch):
         assert fast_drops["nan_position"] == 1
         for a, b in zip(fast, slow, strict=True):
             assert (a is None and b is None) or a.same_as(b)
+
+
+def _batch_frames():
+    """Driver messages of every kind ``update_batch`` meets, as CDR bytes, in stamp order."""
+    frames = []
+    for step in range(14):
+        stamp = STAMP + step * 33_000_000
+        group = _group(3, stamp=stamp, seed=20 + step)
+        group.skeletons[0].orientations[2] = np.nan  # a zero quaternion on the wire
+        group.skeletons[2].confidences[5] = np.nan  # no level text
+        if step in {2, 3}:  # a missing joint: ids not whole bodies, still usual
+            group.skeletons[1].marker_present[7] = False
+            group.skeletons[1].markers[7] = np.nan
+            group.skeletons[1].update_links()
+        data = group_to_driver_markers(group)
+        if step == 4:  # a NaN position: counted and dropped by the general path
+            data.poses[5, 0] = np.nan
+        if step == 5:  # out of order and a duplicate
+            data.ids[[0, 1]] = data.ids[[1, 0]]
+            data.ids[40] = data.ids[39]
+        if step == 6:  # DELETE markers among the joints
+            data.actions[10:12] = DELETE
+        if step == 7:  # texts that are no level, or one the codec must judge
+            data.texts[3], data.texts[4] = "x", " 2"
+        if step == 8:  # mixed stamps, a non-ASCII frame id
+            data.stamps_ns[9] += 1
+            data.frame_ids = ["kamera_ü"] * len(data)
+        if step == 9:  # the same stamp again: dropped whole
+            data.stamps_ns[:] = stamp - 33_000_000
+        if step == 10:  # an unknown joint id
+            data.ids[-1] = data.ids[-1] // 100 * 100 + 60
+        frames.append(encode_marker_array(data))
+        if step == 11:  # another layout in the namespace, an empty array, a DELETEALL
+            other = group_to_driver_markers(_group(1, stamp + 1, KINECT_V2))
+            frames.append(encode_marker_array(other))
+            frames.append(encode_marker_array(MarkerArrayData.new(0)))
+            frames.append(encode_marker_array(_markers([0], actions=[DELETEALL],
+                                                       stamps=[stamp + 2])))  # fmt: skip
+        if step == 12:  # bytes no codec reads
+            frames.append(frames[-1][:-40])
+    return frames
+
+
+def _one_at_a_time(bridge, frames):
+    """update_bytes of each frame, with update_batch's convention for undecodable bytes."""
+    out = []
+    for raw in frames:
+        try:
+            out.append(bridge.update_bytes(raw))
+        except CodecError:
+            bridge.drops["undecodable"] += 1
+            out.append(None)
+    return out
+
+
+@pytest.mark.parametrize(
+    "params",
+    [
+        DriverBridgeParams(),
+        DriverBridgeParams(position_scale=0.001, frame_id="cam"),
+        DriverBridgeParams(joint_names=list(reversed(AZURE_KINECT.joint_names))),
+    ],
+)
+def test_batch_path_equals_message_after_message(params):
+    """update_batch (compiled, a batch at a time) == update_bytes frame after frame."""
+    pytest.importorskip("numba")
+    from hiros_azure_bridge import compiled
+
+    frames = _batch_frames()
+    ends = np.cumsum([len(f) for f in frames])
+    starts = ends - [len(f) for f in frames]
+    buffer = b"".join(frames)
+    one, batch = DriverBridge(params), DriverBridge(params)
+    expected = _one_at_a_time(one, frames)
+    got = batch.update_batch(buffer, starts, ends)
+    half = len(frames) // 2  # the bridge's stamp carries over from batch to batch
+    again = DriverBridge(params)
+    split = again.update_batch(buffer, starts[:half], ends[:half])
+    split += again.update_batch(buffer, starts[half:], ends[half:])
+    for a, b, c in zip(expected, got, split, strict=True):
+        assert (a is None and b is None) or a.same_as(b)
+        assert (a is None and c is None) or a.same_as(c)
+    assert batch.drops == one.drops == again.drops
+    met = {"nan_position", "duplicate_marker", "delete_marker", "mixed_stamps", "repeated_stamp"}
+    assert met | {"empty_array", "undecodable", "unknown_joint"} <= set(one.drops)
+    # the compiled reading takes the usual frames itself (the test above could not tell)
+    parsed = compiled.driver_messages(np.frombuffer(buffer, np.uint8), starts, ends, 1.0)
+    assert parsed[1][[0, 1, 2, 3, 9, 12]].all()
+    assert not parsed[1][[4, 6, 7, 8]].any()

@@ -18,6 +18,7 @@ from hiros_core.recording import (
     RecordingReader,
     RecordingWriter,
     iter_groups,
+    iter_logged_groups,
 )
 
 
@@ -127,6 +128,54 @@ def test_messages_out_of_order_in_the_file_come_out_in_time_order(tmp_path, samp
         times = [m.log_time_ns for m in reader.messages()]
     assert times == sorted(times)
     assert len(times) == 12
+
+
+def test_chunk_reading_keeps_the_mcap_readers_order(tmp_path, samples):
+    """Overlapping chunks and equal log times: the order of the ``mcap`` library's reader."""
+    path = tmp_path / "overlap.mcap"
+    with RecordingWriter(path, chunk_size=60_000) as writer:
+        for index in (3, 1, 0, 2, 5, 4, 4, 9, 6, 8, 7, 7):
+            for camera in ("k01", "k02"):
+                group = samples.make_group(index, camera)
+                writer.write_group(f"/{camera}/skeletons", group, samples.T0 + index)
+    with path.open("rb") as stream:
+        reader = make_reader(stream)
+        assert len(reader.get_summary().chunk_indexes) > 3
+        expected = [(c.topic, m.log_time, m.data) for _, c, m in reader.iter_messages()]
+        only_k02 = [e for e in expected if e[0] == "/k02/skeletons"]
+    with RecordingReader(path) as recording:
+        read = [(m.topic, m.log_time_ns, m.data) for m in recording.messages()]
+        batched = [
+            (m.topic, m.log_time_ns, m.data) for b in recording.batches() for m in b.messages()
+        ]
+        some = [(m.topic, m.log_time_ns, m.data) for m in recording.messages({"/k02/skeletons"})]
+    assert read == batched == expected
+    assert some == only_k02
+
+
+def test_logged_groups_and_a_reader_watched_message_by_message(tmp_path, driver_frames):
+    path = tmp_path / "take.mcap"
+    _write(path, driver_frames)
+    with RecordingReader(path) as reader:
+        log_times = [m.log_time_ns for m in reader.messages(["/k01/body_tracking_data"])]
+    logged = list(iter_logged_groups(path, topics=["/k01/body_tracking_data"]))
+    assert [t for _, _, t in logged] == log_times
+    plain = list(iter_groups(path, topics=["/k01/body_tracking_data"]))
+    assert all(a[1].same_as(b[1]) for a, b in zip(logged, plain, strict=True))
+    # a reader whose ``messages`` is replaced sees each message just before its group
+    reader = RecordingReader(path)
+    seen = []
+    read_messages = reader.messages
+
+    def watching(*args, **kwargs):
+        for message in read_messages(*args, **kwargs):
+            seen.append(message.log_time_ns)
+            yield message
+
+    reader.messages = watching
+    with reader:
+        for _, _, log_time in iter_logged_groups(reader):
+            assert seen[-1] == log_time
 
 
 def test_truncated_mcap_reads_what_it_can(tmp_path, driver_frames):
