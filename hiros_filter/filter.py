@@ -38,6 +38,7 @@ from hiros_core.model import Skeleton, SkeletonGroup, link_rows
 from hiros_filter.estimators import ButterworthBank, KalmanBank, rotation_vectors, slerp
 from hiros_filter.lengths import LengthKeeper, held_links
 from hiros_optimizer.kinematics import KinematicTree
+from hiros_optimizer.stacking import stack_frame
 
 __all__ = ["Filter", "FilterParams"]
 
@@ -209,8 +210,9 @@ class Filter:
         batches: dict[str, tuple[list[Skeleton], list[tuple[int, Skeleton]]]] = {}
         seen: set[int] = set()
         max_gap_ns = round(self.params.max_gap * 1e9)
-        for skeleton in group.skeletons:
-            if not self._valid(skeleton, seen):
+        places = stack_frame(group.skeletons, self.drops) if group.skeletons else []
+        for skeleton, place in zip(group.skeletons, places, strict=True):
+            if place is None or not self._valid(skeleton, seen):
                 if skeleton.id < 0 and skeleton.markers.shape[0] == skeleton.layout.n_joints:
                     out.skeletons.append(skeleton.copy())
                 continue
@@ -247,12 +249,7 @@ class Filter:
     # ------------------------------------------------------------------------ internals
 
     def _valid(self, skeleton: Skeleton, seen: set[int]) -> bool:
-        if skeleton.markers.shape[0] != skeleton.layout.n_joints:
-            self.drops["marker rows do not match the layout"] += 1
-            return False
-        if not np.isfinite(skeleton.positions[skeleton.marker_present]).all():
-            self.drops["non-finite position of a present joint"] += 1
-            return False
+        """Whether a usable skeleton (:func:`stack_frame`) has a new track id (else counted)."""
         if skeleton.id < 0:
             self.drops["no track id (passed through)"] += 1
             return False

@@ -25,30 +25,36 @@ Nothing here is compiled at import: numba compiles on the first call (cached on 
 """
 
 # Numba kernels: untyped array arguments passed positionally, long straight-line loops.
-# ruff: noqa: ANN001, ANN202, PLR0912, PLR0915, PLR0917
+# ruff: noqa: ANN001, ANN201, ANN202, PLR0912, PLR0915, PLR0917
 
 from __future__ import annotations
 
 import numpy as np
 from numba import njit
 
-__all__ = ["fit_people"]
+__all__ = ["fit_frame", "fit_people", "learn_frame", "unusable_rows"]
 
 _EPS = 1e-12
+_MIN_VELOCITY_DT = 1e-3  # s; as ``hiros_optimizer.memory``
 
 
-@njit(cache=True)
-def _forward(parents, order, vectors, positions):
-    """Positions from link vectors, root outwards."""
-    for j in order:
+@njit(cache=True, error_model="numpy")
+def _forward(parents, order, vectors, positions, first=0):
+    """Positions from link vectors, root outwards, of the joints from ``order[first]`` on.
+
+    A sweep moves only the links of one depth and below, so the joints above keep their
+    positions (recomputing them would give the same numbers).
+    """
+    for index in range(first, len(order)):
+        j = order[index]
         p = parents[j]
         for k in range(3):
             positions[j, k] = vectors[j, k] if p < 0 else positions[p, k] + vectors[j, k]
 
 
-@njit(cache=True)
-def _subtree_sums(parents, order, values, out):
-    """``out[c] = Σ values[j]`` over ``j`` at and below ``c`` (rows of any width)."""
+@njit(cache=True, error_model="numpy")
+def _subtree_weights(parents, order, values, out):
+    """``out[c] = Σ values[j]`` over ``j`` at and below ``c``, for ``(J,)`` values."""
     out[:] = values
     for index in range(len(order) - 1, -1, -1):
         j = order[index]
@@ -57,7 +63,28 @@ def _subtree_sums(parents, order, values, out):
             out[p] += out[j]
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
+def _subtree_sums(parents, order, values, out, first=0, stop=0):
+    """``out[c] = Σ values[j]`` over ``j`` at and below ``c``, for ``(J, 3)`` rows.
+
+    Only the joints from ``order[first]`` on are summed, and only the joints from
+    ``order[stop]`` on passed to their parents (``stop`` > ``first`` where the parents above
+    ``order[first]`` are not wanted); the additions are those of the full sum, in its order.
+    Element by element: a row expression (``out[p] += out[j]``) allocates a temporary.
+    """
+    for index in range(first, len(order)):
+        j = order[index]
+        for k in range(3):
+            out[j, k] = values[j, k]
+    for index in range(len(order) - 1, max(first, stop) - 1, -1):
+        j = order[index]
+        p = parents[j]
+        if p >= 0:
+            for k in range(3):
+                out[p, k] += out[j, k]
+
+
+@njit(cache=True, error_model="numpy")
 def _cost(positions, targets, total):
     cost = 0.0
     for j in range(len(total)):
@@ -67,7 +94,7 @@ def _cost(positions, targets, total):
     return cost
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _inverse3(m, out):
     """Inverse of a symmetric positive definite 3×3 matrix by cofactors."""
     c00 = m[1, 1] * m[2, 2] - m[1, 2] * m[2, 1]
@@ -86,12 +113,12 @@ def _inverse3(m, out):
     out[2, 2] = (m[0, 0] * m[1, 1] - m[0, 1] * m[1, 0]) * inv
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _initial(parents, order, targets, total, lengths, fallback, vectors, positions):
     """``kinematics._initial_vectors`` of one person."""
     n = len(parents)
     below = np.empty(n)
-    _subtree_sums(parents, order, total, below)
+    _subtree_weights(parents, order, total, below)
     weighted = np.empty((n, 3))
     for j in range(n):
         for k in range(3):
@@ -134,21 +161,24 @@ def _initial(parents, order, targets, total, lengths, fallback, vectors, positio
             positions[j, k] = vector[k] + (positions[p, k] if p >= 0 else 0.0)
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _sweeps(parents, order, level_starts, targets, total, lengths, vectors, positions, sweeps):
     """``kinematics._coordinate_sweeps`` of one person."""
     n = len(parents)
     below = np.empty(n)
-    _subtree_sums(parents, order, total, below)
+    _subtree_weights(parents, order, total, below)
     residual = np.empty((n, 3))
     pull = np.empty((n, 3))
     for _ in range(sweeps):
         for level in range(len(level_starts) - 1):
-            for j in range(n):
+            # Only this depth's links move: the sums below them and the positions from them.
+            first, stop = level_starts[level], level_starts[level + 1]
+            for index in range(first, n):
+                j = order[index]
                 for k in range(3):
                     residual[j, k] = total[j] * (targets[j, k] - positions[j, k])
-            _subtree_sums(parents, order, residual, pull)
-            for index in range(level_starts[level], level_starts[level + 1]):
+            _subtree_sums(parents, order, residual, pull, first, stop)
+            for index in range(first, stop):
                 c = order[index]
                 w = below[c]
                 for k in range(3):
@@ -160,10 +190,10 @@ def _sweeps(parents, order, level_starts, targets, total, lengths, vectors, posi
                             vectors[c, k] = lengths[c] * pull[c, k] / norm
                         else:
                             vectors[c, k] = pull[c, k] / w
-            _forward(parents, order, vectors, positions)
+            _forward(parents, order, vectors, positions, first)
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _basis(vector, length, out):
     """Tangent basis rows (scaled by the length) of a calibrated link; third row zero."""
     d0, d1, d2 = vector[0] / length, vector[1] / length, vector[2] / length
@@ -183,12 +213,12 @@ def _basis(vector, length, out):
     out[2, :] = 0.0
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _gauss_newton(parents, order, targets, total, lengths, vectors, positions, refinements):
     """``kinematics._gauss_newton`` of one person, by elimination over the tree."""
     n = len(parents)
     below = np.empty(n)
-    _subtree_sums(parents, order, total, below)
+    _subtree_weights(parents, order, total, below)
     basis = np.zeros((n, 3, 3))  # rows: the link's parameter directions
     quad = np.empty((n, 3, 3))  # A of each joint's subtree
     linear = np.empty((n, 3))  # b of each joint's subtree
@@ -294,7 +324,42 @@ def _gauss_newton(parents, order, targets, total, lengths, vectors, positions, r
             cost = new_cost
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
+def _fit_person(
+    parents, order, level_starts, measured, weights, lengths, prior, prior_weight, fallback,
+    sweeps, refinements, vectors, positions,
+):  # fmt: skip
+    """The fit of one person: ``(J, 3)`` measured, prior, fallback; ``(J,)`` weights, lengths.
+
+    Writes the link vectors and positions into ``vectors`` and ``positions``.
+    """
+    n = len(parents)
+    targets = np.zeros((n, 3))
+    total = np.zeros(n)
+    for j in range(n):
+        m = measured[j]
+        w = weights[j]
+        finite = np.isfinite(m[0]) and np.isfinite(m[1]) and np.isfinite(m[2])
+        if not finite or not np.isfinite(w) or w < 0:
+            w = 0.0
+        q = prior[j]
+        has_prior = (
+            prior_weight > 0 and np.isfinite(q[0]) and np.isfinite(q[1]) and np.isfinite(q[2])
+        )
+        total[j] = w + (prior_weight if has_prior else 0.0)
+        for k in range(3):
+            value = w * m[k] if w > 0 else 0.0
+            if has_prior:
+                value += prior_weight * q[k]
+            targets[j, k] = value / total[j] if total[j] > 0 else 0.0
+    _initial(parents, order, targets, total, lengths, fallback, vectors, positions)
+    _sweeps(
+        parents, order, level_starts, targets, total, lengths, vectors, positions, sweeps
+    )  # fmt: skip
+    _gauss_newton(parents, order, targets, total, lengths, vectors, positions, refinements)
+
+
+@njit(cache=True, error_model="numpy")
 def _fit(
     parents,
     order,
@@ -311,38 +376,174 @@ def _fit(
     n_people, n = weights.shape
     positions = np.zeros((n_people, n, 3))
     vectors = np.zeros((n_people, n, 3))
-    targets = np.zeros((n, 3))
-    total = np.zeros(n)
     for person in range(n_people):
-        for j in range(n):
-            m = measured[person, j]
-            w = weights[person, j]
-            finite = np.isfinite(m[0]) and np.isfinite(m[1]) and np.isfinite(m[2])
-            if not finite or not np.isfinite(w) or w < 0:
-                w = 0.0
-            q = prior[person, j]
-            has_prior = (
-                prior_weight > 0 and np.isfinite(q[0]) and np.isfinite(q[1]) and np.isfinite(q[2])
-            )
-            total[j] = w + (prior_weight if has_prior else 0.0)
-            for k in range(3):
-                value = w * m[k] if w > 0 else 0.0
-                if has_prior:
-                    value += prior_weight * q[k]
-                targets[j, k] = value / total[j] if total[j] > 0 else 0.0
-        _initial(
-            parents, order, targets, total, lengths[person], fallback[person],
+        _fit_person(
+            parents, order, level_starts, measured[person], weights[person], lengths[person],
+            prior[person], prior_weight, fallback[person], sweeps, refinements,
             vectors[person], positions[person],
         )  # fmt: skip
-        _sweeps(
-            parents, order, level_starts, targets, total, lengths[person], vectors[person],
-            positions[person], sweeps,
-        )  # fmt: skip
-        _gauss_newton(
-            parents, order, targets, total, lengths[person], vectors[person], positions[person],
-            refinements,
-        )  # fmt: skip
     return positions, vectors
+
+
+# --------------------------------------------------------------- one frame of the stage
+# ``hiros_optimizer.memory.Memory``'s numpy steps for all people of a frame in one call: the
+# same formulas in the same order (norms summed x, y, z as numpy does), so the same numbers.
+# Memory arrays: ``positions``, ``velocities``, ``vectors`` ``(S, J, 3)``, ``time_ns`` ``(S,)``,
+# ``timed`` ``(S,)`` (False: no motion known; then positions and vectors are NaN, velocities 0).
+
+
+@njit(cache=True, error_model="numpy")
+def _forget_stale(s, stamp, time_ns, timed, positions, velocities, vectors, timeout):
+    """``Memory.forget_stale`` of memory row ``s``."""
+    if timed[s] and ((stamp - time_ns[s]) * 1e-9 > timeout or stamp < time_ns[s]):
+        timed[s] = False
+        positions[s] = np.nan
+        velocities[s] = 0.0
+        vectors[s] = np.nan
+
+
+@njit(cache=True, error_model="numpy")
+def _remember(s, stamp, seen, fitted, time_ns, timed, positions, velocities, vectors):
+    """``Memory.remember`` of memory row ``s``: ``seen`` ``(J, 3)`` NaN where absent."""
+    was_timed = timed[s]
+    dt = (stamp - time_ns[s]) * 1e-9 if was_timed else 0.0
+    divisor = dt if dt > 0 else 1.0
+    for j in range(seen.shape[0]):
+        for k in range(3):
+            value = seen[j, k]
+            if was_timed:
+                previous = positions[s, j, k]
+                velocity = (value - previous) / divisor
+                if dt >= _MIN_VELOCITY_DT:
+                    velocities[s, j, k] = velocity if np.isfinite(velocity) else 0.0
+                positions[s, j, k] = value if np.isfinite(value) else previous
+            else:
+                velocities[s, j, k] = 0.0
+                positions[s, j, k] = value
+            vectors[s, j, k] = fitted[j, k]
+    time_ns[s] = stamp
+    timed[s] = True
+
+
+@njit(cache=True, error_model="numpy")
+def _norm3(a, b):
+    """``np.linalg.norm(a - b)`` of two 3-vectors (x² + y², then + z², as numpy sums)."""
+    d0, d1, d2 = a[0] - b[0], a[1] - b[1], a[2] - b[2]
+    return np.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
+
+
+@njit(cache=True, error_model="numpy")
+def _weight(confidence, present, floor):
+    """``_stacked_weights`` of one joint: NaN confidence counts 1, at least ``floor``."""
+    if not present:
+        return 0.0
+    c = confidence if np.isfinite(confidence) else 1.0
+    return c if c >= floor else floor
+
+
+@njit(cache=True, error_model="numpy")
+def fit_frame(
+    parents, order, level_starts, markers, present, lengths, rows, stamps, time_ns, timed,
+    positions, velocities, vectors, floor, threshold, distance, prior_weight, timeout,
+    sweeps, refinements,
+):  # fmt: skip
+    """``Memory.fit``: prior, outlier weights, fit, output positions, memory, in place.
+
+    ``markers`` ``(P, J, 20)`` are the output rows (fitted positions written where present),
+    ``lengths`` ``(P, J)`` the people's calibrations, ``rows`` their memory rows.
+    """
+    n_people, n = present.shape
+    measured = np.empty((n, 3))
+    prior = np.empty((n, 3))
+    weights = np.empty(n)
+    broken = np.empty(n, dtype=np.bool_)
+    suspect = np.empty(n, dtype=np.bool_)
+    fitted = np.empty((n, 3))
+    moved = np.empty((n, 3))
+    for i in range(n_people):
+        s = rows[i]
+        _forget_stale(s, stamps[i], time_ns, timed, positions, velocities, vectors, timeout)
+        dt = (stamps[i] - time_ns[s]) * 1e-9 if timed[s] else 0.0
+        dt = max(dt, 0.0)
+        for j in range(n):
+            for k in range(3):
+                measured[j, k] = markers[i, j, 1 + k]
+                prior[j, k] = positions[s, j, k] + velocities[s, j, k] * dt
+            suspect[j] = False
+        # Outliers: ends of a link off its length, when also far from the motion.
+        for j in range(n):
+            p = parents[j]
+            error = np.nan
+            if p >= 0:
+                error = abs(_norm3(measured[j], measured[p]) - lengths[i, j]) / lengths[i, j]
+            broken[j] = error > threshold
+            if broken[j]:
+                suspect[j] = True
+                suspect[p] = True
+        for j in range(n):
+            weight = _weight(markers[i, j, 0], present[i, j], floor)
+            if suspect[j]:
+                ratio = distance / _norm3(measured[j], prior[j])
+                factor = min(1.0, ratio * ratio) if np.isfinite(ratio) else np.nan
+                if np.isfinite(factor):
+                    weight *= factor
+            weights[j] = weight
+        _fit_person(
+            parents, order, level_starts, measured, weights, lengths[i], prior, prior_weight,
+            vectors[s], sweeps, refinements, fitted, moved,
+        )  # fmt: skip
+        for j in range(n):
+            for k in range(3):
+                if present[i, j]:
+                    markers[i, j, 1 + k] = moved[j, k]
+                measured[j, k] = moved[j, k] if present[i, j] else np.nan
+        _remember(s, stamps[i], measured, fitted, time_ns, timed, positions, velocities, vectors)
+
+
+@njit(cache=True, error_model="numpy")
+def learn_frame(
+    parents, markers, present, rows, stamps, time_ns, timed, positions, velocities, vectors,
+    window, filled, timeout,
+):  # fmt: skip
+    """``Memory.learn``: push each person's link lengths into their window, remember them."""
+    n_people, n = present.shape
+    size = window.shape[2]
+    counted = np.empty((n, 3))
+    seen = np.empty((n, 3))
+    no_vectors = np.full((n, 3), np.nan)
+    for i in range(n_people):
+        s = rows[i]
+        _forget_stale(s, stamps[i], time_ns, timed, positions, velocities, vectors, timeout)
+        for j in range(n):
+            keep = _weight(markers[i, j, 0], present[i, j], 0.0) > 0
+            for k in range(3):
+                counted[j, k] = markers[i, j, 1 + k] if keep else np.nan
+                seen[j, k] = markers[i, j, 1 + k] if present[i, j] else np.nan
+        column = filled[s] % size
+        for j in range(n):
+            p = parents[j]
+            window[s, j, column] = _norm3(counted[j], counted[p]) if p >= 0 else np.nan
+        filled[s] += 1
+        _remember(s, stamps[i], seen, no_vectors, time_ns, timed, positions, velocities, vectors)
+
+
+@njit(cache=True, error_model="numpy")
+def unusable_rows(markers, present):
+    """``(P,)`` True where a present joint of ``markers`` ``(P, J, 20)`` has a non-finite position.
+
+    ``hiros_optimizer.stacking.stack_frame``'s check, in one call instead of five numpy ones.
+    """
+    n_people, n = present.shape
+    bad = np.zeros(n_people, dtype=np.bool_)
+    for i in range(n_people):
+        for j in range(n):
+            if present[i, j] and not (
+                np.isfinite(markers[i, j, 1])
+                and np.isfinite(markers[i, j, 2])
+                and np.isfinite(markers[i, j, 3])
+            ):
+                bad[i] = True
+    return bad
 
 
 def fit_people(

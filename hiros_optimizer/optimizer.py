@@ -33,19 +33,19 @@ from __future__ import annotations
 from collections import Counter
 from dataclasses import dataclass
 from functools import lru_cache
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 
 from hiros_core.errors import ConfigError
 from hiros_core.layouts import Layout, get_layout
-from hiros_core.model import Skeleton, SkeletonGroup, link_rows, ns_to_sec
-from hiros_optimizer.kinematics import KinematicTree, fit_fixed_lengths, link_lengths
+from hiros_core.model import Skeleton, SkeletonGroup, link_rows
+from hiros_optimizer.memory import FitSettings, Memory
+from hiros_optimizer.stacking import LayoutRows, stack_frame, with_rows
 
 __all__ = ["Optimizer", "OptimizerParams", "PersonCalibration"]
 
 _MAD_TO_SD = 1.4826  # MAD of a normal distribution times this is its standard deviation
-_MIN_VELOCITY_DT = 1e-3  # s; closer frames (duplicates) would turn noise into huge velocities
 
 
 @dataclass
@@ -174,20 +174,21 @@ class PersonCalibration:
 
 @dataclass
 class _Track:
-    """What the stage remembers about one track id."""
+    """One track id: its layout, its row in that layout's :class:`Memory`, its calibration."""
 
     layout: Layout
-    window: np.ndarray  # (J, N) measured link lengths of the last N frames, NaN where missing
-    filled: int = 0  # frames pushed into the window (saturates at N... and beyond)
+    row: int
     calibration: PersonCalibration | None = None
-    positions: np.ndarray | None = None  # (J, 3) last output
-    velocities: np.ndarray | None = None  # (J, 3) from the last two outputs
-    vectors: np.ndarray | None = None  # (J, 3) last link vectors, to start unseen links from
-    time_ns: int | None = None
 
-    def forget_motion(self) -> None:
-        self.positions = self.velocities = self.vectors = None
-        self.time_ns = None
+
+class _Item(NamedTuple):
+    """A tracked person of the frame: where their result goes and where their rows are."""
+
+    index: int  # in the output group
+    skeleton: Skeleton
+    track_id: int  # the output id
+    track: _Track
+    row: int  # in the frame's stack of the layout
 
 
 class Optimizer:
@@ -206,7 +207,13 @@ class Optimizer:
         self.calibrations: dict[int, PersonCalibration] = {}
         self._tracks: dict[int, _Track] = {}
         self._renames: dict[int, int] = {}
-        self._trees: dict[str, KinematicTree] = {}
+        self._memories: dict[str, Memory] = {}
+        params = self.params
+        self._settings = FitSettings(
+            params.confidence_floor, params.outlier_threshold, params.outlier_distance,
+            params.prior_weight, params.track_timeout, params.sweeps, params.refinements,
+            params.compiled,
+        )  # fmt: skip
         self.new_calibrations: list[int] = []
         """Track ids calibrated by the last :meth:`update` (the node exports on these)."""
         if self.params.compiled:
@@ -229,8 +236,7 @@ class Optimizer:
             track = self._tracks.get(track_id)
             if track is not None:
                 track.calibration = None
-                track.window[:] = np.nan
-                track.filled = 0
+                self._memories[track.layout.name].restart_window(track.row)
         return known
 
     def change_id(self, from_id: int, to_id: int) -> bool:
@@ -299,50 +305,46 @@ class Optimizer:
         """Fit every calibrated person of ``group``; others pass through (module docstring)."""
         self.new_calibrations = []
         out = SkeletonGroup(group.stamp_ns, group.frame_id, [])
+        if not group.skeletons:
+            return out
         seen: set[int] = set()
-        learning: dict[str, list[tuple[int, Skeleton, _Track]]] = {}
-        batches: dict[str, list[tuple[int, Skeleton, _Track]]] = {}
-        for skeleton in group.skeletons:
-            if skeleton.markers.shape[0] != skeleton.layout.n_joints:
-                self.drops["marker rows do not match the layout"] += 1
+        batches: dict[int, tuple[LayoutRows, list[_Item]]] = {}
+        for skeleton, place in zip(
+            group.skeletons, stack_frame(group.skeletons, self.drops), strict=True
+        ):
+            if place is None:
                 continue
-            present = skeleton.marker_present
-            if not np.isfinite(skeleton.positions[present]).all():
-                self.drops["non-finite position of a present joint"] += 1
-                continue
-            result = skeleton.copy()
-            result.id = self._renames.get(skeleton.id, skeleton.id)
-            if result.id < 0:
+            track_id = self._renames.get(skeleton.id, skeleton.id)
+            if track_id < 0:
                 self.drops["no track id (passed through)"] += 1
+                result = skeleton.copy()
+                result.id = track_id
                 out.skeletons.append(result)
                 continue
-            if result.id in seen:
+            if track_id in seen:
                 self.drops["track id repeated within a group"] += 1
                 continue
-            seen.add(result.id)
-            out.skeletons.append(result)
-            track = self._track(result)
-            target = learning if track.calibration is None else batches
-            target.setdefault(result.layout.name, []).append((result.id, result, track))
-        # Learning and fitting touch disjoint tracks, so their order does not matter.
-        for items in learning.values():
-            self._learn(items)
-        for items in batches.values():
-            self._fit(items)
+            seen.add(track_id)
+            stack, row = place
+            track = self._track(track_id, skeleton.layout)
+            item = _Item(len(out.skeletons), skeleton, track_id, track, row)
+            batches.setdefault(id(stack), (stack, []))[1].append(item)
+            out.skeletons.append(skeleton)  # replaced by its result below
+        for stack, items in batches.values():
+            self._update_layout(stack, items, out.skeletons)
         return out
 
-    def _track(self, skeleton: Skeleton) -> _Track:
-        track = self._tracks.get(skeleton.id)
-        if track is None or track.layout.name != skeleton.layout.name:
-            n = self.params.number_of_frames_for_calibration
-            track = _Track(skeleton.layout, np.full((skeleton.layout.n_joints, n), np.nan))
-            track.calibration = self._calibration_for(skeleton.id, skeleton.layout)
-            self._tracks[skeleton.id] = track
-        elif track.time_ns is not None and (
-            ns_to_sec(skeleton.src_time_ns - track.time_ns) > self.params.track_timeout
-            or skeleton.src_time_ns < track.time_ns
-        ):
-            track.forget_motion()
+    def _track(self, track_id: int, layout: Layout) -> _Track:
+        track = self._tracks.get(track_id)
+        if track is None or track.layout.name != layout.name:
+            if track is not None:
+                self._memories[track.layout.name].release(track.row)
+            memory = self._memories.get(layout.name)
+            if memory is None:
+                n = self.params.number_of_frames_for_calibration
+                memory = self._memories[layout.name] = Memory(layout, n)
+            track = _Track(layout, memory.allocate(), self._calibration_for(track_id, layout))
+            self._tracks[track_id] = track
         return track
 
     def _calibration_for(self, track_id: int, layout: Layout) -> PersonCalibration | None:
@@ -353,79 +355,68 @@ class Optimizer:
             return None
         return calibration
 
-    def _tree(self, layout: Layout) -> KinematicTree:
-        tree = self._trees.get(layout.name)
-        if tree is None:
-            tree = self._trees[layout.name] = KinematicTree.from_layout(layout)
-        return tree
-
-    def _learn(self, items: list[tuple[int, Skeleton, _Track]]) -> None:
-        """Push this frame's link lengths; accept calibrations whose window is steady.
-
-        All learning people of one layout at once: one link-length computation, and one
-        median over the windows of those whose window is full.
-        """
-        layout = items[0][1].layout
-        skeletons = [skeleton for _, skeleton, _ in items]
-        present = np.array([skeleton.marker_present for skeleton in skeletons])
-        measured = np.array([skeleton.positions for skeleton in skeletons])
-        weights = _stacked_weights(skeletons, present)
-        positions = np.where((weights > 0)[..., None], measured, np.nan)
-        lengths = link_lengths(positions, self._tree(layout).parents)
-        full: list[tuple[int, _Track]] = []
-        for (track_id, _, track), row_lengths in zip(items, lengths, strict=True):
-            size = track.window.shape[1]
-            track.window[:, track.filled % size] = row_lengths
-            track.filled += 1
-            if track.filled >= size:
-                full.append((track_id, track))
-        self._remember_all(
-            [track for _, _, track in items],
-            skeletons,
-            np.where(present[..., None], measured, np.nan),
-        )
-        if full:
-            self._accept(layout, full)
-
-    def _remember_all(
-        self,
-        tracks: list[_Track],
-        skeletons: list[Skeleton],
-        positions: np.ndarray,
-        vectors: np.ndarray | None = None,
+    def _update_layout(
+        self, stack: LayoutRows, items: list[_Item], results: list[Skeleton]
     ) -> None:
-        """:meth:`_remember` of several tracks at once.
+        """Learn or fit the tracked people of one layout; their results into ``results``.
 
-        ``positions`` ``(P, J, 3)`` are the skeletons' positions, NaN where absent;
-        ``vectors`` ``(P, J, 3)`` their fitted link vectors (None while learning).
+        The learning and the calibrated people each take one :class:`Memory` call on their
+        stacked rows (they touch disjoint tracks, so the order does not matter), and the links
+        of the fitted people are rebuilt at once.
         """
-        previous = np.full_like(positions, np.nan)
-        dt = np.zeros(len(tracks))
-        for row, (track, skeleton) in enumerate(zip(tracks, skeletons, strict=True)):
-            if track.positions is not None:
-                previous[row] = track.positions
-            if track.time_ns is not None:
-                dt[row] = ns_to_sec(skeleton.src_time_ns - track.time_ns)
-        with np.errstate(invalid="ignore", divide="ignore"):
-            velocities = (positions - previous) / np.where(dt > 0, dt, 1.0)[:, None, None]
-        velocities = np.where(np.isfinite(velocities), velocities, 0.0)
-        kept = np.where(np.isfinite(positions), positions, previous)
-        for row, (track, skeleton) in enumerate(zip(tracks, skeletons, strict=True)):
-            if track.positions is None:
-                track.velocities = None
-                track.positions = positions[row]
+        memory = self._memories[stack.layout.name]
+        markers, present = stack.take([item.row for item in items])
+        rows = np.array([item.track.row for item in items])
+        stamps = np.array([item.skeleton.src_time_ns for item in items], dtype=np.int64)
+        calibrations = [item.track.calibration for item in items]
+        fitting = [calibration is not None for calibration in calibrations]
+        everyone = all(fitting)
+        links = link_present = None
+        if everyone:
+            lengths = np.array([calibration.lengths for calibration in calibrations])
+            memory.fit(rows, stamps, markers, present, lengths, settings=self._settings)
+            links, link_present = link_rows(markers, present, stack.layout)
+        elif any(fitting):
+            fit = np.flatnonzero(fitting)
+            lengths = np.array([c.lengths for c in calibrations if c is not None])
+            fit_markers = markers[fit]
+            memory.fit(
+                rows[fit], stamps[fit], fit_markers, present[fit], lengths, settings=self._settings
+            )
+            markers[fit] = fit_markers
+            links, link_present = link_rows(markers, present, stack.layout)
+        if not everyone:
+            learn = np.flatnonzero(np.logical_not(fitting))
+            memory.learn(
+                rows[learn], stamps[learn], markers[learn], present[learn], settings=self._settings
+            )
+            self._accept_full(memory, [items[i] for i in learn])
+        for n, item in enumerate(items):
+            skeleton = item.skeleton
+            if fitting[n]:
+                links_n, link_present_n = links[n], link_present[n]
             else:
-                if dt[row] >= _MIN_VELOCITY_DT:
-                    track.velocities = velocities[row]
-                # A joint missing this frame keeps its last position (the prediction survives).
-                track.positions = kept[row]
-            track.vectors = None if vectors is None else vectors[row]
-            track.time_ns = skeleton.src_time_ns
+                links_n, link_present_n = skeleton.links.copy(), skeleton.link_present.copy()
+            result = with_rows(
+                skeleton, item.track_id, markers=markers[n], links=links_n, present=present[n],
+                link_present=link_present_n,
+            )  # fmt: skip
+            results[item.index] = result
 
-    def _accept(self, layout: Layout, full: list[tuple[int, _Track]]) -> None:
+    def _accept_full(self, memory: Memory, items: list[_Item]) -> None:
+        """:meth:`_accept` the learning people whose window is full."""
+        size = memory.window.shape[2]
+        full = [
+            (item.track_id, item.track) for item in items if memory.filled[item.track.row] >= size
+        ]
+        if full:
+            self._accept(memory, full)
+
+    def _accept(self, memory: Memory, full: list[tuple[int, _Track]]) -> None:
         """Accept the calibration of each full window that is steady enough."""
         params = self.params
-        windows = np.array([track.window for _, track in full])  # (R, J, N)
+        layout = memory.layout
+        windows = memory.window[[track.row for _, track in full]]  # (R, J, N)
         size = windows.shape[2]
         count = size - np.isnan(windows).sum(axis=2)  # (R, J) frames each link was measured in
         seen = count / size >= params.min_link_presence
@@ -449,80 +440,27 @@ class Optimizer:
         lengths = np.where(seen & (median > 0), unbiased, np.nan)
         for row in np.flatnonzero(enough):
             track_id, track = full[row]
-            track.calibration = PersonCalibration(
-                layout, lengths[row], variation[row], track.window.shape[1]
-            )
+            track.calibration = PersonCalibration(layout, lengths[row], variation[row], size)
             self.calibrations[track_id] = track.calibration
             self.new_calibrations.append(track_id)
-
-    def _fit(self, items: list[tuple[int, Skeleton, _Track]]) -> None:
-        """One least-squares fit for all calibrated people of one layout."""
-        layout = items[0][1].layout
-        tree = self._tree(layout)
-        n_people, n_joints = len(items), layout.n_joints
-        skeletons = [skeleton for _, skeleton, _ in items]
-        tracks = [track for _, _, track in items]
-        markers = np.array([skeleton.markers for skeleton in skeletons])  # the output rows
-        present = np.array([skeleton.marker_present for skeleton in skeletons])
-        measured = markers[..., 1:4].copy()
-        weights = _stacked_weights(skeletons, present, self.params.confidence_floor)
-        lengths = np.array([track.calibration.lengths for track in tracks])
-        prior = np.full((n_people, n_joints, 3), np.nan)
-        fallback = np.full((n_people, n_joints, 3), np.nan)
-        for row, (skeleton, track) in enumerate(zip(skeletons, tracks, strict=True)):
-            if track.positions is not None:
-                dt = max(ns_to_sec(skeleton.src_time_ns - track.time_ns), 0.0)
-                velocity = 0.0 if track.velocities is None else track.velocities
-                prior[row] = track.positions + velocity * dt
-                fallback[row] = track.vectors
-        weights = weights * self._outlier_factors(tree, measured, lengths, prior)
-        positions, vectors = fit_fixed_lengths(
-            tree,
-            measured,
-            weights,
-            lengths,
-            prior=prior,
-            prior_weight=self.params.prior_weight,
-            fallback_vectors=fallback,
-            sweeps=self.params.sweeps,
-            refinements=self.params.refinements,
-            compiled=self.params.compiled,
-        )
-        # Present joints take the fit; links of everyone at once; the skeletons (the stage's
-        # own copies) take the new rows.
-        np.copyto(markers[..., 1:4], positions, where=present[..., None])
-        links, link_present = link_rows(markers, present, layout)
-        for row, skeleton in enumerate(skeletons):
-            skeleton.markers, skeleton.links = markers[row], links[row]
-            skeleton.link_present = link_present[row]
-        self._remember_all(
-            tracks, skeletons, np.where(present[..., None], markers[..., 1:4], np.nan), vectors
-        )
-
-    def _outlier_factors(
-        self, tree: KinematicTree, measured: np.ndarray, lengths: np.ndarray, prior: np.ndarray
-    ) -> np.ndarray:
-        """``(P, J)`` weight factors: < 1 for joints off both the body and the motion."""
-        with np.errstate(invalid="ignore", divide="ignore"):
-            error = np.abs(link_lengths(measured, tree.parents) - lengths) / lengths
-            broken = error > self.params.outlier_threshold  # (P, J) by child joint
-            suspect = broken | ((broken.astype(float) @ tree.parent_of) > 0)
-            distance = np.linalg.norm(measured - prior, axis=-1)
-            factor = np.minimum(1.0, (self.params.outlier_distance / distance) ** 2)
-        return np.where(suspect & np.isfinite(factor), factor, 1.0)
 
 
 @lru_cache(maxsize=1)
 def _warm_up() -> None:
-    """Compile (or load from numba's disk cache) the fit kernel now, not at the first fit.
+    """Compile (or load from numba's disk cache) the frame kernels now, not at the first frame.
 
-    Once per process: a live node would otherwise stall on its first calibrated person (about
-    0.5 s from the cache, over 10 s on a machine that never compiled it).
+    Once per process: a live node would otherwise stall on its first people (about 0.5 s from
+    the cache, over 10 s on a machine that never compiled them).
     """
-    tree = KinematicTree.from_layout(get_layout("azure_kinect"))
-    positions = np.zeros((1, len(tree.parents), 3))
-    lengths = np.where(tree.has_parent, 0.1, np.nan)[None]
-    fit_fixed_lengths(tree, positions, np.ones(positions.shape[:2]), lengths, compiled=True)
+    layout = get_layout("azure_kinect")
+    memory = Memory(layout, 3)
+    rows = np.array([memory.allocate()])
+    markers = np.zeros((1, layout.n_joints, 20))
+    present = np.ones((1, layout.n_joints), dtype=bool)
+    settings = FitSettings(0.1, 0.2, 0.15, 0.01, 1.0, 1, 2, compiled=True)
+    memory.learn(rows, np.zeros(1, dtype=np.int64), markers, present, settings=settings)
+    lengths = np.where(memory.tree.has_parent, 0.1, np.nan)[None]
+    memory.fit(rows, np.ones(1, dtype=np.int64), markers, present, lengths, settings=settings)
 
 
 def _nanmedian_last(values: np.ndarray, count: np.ndarray) -> np.ndarray:
@@ -539,12 +477,3 @@ def _nanmedian_last(values: np.ndarray, count: np.ndarray) -> np.ndarray:
     low = ordered[base + np.maximum(count - 1, 0) // 2]
     high = ordered[base + count // 2]
     return np.where(count > 0, (low + high) / 2, np.nan)
-
-
-def _stacked_weights(
-    skeletons: list[Skeleton], present: np.ndarray, floor: float = 0.0
-) -> np.ndarray:
-    """``(P, J)`` :func:`_weights` of several skeletons of one layout."""
-    confidence = np.array([skeleton.confidences for skeleton in skeletons])
-    confidence = np.where(np.isfinite(confidence), confidence, 1.0)
-    return np.where(present, np.clip(confidence, floor, None), 0.0)

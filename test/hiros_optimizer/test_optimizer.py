@@ -217,3 +217,30 @@ def test_params_are_checked():
         OptimizerParams(number_of_frames_for_calibration=1)
     with pytest.raises(ConfigError):
         OptimizerParams(min_calibrated_fraction=0.0)
+
+
+def test_compiled_frames_equal_the_numpy_frames(noisy_people, group_at):
+    """Learning, fitting (with an outlier, a gap past the timeout and a new id) through the
+    frame kernels of ``hiros_optimizer.compiled`` and through the numpy reference of
+    ``hiros_optimizer.memory``: the same outputs (the fits agree to rounding)."""
+    _, measured, _ = noisy_people
+    people = [p.copy() for p in measured]
+    people[0][40, 5] += 0.4  # an outlier joint once calibrated
+    stages = [small_optimizer(compiled=compiled) for compiled in (False, True)]
+    outputs = [[], []]
+    frames = [*range(45), *range(80, 90)]  # 35 frames missing: over the 1 s track timeout
+    for frame in frames:
+        ids = [0, 1] if frame < 80 else [0, 2]
+        group = group_at(frame, people, ids=ids)
+        for stage, out in zip(stages, outputs, strict=True):
+            copy = SkeletonGroup(
+                group.stamp_ns, group.frame_id, [s.copy() for s in group.skeletons]
+            )
+            out.append(stage.update(copy).skeletons)
+    assert sorted(stages[0].calibrations) == sorted(stages[1].calibrations) == [0, 1]
+    for reference, compiled in zip(*outputs, strict=True):
+        for a, b in zip(reference, compiled, strict=True):
+            assert a.id == b.id
+            np.testing.assert_array_equal(a.marker_present, b.marker_present)
+            np.testing.assert_allclose(b.markers, a.markers, atol=1e-9, equal_nan=True)
+            np.testing.assert_allclose(b.links, a.links, atol=1e-9, equal_nan=True)

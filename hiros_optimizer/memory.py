@@ -1,0 +1,249 @@
+"""What the optimizer remembers of every track of one layout, as stacked per-row arrays.
+
+One row per track id (:class:`Memory` hands rows out and takes them back): the learning window
+of measured link lengths, and the motion the fit predicts from (last output positions, their
+velocity, the fitted link vectors, the stamp). Keeping them stacked lets one call do a whole
+frame's work for all its people: :meth:`Memory.fit` (prior, outlier weights, fit, new motion)
+and :meth:`Memory.learn` (window, motion), each either as one numba kernel
+(:mod:`hiros_optimizer.compiled`, the stage's default) or as the numpy reference here, which
+computes the same numbers in the same order (a test compares the two).
+
+"No motion known" (a new track, or one unseen for longer than the timeout) is a row with
+``timed`` False, NaN positions and vectors and zero velocities: the prior and the fallback
+vectors are then NaN by arithmetic alone, with no case of their own.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from hiros_core.layouts import Layout
+from hiros_optimizer.kinematics import KinematicTree, fit_fixed_lengths, link_lengths
+
+__all__ = ["FitSettings", "Memory"]
+
+_MIN_VELOCITY_DT = 1e-3  # s; closer frames (duplicates) would turn noise into huge velocities
+
+
+@dataclass(frozen=True)
+class FitSettings:
+    """The optimizer parameters a frame's fit uses (see ``OptimizerParams``)."""
+
+    confidence_floor: float
+    outlier_threshold: float
+    outlier_distance: float
+    prior_weight: float
+    track_timeout: float
+    sweeps: int
+    refinements: int
+    compiled: bool
+
+    @property
+    def kernel_values(self) -> tuple[float, float, float, float, float, int, int]:
+        """The trailing arguments of ``compiled.fit_frame``, typed as the kernel expects."""
+        return (
+            float(self.confidence_floor), float(self.outlier_threshold),
+            float(self.outlier_distance), float(self.prior_weight), float(self.track_timeout),
+            int(self.sweeps), int(self.refinements),
+        )  # fmt: skip
+
+
+class Memory:
+    """Per-track state of one layout, one row per track (module docstring).
+
+    Attributes:
+        layout: the layout of every row.
+        tree: its kinematic tables.
+        window: ``(S, J, N)`` measured link lengths of the last N learning frames (NaN: none).
+        filled: ``(S,)`` frames pushed into each window.
+        positions: ``(S, J, 3)`` last output positions (absent joints keep their last one).
+        velocities: ``(S, J, 3)`` from the last two outputs.
+        vectors: ``(S, J, 3)`` last fitted link vectors (NaN while learning).
+        time_ns: ``(S,)`` stamp of the last frame.
+        timed: ``(S,)`` False where no motion is known.
+
+    """
+
+    def __init__(self, layout: Layout, window: int) -> None:
+        self.layout = layout
+        self.tree = KinematicTree.from_layout(layout)
+        self._free: list[int] = []
+        n = layout.n_joints
+        self.window = np.full((0, n, window), np.nan)
+        self.filled = np.zeros(0, dtype=np.int64)
+        self.positions = np.full((0, n, 3), np.nan)
+        self.velocities = np.zeros((0, n, 3))
+        self.vectors = np.full((0, n, 3), np.nan)
+        self.time_ns = np.zeros(0, dtype=np.int64)
+        self.timed = np.zeros(0, dtype=bool)
+
+    def allocate(self) -> int:
+        """A fresh row (empty window, no motion), growing the arrays when none is free."""
+        if not self._free:
+            old = len(self.timed)
+            extra = max(4, old)
+            for name in ("window", "positions", "vectors"):
+                self._grow(name, extra, np.nan)
+            for name in ("filled", "velocities", "time_ns", "timed"):
+                self._grow(name, extra, 0)
+            self._free.extend(range(old + extra - 1, old - 1, -1))
+        row = self._free.pop()
+        self.restart_window(row)
+        self.forget_motion(np.array([row]))
+        return row
+
+    def release(self, row: int) -> None:
+        """Give a row back (its track moved to another layout)."""
+        self._free.append(row)
+
+    def _grow(self, name: str, extra: int, fill: float) -> None:
+        array = getattr(self, name)
+        pad = np.full((extra, *array.shape[1:]), fill, dtype=array.dtype)
+        setattr(self, name, np.concatenate([array, pad]))
+
+    def restart_window(self, row: int) -> None:
+        """Learn this row's lengths again from its next frames."""
+        self.window[row] = np.nan
+        self.filled[row] = 0
+
+    def forget_motion(self, rows: np.ndarray) -> None:
+        """No prediction for these rows any more (their lengths are kept)."""
+        self.timed[rows] = False
+        self.positions[rows] = np.nan
+        self.velocities[rows] = 0.0
+        self.vectors[rows] = np.nan
+
+    # ------------------------------------------------------------------ one frame, numpy
+
+    def forget_stale(self, rows: np.ndarray, stamps: np.ndarray, timeout: float) -> None:
+        """Forget the motion of rows unseen for over ``timeout`` s or stamped before it."""
+        last = self.time_ns[rows]
+        stale = self.timed[rows] & (((stamps - last) * 1e-9 > timeout) | (stamps < last))
+        if stale.any():
+            self.forget_motion(rows[stale])
+
+    def remember(
+        self, rows: np.ndarray, stamps: np.ndarray, seen: np.ndarray, vectors: np.ndarray
+    ) -> None:
+        """Take this frame's ``seen`` ``(P, J, 3)`` positions (NaN where absent) and vectors.
+
+        A joint missing this frame keeps its last position (the prediction survives); the
+        velocity is updated when the frames are at least 1 ms apart.
+        """
+        timed = self.timed[rows]
+        previous = self.positions[rows]
+        dt = np.where(timed, (stamps - self.time_ns[rows]) * 1e-9, 0.0)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            velocities = (seen - previous) / np.where(dt > 0, dt, 1.0)[:, None, None]
+        velocities = np.where(np.isfinite(velocities), velocities, 0.0)
+        kept = np.where(np.isfinite(seen), seen, previous)
+        self.positions[rows] = np.where(timed[:, None, None], kept, seen)
+        update = (timed & (dt >= _MIN_VELOCITY_DT))[:, None, None]
+        self.velocities[rows] = np.where(
+            update, velocities, np.where(timed[:, None, None], self.velocities[rows], 0.0)
+        )
+        self.vectors[rows] = vectors
+        self.time_ns[rows] = stamps
+        self.timed[rows] = True
+
+    # ------------------------------------------------------------------ one frame
+
+    def learn(
+        self,
+        rows: np.ndarray,
+        stamps: np.ndarray,
+        markers: np.ndarray,
+        present: np.ndarray,
+        *,
+        settings: FitSettings,
+    ) -> None:
+        """Push the people's measured link lengths into their windows; remember their motion.
+
+        ``markers`` ``(P, J, 20)`` and ``present`` ``(P, J)`` are the people's rows; a joint
+        counts towards a length only when its confidence is above 0 (NaN counts as 1).
+        """
+        if settings.compiled:
+            from hiros_optimizer.compiled import learn_frame
+
+            learn_frame(
+                self.tree.parents, markers, present, rows, stamps, self.time_ns, self.timed,
+                self.positions, self.velocities, self.vectors, self.window, self.filled,
+                float(settings.track_timeout),
+            )  # fmt: skip
+            return
+        self.forget_stale(rows, stamps, settings.track_timeout)
+        measured = markers[..., 1:4]
+        counted = _weights(markers, present, 0.0) > 0
+        lengths = link_lengths(np.where(counted[..., None], measured, np.nan), self.tree.parents)
+        self.window[rows, :, self.filled[rows] % self.window.shape[2]] = lengths
+        self.filled[rows] += 1
+        seen = np.where(present[..., None], measured, np.nan)
+        self.remember(rows, stamps, seen, np.full_like(seen, np.nan))
+
+    def fit(
+        self,
+        rows: np.ndarray,
+        stamps: np.ndarray,
+        markers: np.ndarray,
+        present: np.ndarray,
+        lengths: np.ndarray,
+        *,
+        settings: FitSettings,
+    ) -> None:
+        """Fit the people of ``markers`` to their ``lengths`` ``(P, J)``; positions in place.
+
+        Each person's prior is their last output moved by their velocity; their weights are
+        the confidences (at least the floor), down-weighted for outliers
+        (:meth:`_outlier_factors`). Present joints take the fitted positions.
+        """
+        tree = self.tree
+        if settings.compiled:
+            from hiros_optimizer.compiled import fit_frame
+
+            fit_frame(
+                tree.parents, tree.order, tree.level_starts, markers, present, lengths, rows,
+                stamps, self.time_ns, self.timed, self.positions, self.velocities, self.vectors,
+                *settings.kernel_values,
+            )  # fmt: skip
+            return
+        self.forget_stale(rows, stamps, settings.track_timeout)
+        dt = np.maximum(np.where(self.timed[rows], (stamps - self.time_ns[rows]) * 1e-9, 0.0), 0.0)
+        prior = self.positions[rows] + self.velocities[rows] * dt[:, None, None]
+        measured = markers[..., 1:4].copy()
+        weights = _weights(markers, present, settings.confidence_floor)
+        weights = weights * _outlier_factors(tree, measured, lengths, prior, settings)
+        positions, vectors = fit_fixed_lengths(
+            tree, measured, weights, lengths, prior=prior, prior_weight=settings.prior_weight,
+            fallback_vectors=self.vectors[rows], sweeps=settings.sweeps,
+            refinements=settings.refinements,
+        )  # fmt: skip
+        np.copyto(markers[..., 1:4], positions, where=present[..., None])
+        self.remember(
+            rows, stamps, np.where(present[..., None], markers[..., 1:4], np.nan), vectors
+        )
+
+
+def _weights(markers: np.ndarray, present: np.ndarray, floor: float) -> np.ndarray:
+    """``(P, J)`` fit weights: the confidence (NaN counts as 1), at least ``floor``; 0 absent."""
+    confidence = markers[..., 0]
+    confidence = np.where(np.isfinite(confidence), confidence, 1.0)
+    return np.where(present, np.clip(confidence, floor, None), 0.0)
+
+
+def _outlier_factors(
+    tree: KinematicTree,
+    measured: np.ndarray,
+    lengths: np.ndarray,
+    prior: np.ndarray,
+    settings: FitSettings,
+) -> np.ndarray:
+    """``(P, J)`` weight factors: < 1 for joints off both the body and the motion."""
+    with np.errstate(invalid="ignore", divide="ignore"):
+        error = np.abs(link_lengths(measured, tree.parents) - lengths) / lengths
+        broken = error > settings.outlier_threshold  # (P, J) by child joint
+        suspect = broken | ((broken.astype(float) @ tree.parent_of) > 0)
+        distance = np.linalg.norm(measured - prior, axis=-1)
+        factor = np.minimum(1.0, (settings.outlier_distance / distance) ** 2)
+    return np.where(suspect & np.isfinite(factor), factor, 1.0)
