@@ -51,11 +51,12 @@ class LatestDetections:
             self.cameras[slot] = camera
         elif self._stamps[slot] > skeleton.src_time_ns:
             return False
-        n_joints = len(skeleton.markers)
-        if n_joints > self.rows.shape[1]:
-            self._widen(n_joints)
-        self.rows[slot, :n_joints] = skeleton.markers
-        self.present[slot, :n_joints] = skeleton.marker_present
+        markers = skeleton.markers
+        if len(markers) == self.rows.shape[1]:  # (one layout: the usual case)
+            self.rows[slot] = markers
+            self.present[slot] = skeleton.marker_present
+        else:
+            self._put_rows(slot, skeleton)
         self.stamps[slot] = self._stamps[slot] = skeleton.src_time_ns
         self._layouts[slot] = skeleton.layout
         return True
@@ -104,6 +105,14 @@ class LatestDetections:
         self._stamps += [0] * old
         self._layouts += [None] * old
         self._free = list(range(2 * old - 1, old - 1, -1))
+
+    def _put_rows(self, slot: int, skeleton: Skeleton) -> None:
+        """Copy rows of a layout with another joint count than ``rows``' width."""
+        n_joints = len(skeleton.markers)
+        if n_joints > self.rows.shape[1]:
+            self._widen(n_joints)
+        self.rows[slot, :n_joints] = skeleton.markers
+        self.present[slot, :n_joints] = skeleton.marker_present
 
     def _widen(self, n_joints: int) -> None:
         """Room for ``n_joints`` rows per slot (a layout with more joints than seen so far)."""

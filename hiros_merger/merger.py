@@ -257,6 +257,7 @@ class Merger:
         self._latest = LatestDetections()
         self._cameras: dict[str, int] = {}  # camera name -> index into the arrays below
         self._camera_positions = np.empty((0, 3))  # (K, 3), NaN: unknown
+        self._camera_factors = np.empty(0)  # (K,) agreement weights of ``agreement``
         self._frame_names: dict[str, str] = {}  # calibrated frame id -> camera name
         self._frame_cameras: dict[str, int] = {}  # frame id -> camera index, as found
         self._next_tick_ns: int | None = None
@@ -288,6 +289,7 @@ class Merger:
         if index is None:
             index = self._cameras[name] = len(self._cameras)
             self._camera_positions = np.vstack([self._camera_positions, np.full(3, np.nan)])
+            self._camera_factors = np.append(self._camera_factors, 1.0)
         return index
 
     def _camera_of(self, frame_id: str) -> int:
@@ -307,7 +309,7 @@ class Merger:
         for skeleton in group.skeletons:
             if skeleton.id < 0:
                 self.drops["no track id"] += 1
-            elif not skeleton.marker_present.any():
+            elif not np.count_nonzero(skeleton.marker_present):
                 self.drops["no joint"] += 1
             elif not self._latest.put(skeleton.id, self._camera_of(skeleton.src_frame), skeleton):
                 self.drops["older than the camera's last detection"] += 1
@@ -365,7 +367,7 @@ class Merger:
         track_ids, table, final, rows, present, confidences, totals, counts, oriented = (
             kernels.merge(
                 latest.rows, latest.present, latest.stamps, latest.tracks, latest.cameras, slots,
-                out_ns, self._camera_positions, self._agreement_factors(), self._kernel_params(),
+                out_ns, self._camera_positions, self._camera_factors, self._kernel_params(),
                 params.iterations, params.extrapolate, axes.root, axes.neck, axes.left,
                 axes.right, axes.torso, axes.pointers, axes.has_front, axes.groups,
                 params.limb_residuals, parents, axes.order, params.fuse_directions,
@@ -413,14 +415,6 @@ class Merger:
             dtype=float,
         )
 
-    def _agreement_factors(self) -> np.ndarray:
-        """``(K,)`` each camera's agreement weight ``1 / (1 + (e / agreement_scale)²)``."""
-        scale = self.params.agreement_scale
-        factors = [1.0] * len(self._cameras)
-        for name, error in self.agreement.items():
-            factors[self._cameras[name]] = 1.0 / (1.0 + (error / scale) ** 2)
-        return np.array(factors)
-
     def _stored_orientations(self, table: np.ndarray, n_joints: int) -> np.ndarray:
         """``(M, C, J, 4)`` the detections' orientations by ``table`` slot, NaN where absent."""
         latest = self._latest
@@ -431,9 +425,11 @@ class Merger:
         """Fold each camera's mean joint distance to the fused skeletons into its agreement.
 
         ``totals`` and ``counts`` per camera index: the sum (in track order) and number of
-        its detections' mean distances. A camera without a name (no frame id) has none.
+        its detections' mean distances. A camera without a name (no frame id) has none. Its
+        weight in the next fusions is ``1 / (1 + (agreement / agreement_scale)²)``.
         """
         alpha = self.params.agreement_smoothing
+        scale = self.params.agreement_scale
         totals_list, counts_list = totals.tolist(), counts.tolist()
         for name, index in self._cameras.items():
             count = counts_list[index]
@@ -441,9 +437,9 @@ class Merger:
                 continue
             value = totals_list[index] / count
             previous = self.agreement.get(name)
-            self.agreement[name] = (
-                value if previous is None else previous + alpha * (value - previous)
-            )
+            error = value if previous is None else previous + alpha * (value - previous)
+            self.agreement[name] = error
+            self._camera_factors[index] = 1.0 / (1.0 + (error / scale) ** 2)
 
 
 _WARM = False
