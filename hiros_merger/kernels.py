@@ -16,7 +16,7 @@ import math
 import numpy as np
 from numba import njit
 
-__all__ = ["follow_directions", "fuse"]
+__all__ = ["follow_directions", "fuse", "merge"]
 
 
 @njit(cache=True, error_model="numpy")
@@ -203,6 +203,55 @@ def _weighted_median(positions: np.ndarray, weight: np.ndarray) -> np.ndarray:
 
 
 @njit(cache=True, error_model="numpy")
+def _rays(positions: np.ndarray, camera: np.ndarray, radius: float, rays: np.ndarray) -> float:
+    """Each joint's unit direction from ``camera`` and distance into ``rays`` ``(J, 4)``.
+
+    Returns the squared distance beyond which a point blocks no joint's ray (see
+    ``_occluded``; -1 when no joint is farther than ``radius``).
+    """
+    reach = -1.0
+    for j in range(len(positions)):
+        rx = positions[j, 0] - camera[0]
+        ry = positions[j, 1] - camera[1]
+        rz = positions[j, 2] - camera[2]
+        length = math.sqrt(rx * rx + ry * ry + rz * rz)
+        rays[j, 0], rays[j, 1], rays[j, 2] = rx / length, ry / length, rz / length
+        rays[j, 3] = length
+        if length - radius > 0:
+            reach = max(reach, (length - radius) ** 2 + radius * radius + 1e-6)
+    return reach
+
+
+@njit(cache=True, error_model="numpy")
+def _torso_points(  # noqa: PLR0917
+    fused: np.ndarray,
+    m: int,
+    torso: np.ndarray,
+    camera: np.ndarray,
+    reach: float,
+    points: np.ndarray,
+) -> int:
+    """Other tracks' torso points ``q - camera`` and their squared norm into ``points``.
+
+    Only those nearer than ``reach`` (squared); returns how many.
+    """
+    count = 0
+    for other in range(len(fused)):
+        if other == m:
+            continue
+        for t in torso:
+            qx = fused[other, t, 0] - camera[0]
+            qy = fused[other, t, 1] - camera[1]
+            qz = fused[other, t, 2] - camera[2]
+            squared = qx * qx + qy * qy + qz * qz
+            if squared < reach:
+                points[count, 0], points[count, 1] = qx, qy
+                points[count, 2], points[count, 3] = qz, squared
+                count += 1
+    return count
+
+
+@njit(cache=True, error_model="numpy")
 def _occluded(  # noqa: PLR0917
     fused: np.ndarray,
     positions: np.ndarray,
@@ -217,41 +266,36 @@ def _occluded(  # noqa: PLR0917
 
     A torso point ``q`` blocks the ray from camera ``o`` to joint ``p`` when it lies within
     ``radius`` of the ray (|rel|² - along² decides, except within 1e-9 m² of the radius where
-    the point minus its projection does) and between ``o`` and ``p``.
+    the point minus its projection does) and between ``o`` and ``p``. Per detection, only the
+    torso points nearer to the camera than ``reach`` are tried: one farther than
+    ``sqrt((|p - o| - radius)² + radius²)`` for every joint ``p`` blocks none (the bound has
+    1e-6 m² to spare over the test's 1e-9 and its rounding, so the result is the same).
     """
     n_tracks, n_slots, n_joints = positions.shape[:3]
+    rays = np.empty((n_joints, 4))  # each joint's unit direction from the camera, distance
+    points = np.empty((n_tracks * len(torso), 4))  # torso points near enough: q - o, |q - o|²
+    limit = radius * radius
     for m in range(n_tracks):
         for c in range(n_slots):
             if not known[m, c]:
                 continue
-            ox, oy, oz = cameras[m, c, 0], cameras[m, c, 1], cameras[m, c, 2]
+            reach = _rays(positions[m, c], cameras[m, c], radius, rays)
+            count = _torso_points(fused, m, torso, cameras[m, c], reach, points)
             for j in range(n_joints):
-                rx = positions[m, c, j, 0] - ox
-                ry = positions[m, c, j, 1] - oy
-                rz = positions[m, c, j, 2] - oz
-                length = math.sqrt(rx * rx + ry * ry + rz * rz)
-                dx, dy, dz = rx / length, ry / length, rz / length
-                blocked = False
-                for other in range(n_tracks):
-                    if other == m or blocked:
-                        continue
-                    for t in torso:
-                        qx = fused[other, t, 0] - ox
-                        qy = fused[other, t, 1] - oy
-                        qz = fused[other, t, 2] - oz
-                        along = dx * qx + dy * qy + dz * qz
-                        across_sq = (qx * qx + qy * qy + qz * qz) - along * along
-                        close = across_sq < radius * radius
-                        if abs(across_sq - radius * radius) < 1e-9:
-                            ex = qx - along * dx
-                            ey = qy - along * dy
-                            ez = qz - along * dz
-                            close = math.sqrt(ex * ex + ey * ey + ez * ez) < radius
-                        if close and along > 0 and along < length - radius:
-                            blocked = True
-                            break
-                if blocked:
-                    weight[m, c, j] *= factor
+                dx, dy, dz, length = rays[j, 0], rays[j, 1], rays[j, 2], rays[j, 3]
+                for i in range(count):
+                    qx, qy, qz = points[i, 0], points[i, 1], points[i, 2]
+                    along = dx * qx + dy * qy + dz * qz
+                    across_sq = points[i, 3] - along * along
+                    close = across_sq < limit
+                    if abs(across_sq - limit) < 1e-9:
+                        ex = qx - along * dx
+                        ey = qy - along * dy
+                        ez = qz - along * dz
+                        close = math.sqrt(ex * ex + ey * ey + ez * ez) < radius
+                    if close and along > 0 and along < length - radius:
+                        weight[m, c, j] *= factor
+                        break
 
 
 @njit(cache=True, error_model="numpy")
@@ -387,14 +431,12 @@ def follow_directions(  # noqa: PLR0917 - the fusion's arrays and the layout's
 
 @njit(cache=True, error_model="numpy")
 def fuse(  # noqa: PLR0912, PLR0915, PLR0917 - one output's whole fusion
-    received: np.ndarray,
+    rows: np.ndarray,
     present: np.ndarray,
-    rows_of: np.ndarray,
-    slots: np.ndarray,
-    shape: tuple[int, int],
-    ages_in: np.ndarray,
-    cameras_in: np.ndarray,
-    agreement_in: np.ndarray,
+    table: np.ndarray,
+    ages: np.ndarray,
+    cameras: np.ndarray,
+    agreement: np.ndarray,
     params: np.ndarray,
     iterations: int,
     extrapolate: bool,
@@ -412,23 +454,22 @@ def fuse(  # noqa: PLR0912, PLR0915, PLR0917 - one output's whole fusion
     directions: bool,
     direction_iterations: int,
     direction_eps: float,
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Fuse the detections of every track (see ``Merger._fuse`` for the weights).
 
-    ``received`` ``(N, J, 20)`` rows and ``present`` ``(N, J)`` of each detection, placed at
-    ``(rows_of, slots)`` of a ``shape`` ``(M, C)`` padding; ``ages_in`` ``(N,)`` seconds to the
-    output time, ``cameras_in`` ``(N, 3)`` camera positions (NaN unknown), ``agreement_in``
-    ``(N,)`` each camera's agreement factor; ``params`` the float parameters in the order of
-    ``Merger._kernel_params``; the layout's ``root``, ``neck``, ``left``/``right`` (hip,
-    shoulder), ``torso`` and forward ``pointers`` joints; with ``directions`` the fused
-    skeletons follow the cameras' robust link directions (``follow_directions``, over the
-    layout's ``parents`` in ``order``).
+    Detection ``c`` of track ``m`` is slot ``table[m, c]`` (-1: padding) of the stored
+    ``rows`` ``(S, J', 20)`` and ``present`` ``(S, J')`` (``J' >= J``, the layout's
+    ``len(groups)``); ``ages`` ``(M, C)`` seconds to the output time, ``cameras`` ``(M, C, 3)``
+    camera positions (NaN unknown), ``agreement`` ``(M, C)`` each camera's agreement factor;
+    ``params`` the float parameters in the order of ``Merger._kernel_params``; the layout's
+    ``root``, ``neck``, ``left``/``right`` (hip, shoulder), ``torso`` and forward ``pointers``
+    joints; with ``directions`` the fused skeletons follow the cameras' robust link
+    directions (``follow_directions``, over the layout's ``parents`` in ``order``).
 
     Returns:
-        ``markers`` ``(M, C, J, 20)`` padded rows (NaN where absent), ``fused`` ``(M, J, 3)``,
-        ``final`` ``(M, C, J)`` weights, ``confidence`` ``(M, J)`` and ``velocity``
-        ``(M, J, 3)`` weighted means, and ``(M, C)`` each detection's mean joint distance to
-        the fused skeleton (residuals capped at 0.5 m; NaN where it has no joint).
+        ``fused`` ``(M, J, 3)``, ``final`` ``(M, C, J)`` weights, ``confidence`` ``(M, J)`` and
+        ``velocity`` ``(M, J, 3)`` weighted means, and ``(M, C)`` each detection's mean joint
+        distance to the fused skeleton (residuals capped at 0.5 m; NaN where it has no joint).
 
     """
     (
@@ -463,20 +504,8 @@ def fuse(  # noqa: PLR0912, PLR0915, PLR0917 - one output's whole fusion
         params[13],
     )
     own_cutoff = limb_cutoff if limb_residuals else outlier_cutoff
-    n_tracks, n_slots = shape
-    n_joints = received.shape[1]
-    markers = np.full((n_tracks, n_slots, n_joints, 20), np.nan)
-    ages = np.zeros((n_tracks, n_slots))
-    cameras = np.full((n_tracks, n_slots, 3), np.nan)
-    agreement = np.ones((n_tracks, n_slots))
-    for i in range(len(rows_of)):
-        m, c = rows_of[i], slots[i]
-        for j in range(n_joints):
-            if present[i, j]:
-                markers[m, c, j] = received[i, j]
-        ages[m, c] = ages_in[i]
-        cameras[m, c] = cameras_in[i]
-        agreement[m, c] = agreement_in[i]
+    n_tracks, n_slots = table.shape
+    n_joints = len(groups)
     known = np.zeros((n_tracks, n_slots), dtype=np.bool_)
     any_known = False
     for m in range(n_tracks):
@@ -489,19 +518,24 @@ def fuse(  # noqa: PLR0912, PLR0915, PLR0917 - one output's whole fusion
             any_known = any_known or known[m, c]
 
     # Positions brought to the output time, and the weights known before fusing.
+    # (An absent joint or a padding slot reads as a NaN row.)
     positions = np.empty((n_tracks, n_slots, n_joints, 3))
+    velocities = np.empty((n_tracks, n_slots, n_joints, 3))
     finite = np.zeros((n_tracks, n_slots, n_joints), dtype=np.bool_)
     weight = np.zeros((n_tracks, n_slots, n_joints))
     confidences = np.empty((n_tracks, n_slots, n_joints))
     for m in range(n_tracks):
         for c in range(n_slots):
+            s = table[m, c]
             dt = min(max(ages[m, c], -max_extrapolation), max_extrapolation)
             stale = ages[m, c] / staleness_scale
             for j in range(n_joints):
+                valid = s >= 0 and present[s, j]
                 for a in range(3):
-                    p = markers[m, c, j, 1 + a]
+                    p = rows[s, j, 1 + a] if valid else np.nan
+                    v = rows[s, j, 8 + a] if valid else np.nan
+                    velocities[m, c, j, a] = v
                     if extrapolate:
-                        v = markers[m, c, j, 8 + a]
                         p = p + (v if math.isfinite(v) else 0.0) * dt
                     positions[m, c, j, a] = p
                 is_finite = (
@@ -510,7 +544,7 @@ def fuse(  # noqa: PLR0912, PLR0915, PLR0917 - one output's whole fusion
                     and math.isfinite(positions[m, c, j, 2])
                 )
                 finite[m, c, j] = is_finite
-                confidence = markers[m, c, j, 0]
+                confidence = rows[s, j, 0] if valid else np.nan
                 confidence = confidence if math.isfinite(confidence) else 1.0
                 confidences[m, c, j] = confidence
                 w = _power(max(confidence, confidence_floor), confidence_power)
@@ -625,7 +659,7 @@ def fuse(  # noqa: PLR0912, PLR0915, PLR0917 - one output's whole fusion
                 if w > 0:
                     total_c += w
                     mean_c += confidences[m, c, j] * w
-                v0, v1, v2 = markers[m, c, j, 8], markers[m, c, j, 9], markers[m, c, j, 10]
+                v0, v1, v2 = velocities[m, c, j, 0], velocities[m, c, j, 1], velocities[m, c, j, 2]
                 if math.isfinite(v0) and math.isfinite(v1) and math.isfinite(v2):
                     total_v += w
                     vx += v0 * w
@@ -663,4 +697,191 @@ def fuse(  # noqa: PLR0912, PLR0915, PLR0917 - one output's whole fusion
             direction_iterations,
             direction_eps,
         )
-    return markers, fused, final, confidence, velocity, disagreement
+    return fused, final, confidence, velocity, disagreement
+
+
+@njit(cache=True, error_model="numpy")
+def _arrange(tracks: np.ndarray, selected: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Sorted track ids ``(M,)`` of the ``selected`` slots, and their ``(M, C)`` slot table.
+
+    Row ``m`` holds track ``m``'s slots in their order in ``selected``, then -1 padding.
+    """
+    track_ids = np.unique(tracks[selected])
+    rows_of = np.searchsorted(track_ids, tracks[selected])
+    counts = np.zeros(len(track_ids), dtype=np.int64)
+    for m in rows_of:
+        counts[m] += 1
+    table = np.full((len(track_ids), counts.max()), -1, dtype=np.int64)
+    counts[:] = 0
+    for i in range(len(selected)):
+        m = rows_of[i]
+        table[m, counts[m]] = selected[i]
+        counts[m] += 1
+    return track_ids, table
+
+
+@njit(cache=True, error_model="numpy")
+def _detection_terms(  # noqa: PLR0917
+    table: np.ndarray,
+    stamps: np.ndarray,
+    cameras: np.ndarray,
+    out_ns: int,
+    camera_positions: np.ndarray,
+    camera_factors: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Each detection's age (s), camera position and agreement factor, ``(M, C)``-padded.
+
+    Padding: age 0, position NaN (unknown camera), factor 1.
+    """
+    n_tracks, n_slots = table.shape
+    ages = np.zeros((n_tracks, n_slots))
+    where = np.full((n_tracks, n_slots, 3), np.nan)
+    agreement = np.ones((n_tracks, n_slots))
+    for m in range(n_tracks):
+        for c in range(n_slots):
+            s = table[m, c]
+            if s >= 0:
+                ages[m, c] = (out_ns - stamps[s]) * 1e-9
+                where[m, c] = camera_positions[cameras[s]]
+                agreement[m, c] = camera_factors[cameras[s]]
+    return ages, where, agreement
+
+
+@njit(cache=True, error_model="numpy")
+def _output_rows(
+    fused: np.ndarray, confidence: np.ndarray, velocity: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Marker rows ``(M, J, 20)``, presence ``(M, J)`` and skeleton confidence ``(M,)``.
+
+    A joint is present where its fused position is finite; its row holds the confidence,
+    position and velocity (NaN elsewhere). A skeleton's confidence is the mean of its present
+    joints' non-NaN confidences, summed as numpy's ``nanmean`` sums them (NaN: none).
+    """
+    n_tracks, n_joints = confidence.shape
+    rows = np.full((n_tracks, n_joints, 20), np.nan)
+    present = np.zeros((n_tracks, n_joints), dtype=np.bool_)
+    skeleton = np.full(n_tracks, np.nan)
+    values = np.empty(n_joints)
+    for m in range(n_tracks):
+        n_present = n_valued = 0
+        for j in range(n_joints):
+            if not (
+                math.isfinite(fused[m, j, 0])
+                and math.isfinite(fused[m, j, 1])
+                and math.isfinite(fused[m, j, 2])
+            ):
+                continue
+            present[m, j] = True
+            rows[m, j, 0] = confidence[m, j]
+            for a in range(3):
+                rows[m, j, 1 + a] = fused[m, j, a]
+                rows[m, j, 8 + a] = velocity[m, j, a]
+            valued = not math.isnan(confidence[m, j])
+            values[n_present] = confidence[m, j] if valued else 0.0
+            n_present += 1
+            if valued:
+                n_valued += 1
+        if n_valued:
+            skeleton[m] = _pairwise_sum(values, n_present) / n_valued
+    return rows, present, skeleton
+
+
+@njit(cache=True, error_model="numpy")
+def _camera_errors(
+    disagreement: np.ndarray, table: np.ndarray, cameras: np.ndarray, n_cameras: int
+) -> tuple[np.ndarray, np.ndarray]:
+    """Per camera index, the sum (in track order) and count of its detections' disagreements."""
+    totals = np.zeros(n_cameras)
+    counts = np.zeros(n_cameras, dtype=np.int64)
+    n_tracks, n_slots = table.shape
+    for m in range(n_tracks):
+        for c in range(n_slots):
+            s = table[m, c]
+            if s >= 0 and not math.isnan(disagreement[m, c]):
+                totals[cameras[s]] += disagreement[m, c]
+                counts[cameras[s]] += 1
+    return totals, counts
+
+
+@njit(cache=True, error_model="numpy")
+def _any_orientation(rows: np.ndarray, present: np.ndarray, selected: np.ndarray, n: int) -> bool:
+    """Whether a present joint (of the first ``n``) of a ``selected`` slot has an orientation."""
+    for s in selected:
+        for j in range(n):
+            if (
+                present[s, j]
+                and math.isfinite(rows[s, j, 4])
+                and math.isfinite(rows[s, j, 5])
+                and math.isfinite(rows[s, j, 6])
+                and math.isfinite(rows[s, j, 7])
+            ):
+                return True
+    return False
+
+
+@njit(cache=True, error_model="numpy")
+def merge(  # noqa: PLR0917 - the stored detections, the cameras, the parameters, the layout
+    rows: np.ndarray,
+    present: np.ndarray,
+    stamps: np.ndarray,
+    tracks: np.ndarray,
+    cameras: np.ndarray,
+    selected: np.ndarray,
+    out_ns: int,
+    camera_positions: np.ndarray,
+    camera_factors: np.ndarray,
+    params: np.ndarray,
+    iterations: int,
+    extrapolate: bool,
+    root: int,
+    neck: int,
+    left: np.ndarray,
+    right: np.ndarray,
+    torso: np.ndarray,
+    pointers: np.ndarray,
+    has_front: bool,
+    groups: np.ndarray,
+    limb_residuals: bool,
+    parents: np.ndarray,
+    order: np.ndarray,
+    directions: bool,
+    direction_iterations: int,
+    direction_eps: float,
+) -> tuple[
+    np.ndarray,
+    np.ndarray,
+    np.ndarray,
+    np.ndarray,
+    np.ndarray,
+    np.ndarray,
+    np.ndarray,
+    np.ndarray,
+    bool,
+]:
+    """One output: ``fuse`` the ``selected`` stored slots at ``out_ns``, as output rows.
+
+    The slots' ``rows``/``present``/``stamps``/``tracks``/``cameras`` are the stored
+    detections' (``LatestDetections``); ``camera_positions`` ``(K, 3)`` (NaN unknown) and
+    ``camera_factors`` ``(K,)`` (agreement) by camera index; the rest as ``fuse`` takes them.
+
+    Returns:
+        ``track_ids`` ``(M,)`` sorted, ``table`` ``(M, C)`` each track's slots (-1 padding),
+        ``final`` ``(M, C, J)`` weights, output ``rows`` ``(M, J, 20)``, ``present``
+        ``(M, J)`` and skeleton confidences ``(M,)`` (``_output_rows``), per camera index the
+        sum and count of its detections' mean joint distances to the fused skeletons, and
+        whether any selected joint has an orientation (to average, outside).
+
+    """
+    track_ids, table = _arrange(tracks, selected)
+    ages, where, agreement = _detection_terms(
+        table, stamps, cameras, out_ns, camera_positions, camera_factors
+    )
+    fused, final, confidence, velocity, disagreement = fuse(
+        rows, present, table, ages, where, agreement, params, iterations, extrapolate, root,
+        neck, left, right, torso, pointers, has_front, groups, limb_residuals, parents, order,
+        directions, direction_iterations, direction_eps,
+    )  # fmt: skip
+    out_rows, out_present, skeleton = _output_rows(fused, confidence, velocity)
+    totals, counts = _camera_errors(disagreement, table, cameras, len(camera_factors))
+    oriented = _any_orientation(rows, present, selected, len(groups))
+    return track_ids, table, final, out_rows, out_present, skeleton, totals, counts, oriented

@@ -39,7 +39,6 @@ Shapes: ``M`` tracks, ``C`` detections per track (padded), ``J`` joints; metres,
 
 from __future__ import annotations
 
-import math
 from collections import Counter
 from dataclasses import dataclass
 
@@ -47,12 +46,11 @@ import numpy as np
 
 from hiros_core.calibration import Calibration, CameraCalibration
 from hiros_core.layouts import AZURE_KINECT, Layout
-from hiros_core.model import STATE_WIDTH, Skeleton, SkeletonGroup, camera_from_frame
+from hiros_core.model import Skeleton, SkeletonGroup, camera_from_frame
 from hiros_merger import kernels
+from hiros_merger.latest import LatestDetections
 
 __all__ = ["Merger", "MergerParams"]
-
-_NS = 1e-9
 
 
 @dataclass
@@ -212,7 +210,6 @@ def _limbs(layout: Layout, torso: np.ndarray) -> np.ndarray:
 
 
 _AXES: dict[str, _BodyAxes] = {}
-_UNKNOWN_CAMERA = (np.nan, np.nan, np.nan)
 
 
 def _axes(layout: Layout) -> _BodyAxes:
@@ -257,9 +254,12 @@ class Merger:
         self.params = params or MergerParams()
         self.drops: Counter[str] = Counter()
         self.agreement: dict[str, float] = {}
-        self._camera_positions: dict[str, np.ndarray] = {}
-        self._frame_names: dict[str, str] = {}
-        self._latest: dict[int, dict[str, Skeleton]] = {}
+        self._latest = LatestDetections()
+        self._cameras: dict[str, int] = {}  # camera name -> index into the arrays below
+        self._camera_positions = np.empty((0, 3))  # (K, 3), NaN: unknown
+        self._camera_factors = np.empty(0)  # (K,) agreement weights of ``agreement``
+        self._frame_names: dict[str, str] = {}  # calibrated frame id -> camera name
+        self._frame_cameras: dict[str, int] = {}  # frame id -> camera index, as found
         self._next_tick_ns: int | None = None
         self._last_out_ns: int | None = None
         self._world_frame = "world"
@@ -269,19 +269,36 @@ class Merger:
     # ----------------------------------------------------------------------------- calibration
     def set_calibration(self, calibration: Calibration) -> None:
         """Camera positions for the depth, view and occlusion weights (optional)."""
-        self._camera_positions = {}
+        self._camera_positions[:] = np.nan
         self._frame_names = {}
+        self._frame_cameras = {}
         for name, camera in calibration.cameras.items():
             self.set_camera(name, camera)
 
     def set_camera(self, name: str, camera: CameraCalibration) -> None:
         """Replace one camera's pose (a live update from ``calib``)."""
-        self._camera_positions[name] = np.asarray(camera.translation, dtype=float)
+        index = self._camera_index(name)  # (may grow the array)
+        self._camera_positions[index] = camera.translation
         if camera.frame_id:
             self._frame_names[camera.frame_id] = name
+            self._frame_cameras = {}
 
-    def _camera_name(self, frame_id: str) -> str:
-        return self._frame_names.get(frame_id) or camera_from_frame(frame_id)
+    def _camera_index(self, name: str) -> int:
+        """The camera's index into the per-camera arrays (a new camera's position unknown)."""
+        index = self._cameras.get(name)
+        if index is None:
+            index = self._cameras[name] = len(self._cameras)
+            self._camera_positions = np.vstack([self._camera_positions, np.full(3, np.nan)])
+            self._camera_factors = np.append(self._camera_factors, 1.0)
+        return index
+
+    def _camera_of(self, frame_id: str) -> int:
+        """Index of the camera a detection's ``src_frame`` belongs to."""
+        index = self._frame_cameras.get(frame_id)
+        if index is None:
+            name = self._frame_names.get(frame_id) or camera_from_frame(frame_id)
+            index = self._frame_cameras[frame_id] = self._camera_index(name)
+        return index
 
     # ----------------------------------------------------------------------------------- flow
     def update(self, group: SkeletonGroup) -> SkeletonGroup:
@@ -292,18 +309,12 @@ class Merger:
         for skeleton in group.skeletons:
             if skeleton.id < 0:
                 self.drops["no track id"] += 1
-                continue
-            if not skeleton.marker_present.any():
+            elif not np.count_nonzero(skeleton.marker_present):
                 self.drops["no joint"] += 1
-                continue
-            camera = self._camera_name(skeleton.src_frame)
-            per_camera = self._latest.setdefault(skeleton.id, {})
-            previous = per_camera.get(camera)
-            if previous is not None and previous.src_time_ns > skeleton.src_time_ns:
+            elif not self._latest.put(skeleton.id, self._camera_of(skeleton.src_frame), skeleton):
                 self.drops["older than the camera's last detection"] += 1
-                continue
-            per_camera[camera] = skeleton
-            newest = max(newest or skeleton.src_time_ns, skeleton.src_time_ns)
+            elif newest is None or skeleton.src_time_ns > newest:
+                newest = skeleton.src_time_ns
         out_ns = self._output_time(newest, group.stamp_ns)
         if out_ns is None:
             return SkeletonGroup(group.stamp_ns, self._world_frame, [])
@@ -335,161 +346,100 @@ class Merger:
         params = self.params
         window_ns = round(params.window * 1e9)
         timeout_ns = round(params.track_timeout * 1e9)
-        entries: list[tuple[int, str, Skeleton]] = []
-        for track_id in list(self._latest):
-            per_camera = self._latest[track_id]
-            for camera in list(per_camera):
-                age = out_ns - per_camera[camera].src_time_ns
-                if age > timeout_ns:
-                    del per_camera[camera]
-                elif abs(age) <= window_ns:
-                    entries.append((track_id, camera, per_camera[camera]))
-            if not per_camera:
-                del self._latest[track_id]
-        if not entries:
+        selected, layout = self._latest.select(out_ns, window_ns, timeout_ns)
+        if layout is None:
             return []
-        layout = entries[0][2].layout
-        entries = [e for e in entries if e[2].layout.n_joints == layout.n_joints]
-        track_ids = sorted({track_id for track_id, _, _ in entries})
-        return self._fuse(entries, track_ids, layout, out_ns)
+        return self._fuse(selected, layout, out_ns)
 
-    def _fuse(
-        self,
-        entries: list[tuple[int, str, Skeleton]],
-        track_ids: list[int],
-        layout: Layout,
-        out_ns: int,
-    ) -> list[Skeleton]:
+    def _fuse(self, selected: list[int], layout: Layout, out_ns: int) -> list[Skeleton]:
         """Fuse the detections of each track: robust weighted mean of positions, SO(3) mean.
 
-        The positions, weights and means are one compiled kernel (``kernels.fuse``, the
-        numpy form of each step is in the module docstring's formulas); the orientations'
+        The positions, weights, means and output rows are one compiled kernel
+        (``kernels.merge``, the numpy form of each step is in the module docstring's
+        formulas) reading the ``selected`` slots of the stored detections; the orientations'
         eigen-decomposition stays with numpy.
         """
         params = self.params
-        index = {track_id: m for m, track_id in enumerate(track_ids)}
-        counts = dict.fromkeys(track_ids, 0)
-        rows_of: list[int] = []
-        slots: list[int] = []
-        for track_id, _, _ in entries:
-            rows_of.append(index[track_id])
-            slots.append(counts[track_id])
-            counts[track_id] += 1
-        scale = params.agreement_scale
-        factors = {
-            name: 1.0 / (1.0 + (error / scale) ** 2) for name, error in self.agreement.items()
-        }
         axes = _axes(layout)
-        markers, fused, final, confidence, velocity, disagreement = kernels.fuse(
-            np.array([s.markers for _, _, s in entries]),
-            np.array([s.marker_present for _, _, s in entries]),
-            np.array(rows_of, dtype=np.int64),
-            np.array(slots, dtype=np.int64),
-            (len(track_ids), max(counts.values())),
-            np.array([(out_ns - s.src_time_ns) * _NS for _, _, s in entries]),
-            np.array(
-                [self._camera_positions.get(camera, _UNKNOWN_CAMERA) for _, camera, _ in entries],
-                dtype=float,
-            ),
-            np.array([factors.get(camera, 1.0) for _, camera, _ in entries]),
-            np.array(
-                [
-                    params.max_extrapolation,
-                    params.confidence_floor,
-                    params.confidence_power,
-                    params.staleness_scale,
-                    params.depth_gain,
-                    params.flipped_weight,
-                    params.view_weight_min,
-                    params.view_power,
-                    params.occlusion_radius,
-                    params.occlusion_weight,
-                    params.outlier_scale,
-                    params.outlier_cutoff,
-                    params.limb_cutoff,
-                    params.oblique_gain,
-                ],
-                dtype=float,
-            ),
-            params.iterations,
-            params.extrapolate,
-            axes.root,
-            axes.neck,
-            axes.left,
-            axes.right,
-            axes.torso,
-            axes.pointers,
-            axes.has_front,
-            axes.groups,
-            params.limb_residuals,
-            axes.parents if params.direction_torso else axes.limb_parents,
-            axes.order,
-            params.fuse_directions,
-            params.direction_iterations,
-            params.direction_eps,
-        )
-        self._update_agreement(disagreement, rows_of, slots, [c for _, c, _ in entries])
-        orientations = markers[..., 4:8]
-        orientation = (
-            _quaternion_mean(orientations, final)
-            if np.isfinite(orientations).all(axis=-1).any()
-            else None
-        )
-        # Every track's output rows at once; a joint is present where its fused position is.
-        present = np.isfinite(fused).all(axis=-1)  # (M, J)
-        rows = np.full((*present.shape, STATE_WIDTH), np.nan)
-        keep = present[..., None]
-        rows[..., 0] = np.where(present, confidence, np.nan)
-        rows[..., 1:4] = np.where(keep, fused, np.nan)
-        rows[..., 8:11] = np.where(keep, velocity, np.nan)
-        if orientation is not None:
-            rows[..., 4:8] = np.where(keep, orientation, np.nan)
+        latest = self._latest
+        slots = np.array(selected, dtype=np.int64)
+        parents = axes.parents if params.direction_torso else axes.limb_parents
+        track_ids, table, final, rows, present, confidences, totals, counts, oriented = (
+            kernels.merge(
+                latest.rows, latest.present, latest.stamps, latest.tracks, latest.cameras, slots,
+                out_ns, self._camera_positions, self._camera_factors, self._kernel_params(),
+                params.iterations, params.extrapolate, axes.root, axes.neck, axes.left,
+                axes.right, axes.torso, axes.pointers, axes.has_front, axes.groups,
+                params.limb_residuals, parents, axes.order, params.fuse_directions,
+                params.direction_iterations, params.direction_eps,
+            )
+        )  # fmt: skip
+        self._update_agreement(totals, counts)
+        if oriented:
+            quaternions = self._stored_orientations(table, layout.n_joints)
+            rows[..., 4:8] = np.where(
+                present[..., None], _quaternion_mean(quaternions, final), np.nan
+            )
         out = Skeleton.many_from_rows(
             rows,
             present,
             layout,
-            skeleton_ids=track_ids,
+            skeleton_ids=track_ids.tolist(),
             src_time_ns=out_ns,
             src_frame=self._world_frame,
         )
-        whole = present.all(axis=1)
-        with np.errstate(invalid="ignore", divide="ignore"):
-            means = np.nanmean(rows[..., 0], axis=1) if whole.any() else whole
-        for m, skeleton in enumerate(out):
-            if whole[m]:
-                skeleton.confidence = float(means[m])
-            elif present[m].any():
-                skeleton.confidence = float(np.nanmean(rows[m, present[m], 0]))
+        for skeleton, confidence in zip(out, confidences.tolist(), strict=True):
+            skeleton.confidence = confidence
         return out
 
-    def _update_agreement(
-        self,
-        disagreement: np.ndarray,
-        rows_of: list[int],
-        slots: list[int],
-        cameras: list[str],
-    ) -> None:
+    def _kernel_params(self) -> np.ndarray:
+        """The float parameters in the order ``kernels.fuse`` unpacks them."""
+        params = self.params
+        return np.array(
+            [
+                params.max_extrapolation,
+                params.confidence_floor,
+                params.confidence_power,
+                params.staleness_scale,
+                params.depth_gain,
+                params.flipped_weight,
+                params.view_weight_min,
+                params.view_power,
+                params.occlusion_radius,
+                params.occlusion_weight,
+                params.outlier_scale,
+                params.outlier_cutoff,
+                params.limb_cutoff,
+                params.oblique_gain,
+            ],
+            dtype=float,
+        )
+
+    def _stored_orientations(self, table: np.ndarray, n_joints: int) -> np.ndarray:
+        """``(M, C, J, 4)`` the detections' orientations by ``table`` slot, NaN where absent."""
+        latest = self._latest
+        valid = (table >= 0)[..., None] & latest.present[table, :n_joints]
+        return np.where(valid[..., None], latest.rows[table, :n_joints, 4:8], np.nan)
+
+    def _update_agreement(self, totals: np.ndarray, counts: np.ndarray) -> None:
         """Fold each camera's mean joint distance to the fused skeletons into its agreement.
 
-        ``disagreement`` ``(M, C)`` per detection (NaN: no joint), at ``(rows_of, slots)`` of
-        the detections of ``cameras``; taken in track order (the order of the sums).
+        ``totals`` and ``counts`` per camera index: the sum (in track order) and number of
+        its detections' mean distances. A camera without a name (no frame id) has none. Its
+        weight in the next fusions is ``1 / (1 + (agreement / agreement_scale)²)``.
         """
         alpha = self.params.agreement_smoothing
-        values = disagreement.tolist()
-        per_camera: dict[str, list[float]] = {}
-        for m, c, name in sorted(zip(rows_of, slots, cameras, strict=True)):
-            value = values[m][c]
-            if name and not math.isnan(value):
-                per_camera.setdefault(name, []).append(value)
-        for name, errors in per_camera.items():
-            total = 0.0
-            for error in errors:
-                total += error
-            value = total / len(errors)
+        scale = self.params.agreement_scale
+        totals_list, counts_list = totals.tolist(), counts.tolist()
+        for name, index in self._cameras.items():
+            count = counts_list[index]
+            if not (name and count):
+                continue
+            value = totals_list[index] / count
             previous = self.agreement.get(name)
-            self.agreement[name] = (
-                value if previous is None else previous + alpha * (value - previous)
-            )
+            error = value if previous is None else previous + alpha * (value - previous)
+            self.agreement[name] = error
+            self._camera_factors[index] = 1.0 / (1.0 + (error / scale) ** 2)
 
 
 _WARM = False
