@@ -16,6 +16,8 @@ child) are refused with ``CodecError`` rather than silently altered.
 from __future__ import annotations
 
 import struct
+import sys
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import NamedTuple
 
@@ -43,6 +45,7 @@ __all__ = [
     "decode_marker_array",
     "decode_marker_fields",
     "encode_group",
+    "encode_group_into",
     "encode_marker_array",
     "marker_array_plan",
 ]
@@ -215,6 +218,16 @@ class _GroupPlan:
     stamp_at: int
     fields: tuple[tuple[int, int, int], ...]  # per skeleton: head, maxes, confidence offsets
     floats: np.ndarray
+    packer: struct.Struct  # the group's integer fields and confidences, in ``field_runs`` order
+    field_index: np.ndarray  # template byte of each packed byte (the numpy encoder's scatter)
+    field_runs: np.ndarray  # (F, 3) message offset, packed offset, bytes (the compiled copy)
+    runs: np.ndarray  # (R, 3) message offset, float offset in the values, floats (present rows)
+    layouts: tuple[Layout, ...] = ()  # kept alive: encode_group's cache keys hold their ids
+
+    @property
+    def message(self) -> np.ndarray:
+        """The template's message bytes alone (no lead, no scratch row)."""
+        return self.template[_LEAD : _LEAD + self.size]
 
 
 @dataclass(frozen=True)
@@ -297,7 +310,9 @@ def _build_group_plan(group: SkeletonGroup, keys: list[tuple]) -> _GroupPlan:
     header = _group_header(group)
     offset = header.size - HEADER_SIZE
     templates = [np.zeros(_LEAD, dtype=np.uint8), header.template]
-    fields, indices = [], []
+    fields, indices, runs = [], [], []
+    stamp_at = int(header.slots["stamp"][0]) + _LEAD
+    packed = [(stamp_at, _STAMP_STRUCT)]
     blocks = []
     for skeleton, key in zip(group.skeletons, keys, strict=True):
         phase = offset % 8
@@ -311,11 +326,14 @@ def _build_group_plan(group: SkeletonGroup, keys: list[tuple]) -> _GroupPlan:
     scratch = (-(offset)) % 8 + offset  # payload offset of the scratch row, 8-aligned
     templates.append(np.zeros(scratch - offset + _ROW_BYTES, dtype=np.uint8))
     dump = np.arange(STATE_WIDTH) + scratch // 8
+    values_at = 0  # where the skeleton's box, marker and link rows start in the values
     for start, phase, plan, skeleton in blocks:
         shape: _SkeletonShape = plan.meta  # type: ignore[assignment]
         at = start + HEADER_SIZE + _LEAD
         box_at = int(plan.slots["box"][0]) + at
         fields.append((at + shape.head_at, at + shape.maxes_at, box_at))
+        packed += [(at + shape.head_at, _HEAD_STRUCT), (at + shape.maxes_at, _MAXES_STRUCT)]
+        packed.append((box_at, _CONFIDENCE_STRUCT))
         shift = (start - phase) // 8
         box_index, marker_index, link_index = shape.floats
         markers = np.tile(dump, (skeleton.layout.n_joints, 1))
@@ -323,25 +341,120 @@ def _build_group_plan(group: SkeletonGroup, keys: list[tuple]) -> _GroupPlan:
         links = np.tile(dump, (skeleton.layout.n_links, 1))
         links[shape.link_ids] = (link_index + shift).reshape(-1, STATE_WIDTH)
         indices += [box_index[1:] + shift, markers.ravel(), links.ravel()]
+        runs += _value_runs(box_index[1] + shift, markers[:, 0], links[:, 0], dump[0], values_at)
+        values_at += BOX_WIDTH + (skeleton.layout.n_joints + skeleton.layout.n_links) * STATE_WIDTH
+    floats = np.concatenate(indices) if indices else np.empty(0, dtype=np.intp)
     return _GroupPlan(
         np.concatenate(templates),
         size,
-        int(header.slots["stamp"][0]) + _LEAD,
+        stamp_at,
         tuple(fields),
-        np.concatenate(indices) if indices else np.empty(0, dtype=np.intp),
+        floats,
+        struct.Struct("<" + "".join(kind.format[1:] for _, kind in packed)),
+        np.concatenate([np.arange(at, at + kind.size) for at, kind in packed]),
+        _field_runs(packed),
+        np.array(runs, dtype=np.int64).reshape(-1, 3),
+        tuple(skeleton.layout for skeleton in group.skeletons),
     )
+
+
+def _field_runs(packed: list[tuple[int, struct.Struct]]) -> np.ndarray:
+    """``(F, 3)`` message offset, packed offset and length of each packed field."""
+    runs, at = [], 0
+    for template_at, kind in packed:
+        runs.append((template_at - _LEAD, at, kind.size))
+        at += kind.size
+    return np.array(runs, dtype=np.int64).reshape(-1, 3)
+
+
+def _value_runs(
+    box: int, markers: np.ndarray, links: np.ndarray, dump: int, values_at: int
+) -> list[tuple[int, int, int]]:
+    """One skeleton's float runs ``(message offset, values offset, floats)``, present rows only.
+
+    ``box``/``markers``/``links`` are payload float positions of the box and of each row's
+    first float (``dump`` for rows the skeleton does not carry).
+    """
+    runs = [(HEADER_SIZE + 8 * int(box), values_at, BOX_WIDTH)]
+    at = values_at + BOX_WIDTH
+    for rows in (markers, links):
+        for row, first in enumerate(rows.tolist()):
+            if first != dump:
+                runs.append((HEADER_SIZE + 8 * first, at + row * STATE_WIDTH, STATE_WIDTH))
+        at += rows.size * STATE_WIDTH
+    return runs
 
 
 def encode_group(group: SkeletonGroup) -> bytes:
     """CDR bytes of ``hiros_skeleton_msgs/msg/SkeletonGroup`` for the model ``group``.
 
     The group's plan (cached by the shapes of its skeletons) gives one template for the whole
-    message and one index for all its floats: encoding is a template copy, a few integer
-    fields packed in place and one scatter of every skeleton's rows.
+    message, one struct for its integer fields and one index for all its floats: encoding is
+    a template copy, one pack and one scatter of every skeleton's rows.
     """
+    out = None
+
+    def space(size: int) -> tuple[np.ndarray, int]:
+        nonlocal out
+        out = np.empty(size, dtype=np.uint8)
+        return out, 0
+
+    encode_group_into(group, space)
+    return out.tobytes()  # type: ignore[union-attr]
+
+
+def encode_group_into(group: SkeletonGroup, space: Callable[[int], tuple[np.ndarray, int]]) -> int:
+    """Encode ``group`` where ``space(size)`` says (uint8 array, offset); returns the size.
+
+    For writers that keep messages in a buffer of their own (``RecordingWriter`` writes
+    straight into its MCAP chunk): no ``bytes`` object is made. Nothing is written when the
+    group cannot be encoded (``CodecError`` before ``space`` is called).
+    """
+    plan = _plan_of(group)
+    skeletons = group.skeletons
+    ints: list = [*divmod(group.stamp_ns, _NS)]
+    for s in skeletons:
+        ints += (s.id, *divmod(s.src_time_ns, _NS), s.max_markers, s.max_links, s.confidence)
+    try:
+        packed = plan.packer.pack(*ints)
+    except struct.error:
+        msg = (
+            "SkeletonGroup: a value is out of range of its message field: ids and seconds must "
+            "fit int32, max_markers/max_links uint32"
+        )
+        raise CodecError(msg) from None
+    values = np.concatenate(
+        [a for s in skeletons for a in (s.bounding_box, s.markers, s.links)], axis=None
+    ) if skeletons else _NO_VALUES  # fmt: skip
+    out, at = space(plan.size)
+    if "numba" in sys.modules and values.dtype == np.float64:
+        from hiros_core.fill import fill_runs
+
+        fill_runs(out, at, plan.message, packed, plan.field_runs, values, plan.runs)
+    else:
+        _fill_numpy(plan, packed, values, out, at)
+    return plan.size
+
+
+_NO_VALUES = np.empty(0)
+
+
+def _fill_numpy(
+    plan: _GroupPlan, packed: bytes, values: np.ndarray, out: np.ndarray, at: int
+) -> None:
+    """The numpy form of ``fill.fill_runs`` (the reference it is tested against)."""
+    scratch = plan.template.copy()
+    scratch[plan.field_index] = np.frombuffer(packed, dtype=np.uint8)
+    if values.size:
+        scratch[_LEAD + HEADER_SIZE :].view("<f8")[plan.floats] = values
+    out[at : at + plan.size] = scratch[_LEAD : _LEAD + plan.size]
+
+
+def _plan_of(group: SkeletonGroup) -> _GroupPlan:
+    """The group's cached plan, built on first use (keyed by frames, layouts, presence)."""
     skeletons = group.skeletons
     keys = [
-        (s.src_frame, s.layout, s.marker_present.tobytes(), s.link_present.tobytes())
+        (s.src_frame, id(s.layout), s.marker_present.tobytes(), s.link_present.tobytes())
         for s in skeletons
     ]
     group_key = (group.frame_id, *keys)
@@ -352,23 +465,12 @@ def encode_group(group: SkeletonGroup) -> bytes:
         header = _group_header(group)
         offset = header.size - HEADER_SIZE
         phased = []
-        for skeleton, key in zip(skeletons, keys, strict=True):
+        for skeleton, (frame, _, markers, links) in zip(skeletons, keys, strict=True):
+            key = (frame, skeleton.layout, markers, links)
             phased.append((*key, offset % 8))
             offset += _skeleton_block_size(skeleton, key, offset % 8)
         plan = _GROUP_PLANS[group_key] = _build_group_plan(group, phased)
-    out = plan.template.copy()
-    buffer = memoryview(out)
-    _pack_fields(_STAMP_STRUCT, buffer, plan.stamp_at, *divmod(group.stamp_ns, _NS))
-    values = []
-    for (head_at, maxes_at, box_at), skeleton in zip(plan.fields, skeletons, strict=True):
-        sec, nanosec = divmod(skeleton.src_time_ns, _NS)
-        _pack_fields(_HEAD_STRUCT, buffer, head_at, skeleton.id, sec, nanosec)
-        _pack_fields(_MAXES_STRUCT, buffer, maxes_at, skeleton.max_markers, skeleton.max_links)
-        _CONFIDENCE_STRUCT.pack_into(buffer, box_at, skeleton.confidence)
-        values += [skeleton.bounding_box, skeleton.markers.ravel(), skeleton.links.ravel()]
-    if values:
-        out[_LEAD + HEADER_SIZE :].view("<f8")[plan.floats] = np.concatenate(values)
-    return out[_LEAD : _LEAD + plan.size].tobytes()
+    return plan
 
 
 def _skeleton_block_size(skeleton: Skeleton, key: tuple, phase: int) -> int:
@@ -378,18 +480,6 @@ def _skeleton_block_size(skeleton: Skeleton, key: tuple, phase: int) -> int:
         key, _build_skeleton_plan(skeleton, phase), phase
     )
     return plan.size
-
-
-def _pack_fields(layout: struct.Struct, buffer: memoryview, at: int, *values: int) -> None:
-    """Write integers in place; values outside their CDR types raise CodecError."""
-    try:
-        layout.pack_into(buffer, at, *values)
-    except struct.error:
-        msg = (
-            f"SkeletonGroup: value out of range of its message field ({values}): ids and "
-            "seconds must fit int32, max_markers/max_links uint32"
-        )
-        raise CodecError(msg) from None
 
 
 def decode_group(data: bytes | bytearray | memoryview) -> SkeletonGroup:

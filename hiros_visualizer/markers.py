@@ -12,6 +12,7 @@ and the points change, each in one numpy scatter.
 from __future__ import annotations
 
 import colorsys
+import sys
 from dataclasses import dataclass, fields
 from functools import lru_cache
 
@@ -178,12 +179,18 @@ def encode_skeleton_markers(
             _DRAW_PLANS.clear()
         data = skeleton_markers(group, namespace, params)
         plan = _DRAW_PLANS[key] = _draw_plan(data, encode_marker_array(data), visible, layout)
-    out = plan.template.copy()
-    out.view("<f8")[plan.points] = positions.reshape(-1)[plan.sources]
-    out.view("<f8")[plan.tops] = _label_tops(positions, visible).ravel()
-    stamps = out.view("<i4")
-    stamps[plan.stamps] = sec
-    stamps[plan.stamps + 1] = nanosec
+    if "numba" in sys.modules:
+        from hiros_visualizer.compiled import draw
+
+        out = draw(plan.template, positions, visible, plan.points, plan.sources, plan.tops,
+                   plan.stamps, sec, nanosec)  # fmt: skip
+    else:
+        out = plan.template.copy()
+        out.view("<f8")[plan.points] = positions.reshape(-1)[plan.sources]
+        out.view("<f8")[plan.tops] = _label_tops(positions, visible).ravel()
+        stamps = out.view("<i4")
+        stamps[plan.stamps] = sec
+        stamps[plan.stamps + 1] = nanosec
     return out[LEAD : LEAD + plan.size].tobytes()
 
 

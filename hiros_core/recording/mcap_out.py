@@ -4,12 +4,15 @@ The ``mcap`` library's ``Writer`` compresses every chunk with zstd level 3 in th
 thread and builds each message record through several small writes; on ``hiros run``'s output
 (~10 MB of CDR per recording second) that was most of the writing time. Here:
 
-* a message record is one ``struct`` header and the payload appended to the chunk's list of
-  pieces (joined once, by the writer thread);
+* the open chunk is one preallocated buffer: a message record is its ``struct`` header packed
+  in place and its payload copied after it, or written there directly by an encoder
+  (``reserve`` then ``commit``: ``RecordingWriter.write_group`` encodes SkeletonGroups
+  straight into the chunk), so no per-message ``bytes`` object is made, kept or joined;
 * a full chunk goes to one background thread that compresses it (zstd at a fast level by
   default: ~4.4x smaller, ~4x less CPU than level 3; or lz4), computes its CRC and writes
-  it with its message indexes. zstd, lz4, crc32 and file writes release the GIL, so this runs
-  beside the caller's work on another core;
+  it with its message indexes, then hands the buffer back for a later chunk (reused buffers
+  are already mapped: no page faults per chunk). zstd, lz4, crc32 and file writes release
+  the GIL, so this runs beside the caller's work on another core;
 * records other than messages (schemas, channels, the summary) use the ``mcap`` library's
   record classes, so the layout follows the MCAP specification as that library implements it
   (summary with repeated schemas and channels, statistics, chunk indexes and summary offsets,
@@ -27,6 +30,7 @@ import zlib
 from collections.abc import Callable
 from typing import IO
 
+import numpy as np
 from mcap.data_stream import RecordBuilder
 from mcap.opcode import Opcode
 from mcap.records import (
@@ -56,6 +60,7 @@ _FOOTER_CRC_HEAD = struct.Struct("<BQQQ")
 _CHUNK_HEAD = struct.Struct("<BQQQQII")
 _U64 = struct.Struct("<Q")
 _PENDING_CHUNKS = 4  # chunks queued for the writer thread before add_message waits
+_SLACK = 1 << 20  # buffer bytes past chunk_size: a chunk closes only once it exceeds the size
 
 
 def _compressor(compression: str, level: int) -> tuple[str, Callable[[bytes], bytes]]:
@@ -109,6 +114,7 @@ class McapWriter:
         self.start_time = 0
         self.end_time = 0
         self.chunk_indexes: list[ChunkIndex] = []
+        self._free: queue.SimpleQueue[bytearray] = queue.SimpleQueue()  # written buffers
         self._reset_chunk()
         self._jobs: queue.Queue[tuple | None] = queue.Queue(maxsize=_PENDING_CHUNKS)
         self._error: BaseException | None = None
@@ -116,12 +122,20 @@ class McapWriter:
         self._position = 0
 
     def _reset_chunk(self) -> None:
-        self._chunk: list[bytes] = []  # records, joined by the writer thread
+        try:
+            buffer = self._free.get_nowait()
+        except queue.Empty:
+            buffer = bytearray(self.chunk_size + _SLACK)
+        self._use_buffer(buffer)
         self._chunk_length = 0
         self._chunk_messages = 0
         self._chunk_start = 0
         self._chunk_end = 0
         self._indexes: dict[int, list[tuple[int, int]]] = {}
+
+    def _use_buffer(self, buffer: bytearray) -> None:
+        self._buffer = buffer
+        self.buffer = np.frombuffer(buffer, dtype=np.uint8)  # for encoders: see ``reserve``
 
     def start(self, profile: str = "ros2", library: str = "hiros") -> None:
         """Write the magic and the header record."""
@@ -131,8 +145,7 @@ class McapWriter:
         """A new schema; returns its id (1, 2, ...)."""
         schema = Schema(id=len(self.schemas) + 1, name=name, encoding=encoding, data=data)
         self.schemas.append(schema)
-        self._chunk.append(_record(schema))
-        self._chunk_length += len(self._chunk[-1])
+        self._append(_record(schema))
         return schema.id
 
     def register_channel(
@@ -148,36 +161,72 @@ class McapWriter:
         )
         self.channels.append(channel)
         self.channel_counts[channel.id] = 0
-        self._chunk.append(_record(channel))
-        self._chunk_length += len(self._chunk[-1])
+        self._append(_record(channel))
         return channel.id
+
+    def _append(self, record: bytes) -> None:
+        """Copy a whole record (schema, channel) into the open chunk."""
+        at = self._room(len(record))
+        self._buffer[at : at + len(record)] = record
+        self._chunk_length = at + len(record)
+
+    def _room(self, size: int) -> int:
+        """Where ``size`` more bytes go in the open chunk (its buffer grows if they do not fit)."""
+        at = self._chunk_length
+        if at + size > len(self._buffer):  # a message larger than the slack: rare
+            grown = bytearray(max(2 * len(self._buffer), at + size + _SLACK))
+            grown[:at] = memoryview(self._buffer)[:at]
+            self._use_buffer(grown)
+        return at
 
     def add_message(
         self, channel_id: int, log_time: int, data: bytes, publish_time: int, sequence: int
     ) -> None:
         """Append one message to the open chunk; a full chunk goes to the writer thread."""
+        if not isinstance(data, bytes | bytearray):
+            data = memoryview(data).cast("B")  # any contiguous buffer, counted in bytes
+        size = len(data)
+        at = self.reserve(size)
+        self._buffer[at : at + size] = data
+        self.commit(channel_id, log_time, size, publish_time, sequence)
+
+    def reserve(self, size: int) -> int:
+        """Offset in ``self.buffer`` where the next message's ``size`` payload bytes go.
+
+        Write the payload there, then ``commit`` it; until then nothing is recorded, so an
+        encoder that fails half way leaves the file as it was. ``self.buffer`` may be
+        another array after the next ``reserve``.
+        """
+        return self._room(_MESSAGE.size + size) + _MESSAGE.size
+
+    def commit(
+        self, channel_id: int, log_time: int, size: int, publish_time: int, sequence: int
+    ) -> None:
+        """Record the message whose ``size`` bytes were written where ``reserve`` said."""
         if self._chunk_messages:
-            self._chunk_start = min(self._chunk_start, log_time)
-            self._chunk_end = max(self._chunk_end, log_time)
+            if log_time < self._chunk_start:
+                self._chunk_start = log_time
+            elif log_time > self._chunk_end:
+                self._chunk_end = log_time
         else:
             self._chunk_start = self._chunk_end = log_time
         if self.message_count:
-            self.start_time = min(self.start_time, log_time)
-            self.end_time = max(self.end_time, log_time)
+            if log_time < self.start_time:
+                self.start_time = log_time
+            elif log_time > self.end_time:
+                self.end_time = log_time
         else:
             self.start_time = self.end_time = log_time
+        at = self._chunk_length
         index = self._indexes.get(channel_id)
         if index is None:
             index = self._indexes[channel_id] = []
-        index.append((log_time, self._chunk_length))
-        self._chunk.append(
-            _MESSAGE.pack(
-                Opcode.MESSAGE, _MESSAGE_FIXED + len(data), channel_id, sequence, log_time,
-                publish_time,
-            )
+        index.append((log_time, at))
+        _MESSAGE.pack_into(
+            self._buffer, at, Opcode.MESSAGE, _MESSAGE_FIXED + size, channel_id, sequence,
+            log_time, publish_time,
         )  # fmt: skip
-        self._chunk.append(data)
-        self._chunk_length += _MESSAGE.size + len(data)
+        self._chunk_length = at + _MESSAGE.size + size
         self._chunk_messages += 1
         self.message_count += 1
         self.channel_counts[channel_id] += 1
@@ -187,7 +236,9 @@ class McapWriter:
     def _close_chunk(self) -> None:
         if not self._chunk_messages:
             return
-        job = (self._chunk, self._chunk_start, self._chunk_end, self._indexes)
+        job = (
+            self._buffer, self._chunk_length, self._chunk_start, self._chunk_end, self._indexes
+        )  # fmt: skip
         self._reset_chunk()
         if self._thread is None:
             self._thread = threading.Thread(target=self._work, name="mcap-writer", daemon=True)
@@ -205,14 +256,20 @@ class McapWriter:
                     self._error = exc
 
     def _write_chunk(
-        self, pieces: list[bytes], start: int, end: int, indexes: dict[int, list[tuple[int, int]]]
+        self,
+        buffer: bytearray,
+        size: int,
+        start: int,
+        end: int,
+        indexes: dict[int, list[tuple[int, int]]],
     ) -> None:
-        # One call per step, each releasing the GIL for its whole length (join, crc32, the
-        # compressor, the file write): per-piece calls would hand the GIL back and forth with
-        # the producing thread thousands of times per chunk, slowing both.
-        data = b"".join(pieces)
-        size, crc = len(data), zlib.crc32(data)
+        # One call per step, each releasing the GIL for its whole length (crc32, the
+        # compressor, the file write), so the producing thread keeps its core.
+        data = memoryview(buffer)[:size]
+        crc = zlib.crc32(data)
         compressed = self._compress(data)
+        data.release()
+        self._free.put(buffer)
         name = self.compression.encode()
         length = _CHUNK_HEAD.size - 9 + len(name) + 8 + len(compressed)
         head = _CHUNK_HEAD.pack(Opcode.CHUNK, length, start, end, size, crc, len(name))

@@ -16,6 +16,7 @@ from pathlib import Path
 from types import TracebackType
 from typing import IO
 
+import numpy as np
 import yaml
 
 from hiros_core.errors import RecordingError
@@ -40,6 +41,21 @@ _LATCHED_QOS = (
     "    nsec: 4294967295\n  avoid_ros_namespace_conventions: false\n"
 )
 _LATCHED_TOPICS = frozenset({"/tf_static"})
+
+
+class _Route:
+    """Where messages of a (topic, type spelling) go.
+
+    Their channel, the channel's message count (the MCAP sequence) and the (topic, normalised
+    type) they are counted under; spellings of one type share one route.
+    """
+
+    __slots__ = ("channel", "counted", "sequence")
+
+    def __init__(self, channel: int, counted: tuple[str, str]) -> None:
+        self.channel = channel
+        self.counted = counted
+        self.sequence = 0
 
 
 class RecordingWriter:
@@ -96,8 +112,7 @@ class RecordingWriter:
         self._writer.start(profile="ros2", library="hiros")
         self._schemas: dict[str, int] = {}
         self._channels: dict[tuple[str, str], int] = {}
-        self._routes: dict[tuple[str, str], tuple[int, tuple[str, str]]] = {}
-        self._sequence: Counter[int] = Counter()
+        self._routes: dict[tuple[str, str], _Route] = {}
         self.counts: Counter[tuple[str, str]] = Counter()
         self.start_ns: int | None = None
         self.end_ns: int | None = None
@@ -131,40 +146,55 @@ class RecordingWriter:
         publish_time_ns: int | None = None,
     ) -> None:
         """Append one message of CDR bytes; ``log_time_ns`` orders the recording."""
+        route = self._route(topic, msgtype)
+        log_time_ns = int(log_time_ns)
+        publish = log_time_ns if publish_time_ns is None else int(publish_time_ns)
+        route.sequence += 1
+        self._writer.add_message(route.channel, log_time_ns, data, publish, route.sequence)
+        self._counted(route, log_time_ns)
+
+    def write_group(self, topic: str, group: object, log_time_ns: int | None = None) -> None:
+        """Append a SkeletonGroup (encoded with the codec); log time defaults to its stamp.
+
+        The codec encodes it straight into the open MCAP chunk (``encode_group_into``): no
+        intermediate ``bytes``.
+        """
+        from hiros_core.codec import encode_group_into
+
+        route = self._route(topic, SKELETON_GROUP)
+        stamp = group.stamp_ns if log_time_ns is None else log_time_ns  # type: ignore[attr-defined]
+        stamp = int(stamp)
+        size = encode_group_into(group, self._space)  # type: ignore[arg-type]
+        route.sequence += 1
+        self._writer.commit(route.channel, stamp, size, stamp, route.sequence)
+        self._counted(route, stamp)
+
+    def _space(self, size: int) -> tuple[np.ndarray, int]:
+        at = self._writer.reserve(size)  # may move the chunk to a larger buffer: first
+        return self._writer.buffer, at
+
+    def _route(self, topic: str, msgtype: str) -> _Route:
+        """The topic's channel, registered (and the type normalised) on its first message."""
         if self.closed:
             msg = f"recording {self.path} is closed; open a new writer"
             raise RecordingError(msg)
         route = self._routes.get((topic, msgtype))
-        if route is None:  # normalised and registered once per topic and type spelling
+        if route is None:
             normalized = normalize_msgtype(msgtype)
-            route = self._routes[(topic, msgtype)] = (
-                self._channel(topic, normalized), (topic, normalized)
-            )  # fmt: skip
-        channel, counted = route
-        log_time_ns = int(log_time_ns)
-        self._sequence[channel] += 1
-        self._writer.add_message(
-            channel_id=channel,
-            log_time=log_time_ns,
-            data=data,
-            publish_time=log_time_ns if publish_time_ns is None else int(publish_time_ns),
-            sequence=self._sequence[channel],
-        )
-        self.counts[counted] += 1
-        self.start_ns = log_time_ns if self.start_ns is None else min(self.start_ns, log_time_ns)
-        self.end_ns = log_time_ns if self.end_ns is None else max(self.end_ns, log_time_ns)
+            channel = self._channel(topic, normalized)
+            same = [r for r in self._routes.values() if r.channel == channel]
+            route = same[0] if same else _Route(channel, (topic, normalized))
+            self._routes[(topic, msgtype)] = route
+        return route
 
-    def write_group(self, topic: str, group: object, log_time_ns: int | None = None) -> None:
-        """Append a SkeletonGroup (encoded with the codec); log time defaults to its stamp."""
-        from hiros_core.codec import encode_group
-
-        stamp = group.stamp_ns  # type: ignore[attr-defined]
-        self.write(
-            topic,
-            SKELETON_GROUP,
-            encode_group(group),
-            stamp if log_time_ns is None else log_time_ns,
-        )
+    def _counted(self, route: _Route, log_time_ns: int) -> None:
+        self.counts[route.counted] += 1
+        if self.start_ns is None:
+            self.start_ns = self.end_ns = log_time_ns
+        elif log_time_ns < self.start_ns:
+            self.start_ns = log_time_ns
+        elif log_time_ns > self.end_ns:  # type: ignore[operator]
+            self.end_ns = log_time_ns
 
     def write_marker_array(self, topic: str, data: object, log_time_ns: int | None = None) -> None:
         """Append a MarkerArrayData; log time defaults to its first marker's stamp (else 0)."""

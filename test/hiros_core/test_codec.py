@@ -17,6 +17,7 @@ from hiros_core.codec import (
     decode_group,
     decode_marker_array,
     encode_group,
+    encode_group_into,
     encode_marker_array,
 )
 
@@ -124,6 +125,30 @@ def test_group_bytes_match_rclpy_and_round_trip(group: SkeletonGroup) -> None:
             s.markers.shape == (s.layout.n_joints, 20) and s.links.shape == s.markers.shape
             for s in decoded.skeletons
         )
+
+
+@settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(groups, st.integers(0, 15))
+def test_group_encoded_into_a_buffer_compiled_and_numpy_alike(
+    group: SkeletonGroup, offset: int
+) -> None:
+    """``encode_group_into`` at any (unaligned) offset: its bytes alone, by either filler."""
+    import sys
+
+    import numba  # noqa: F401 - the compiled filler runs when numba is loaded
+
+    reference = encode_group(group)
+    for compiled in (True, False):
+        buffer = np.full(len(reference) + 32, 0xA5, dtype=np.uint8)
+        saved = None if compiled else sys.modules.pop("numba")
+        try:
+            size = encode_group_into(group, lambda n, b=buffer: (b, offset))
+        finally:
+            if saved is not None:
+                sys.modules["numba"] = saved
+        assert size == len(reference)
+        assert buffer[offset : offset + size].tobytes() == reference
+        assert (np.delete(buffer, np.arange(offset, offset + size)) == 0xA5).all()
 
 
 @st.composite

@@ -1,4 +1,7 @@
+import sys
+
 import numpy as np
+import pytest
 
 from hiros_core.codec import encode_marker_array
 from hiros_core.layouts import AZURE_KINECT, KINECT_V2
@@ -51,7 +54,12 @@ def test_mixed_layouts_and_empty_groups():
     assert len(skeleton_markers(SkeletonGroup(0, "w", []))) == 0
 
 
-def test_encoded_markers_equal_the_general_encoding_frame_after_frame():
+@pytest.mark.parametrize("compiled", [True, False])
+def test_encoded_markers_equal_the_general_encoding_frame_after_frame(compiled, monkeypatch):
+    import numba  # noqa: F401 - the compiled filler runs when numba is loaded
+
+    if not compiled:
+        monkeypatch.delitem(sys.modules, "numba")
     rng = np.random.default_rng(5)
     params = VisualizerParams(joint_size=0.03)
     people = [person(4, skeleton_id=3), person(5, skeleton_id=8)]
@@ -68,6 +76,9 @@ def test_encoded_markers_equal_the_general_encoding_frame_after_frame():
         frames.append(SkeletonGroup(1_000_000_000 * step + 17, "world", frame))
     frames.append(SkeletonGroup(9, "world", [person(6, KINECT_V2, 1), person(7, skeleton_id=2)]))
     frames.append(SkeletonGroup(10, "world", []))
+    tie = person(8, skeleton_id=4)
+    tie.positions[[2, 5]] = (-0.0, 0.0, 9.0)  # two highest joints; the label's x is -0.0 + 0.0
+    frames.append(SkeletonGroup(11, "world", [tie]))
     for group in frames:
         for namespace in ("merger", "filter"):
             expected = encode_marker_array(skeleton_markers(group, namespace, params))

@@ -291,3 +291,30 @@ def test_a_write_error_in_the_writer_thread_reaches_the_caller():
     with pytest.raises(OSError, match="disk full"):
         write_all()
     writer.abort()
+
+
+def test_chunks_hold_messages_larger_than_their_buffer_and_reserved_space_commits():
+    import io
+
+    from mcap.reader import make_reader
+
+    from hiros_core.recording.mcap_out import McapWriter
+
+    stream = io.BytesIO()
+    writer = McapWriter(stream, chunk_size=1000)
+    writer.start()
+    channel = writer.register_channel("/a", "cdr", writer.register_schema("x/msg/Y", "", b""), {})
+    payloads = [bytes([k]) * size for k, size in enumerate([10, 3 << 20, 700, 5, 2 << 20])]
+    for stamp, payload in enumerate(payloads):
+        if stamp % 2:  # written in place, as RecordingWriter.write_group does
+            at = writer.reserve(len(payload))
+            writer.buffer[at : at + len(payload)] = np.frombuffer(payload, dtype=np.uint8)
+            writer.commit(channel, stamp, len(payload), stamp, stamp + 1)
+        else:
+            writer.add_message(channel, stamp, payload, stamp, stamp + 1)
+    at = writer.reserve(4)  # reserved but never committed: not in the file
+    writer.buffer[at : at + 4] = 7
+    writer.finish()
+    stream.seek(0)
+    read = [bytes(m.data) for _, _, m in make_reader(stream).iter_messages()]
+    assert read == payloads
