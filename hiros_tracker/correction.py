@@ -106,7 +106,7 @@ class CameraCorrection:
                 stamp_ns if source_ns == group.stamp_ns else camera.to_reference_ns(source_ns)
             )
             moved.src_frame = moved.src_frame or group.frame_id
-        return MovedFrame(SkeletonGroup(stamp_ns, self.world_frame, skeletons), stack)
+        return MovedFrame(SkeletonGroup(stamp_ns, self.world_frame, skeletons), stack, name)
 
 
 class StackedRows(NamedTuple):
@@ -125,11 +125,13 @@ class StackedRows(NamedTuple):
 class MovedFrame(NamedTuple):
     """A camera frame in the world frame and on the reference clock (``CameraCorrection.move``).
 
-    ``stack`` holds its skeletons' rows stacked, or None when their layouts differ.
+    ``stack`` holds its skeletons' rows stacked, or None when their layouts differ;
+    ``camera`` is the calibration's name for the camera.
     """
 
     group: SkeletonGroup
     stack: StackedRows | None
+    camera: str
 
 
 def _row_transform(extrinsics: RigidTransform) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

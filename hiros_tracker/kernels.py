@@ -222,20 +222,13 @@ def canonical_poses(  # noqa: PLR0917
 
 
 @njit(cache=True, error_model="numpy")
-def frame_costs(  # noqa: PLR0917 - one frame's whole matching input
+def frame_costs(  # noqa: PLR0917 - match_costs' and gate_costs' arguments
     positions: np.ndarray,
     velocity: np.ndarray,
     times_ns: np.ndarray,
-    last_hit_ns: np.ndarray,
-    confirmed: np.ndarray,
-    body_ids: np.ndarray,
-    seen: np.ndarray,
-    n_tracks: int,
-    detections: np.ndarray,
-    det_ids: np.ndarray,
-    camera: int,
     stamp_ns: int,
-    recent_ns: int,
+    max_prediction: float,
+    detections: np.ndarray,
     weights: np.ndarray,
     part: np.ndarray,
     mirror: np.ndarray,
@@ -243,51 +236,31 @@ def frame_costs(  # noqa: PLR0917 - one frame's whole matching input
     use_parts: bool,
     min_joints: int,
     margin: float,
-    max_prediction: float,
+    last_hit_ns: np.ndarray,
+    confirmed: np.ndarray,
+    body_ids: np.ndarray,
+    seen: np.ndarray,
+    det_ids: np.ndarray,
+    camera: int,
+    gate_stamp_ns: int,
+    recent_ns: int,
     bonus: float,
     gate_distance: float,
     gate_growth: float,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """``match_costs`` of the first ``n_tracks`` tracks, then ``gate_costs``, in one call.
-
-    The track fields are the ``TrackTable``'s (rows ``[:n_tracks]``). Every pair's cost is
-    independent of the others, so the whole matrix is computed once per frame and each level
-    of the matching cascade takes its rows of it.
+    """``match_costs`` then ``gate_costs`` in one call (each takes its own arguments, in order).
 
     Returns:
-        ``(T, D)`` costs (``INFEASIBLE`` where gated out), ``(T, D, K)`` mirrored parts,
-        ``(T, D)`` feasible pairs and ``(T,)`` cascade levels (see ``gate_costs``).
+        ``(T, D)`` costs, ``(T, D, K)`` mirrored parts, ``(T, D)`` feasible pairs and ``(T,)``
+        cascade levels.
 
     """
-    cost, flips = match_costs(
-        positions[:n_tracks],
-        velocity[:n_tracks],
-        times_ns[:n_tracks],
-        stamp_ns,
-        max_prediction,
-        detections,
-        weights,
-        part,
-        mirror,
-        n_parts,
-        use_parts,
-        min_joints,
-        margin,
-    )
-    feasible, levels = gate_costs(
-        cost,
-        last_hit_ns[:n_tracks],
-        confirmed[:n_tracks],
-        body_ids[:n_tracks],
-        seen[:n_tracks],
-        det_ids,
-        camera,
-        stamp_ns,
-        recent_ns,
-        bonus,
-        gate_distance,
-        gate_growth,
-    )
+    cost, flips = match_costs(positions, velocity, times_ns, stamp_ns, max_prediction,
+                              detections, weights, part, mirror, n_parts, use_parts,
+                              min_joints, margin)  # fmt: skip
+    feasible, levels = gate_costs(cost, last_hit_ns, confirmed, body_ids, seen, det_ids,
+                                  camera, gate_stamp_ns, recent_ns, bonus, gate_distance,
+                                  gate_growth)  # fmt: skip
     return cost, flips, feasible, levels
 
 

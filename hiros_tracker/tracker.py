@@ -296,6 +296,12 @@ class _LayoutInfo:
     frame: _BodyFrame
     sides: tuple[np.ndarray, np.ndarray, np.ndarray]  # _side_arrays
 
+    @cached_property
+    def facing_body(self) -> tuple[int, int, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """What ``kernels.turn_facing`` needs of the layout: body frame joints and mirror."""
+        frame = self.frame
+        return frame.root, frame.neck, frame.left, frame.right, frame.pointers, self.parts.mirror
+
 
 @cache
 def _joint_weights(layout: Layout, decay: float) -> np.ndarray:
@@ -385,7 +391,7 @@ class Tracker:
         if self._released_ns is not None and stamp_ns < self._released_ns:
             self.drops["late frame"] += 1
             return self._output([])
-        camera = self.correction.camera_name(group) or group.camera
+        camera = corrected.camera or group.camera
         heapq.heappush(self._buffer, (stamp_ns, next(self._sequence), camera, corrected))
         if self._newest_ns is None or stamp_ns > self._newest_ns:
             self._newest_ns = stamp_ns
@@ -587,37 +593,21 @@ class Tracker:
         params = self.params
         parts = info.parts
         n = table.n
-        cost, flips = kernels.match_costs(
-            table.positions[:n],
-            table.velocity[:n],
-            table.time_ns[:n],
-            stamp,
-            params.max_prediction,
-            positions,
-            info.weights,
-            parts.part,
-            parts.mirror,
-            parts.count,
-            params.mirror_check,
-            params.min_joints,
-            params.mirror_margin,
-        )
-        if params.velocity_weight > 0 or params.orientation_weight > 0:
-            cost = cost + self._motion_costs(table, detections, parts, flips)
-        feasible, levels = kernels.gate_costs(
-            cost,
-            table.last_hit_ns,
-            table.confirmed,
-            table.body_ids,
-            table.seen,
-            det_ids,
-            camera,
-            stamp,
-            stamp - round(params.recent_window * 1e9),
-            params.body_id_bonus,
-            params.gate_distance,
-            params.gate_growth,
-        )
+        match_args = (
+            table.positions[:n], table.velocity[:n], table.time_ns[:n], stamp,
+            params.max_prediction, positions, info.weights, parts.part, parts.mirror, parts.count,
+            params.mirror_check, params.min_joints, params.mirror_margin,
+        )  # fmt: skip
+        gate_args = (
+            table.last_hit_ns, table.confirmed, table.body_ids, table.seen, det_ids, camera, stamp,
+            stamp - round(params.recent_window * 1e9), params.body_id_bonus,
+            params.gate_distance, params.gate_growth,
+        )  # fmt: skip
+        if params.velocity_weight <= 0 and params.orientation_weight <= 0:
+            return kernels.frame_costs(*match_args, *gate_args)
+        cost, flips = kernels.match_costs(*match_args)
+        cost = cost + self._motion_costs(table, detections, parts, flips)
+        feasible, levels = kernels.gate_costs(cost, *gate_args)
         return cost, flips, feasible, levels
 
     def _motion_costs(
@@ -732,8 +722,9 @@ class Tracker:
         if facing:
             swaps[self._facing(table, rows, canonical, info, time_ns, camera_position)] = True
         voting = params.mirror_check and params.mirror_vote and not facing
+        confirmed, hits = table.confirmed[rows].tolist(), table.hits[rows].tolist()
         for u, row in enumerate(rows.tolist()):
-            if not table.confirmed[row] and table.hits[row] >= params.min_hits:
+            if not confirmed[u] and hits[u] >= params.min_hits:
                 self._confirm(table, row, info, time_ns)
             if voting and table.confirmed[row]:
                 swaps[u] ^= self._vote(table, row, parts, camera, time_ns, flips[u] ^ swaps[u])
@@ -755,14 +746,13 @@ class Tracker:
 
         """
         params = self.params
-        frame = info.frame
         turned = kernels.turn_facing(
             table.positions, table.orientations, table.velocities, table.velocity, table.sums,
             table.record_terms, table.record_start, table.record_count, table.facing,
             table.facing_ns, rows, canonical, self._up,
             _NO_CAMERA if camera_position is None else camera_position,
             camera_position is not None,
-            (frame.root, frame.neck, frame.left, frame.right, frame.pointers, info.parts.mirror),
+            info.facing_body,
             (params.flip_prior, params.flip_prior_back, params.walking_speed,
              params.walking_evidence, params.facing_memory, params.facing_threshold),
             time_ns,
@@ -881,7 +871,7 @@ class Tracker:
             kernels.label_frame(*frame.stack, index, flips, parts.part, parts.mirror,
                                 table.velocities, rows, table.confirmed)  # fmt: skip
         output = []
-        confirmed = table.confirmed[rows].tolist()
+        confirmed, ids = table.confirmed[rows].tolist(), table.ids[rows].tolist()
         for u, (detection, row) in enumerate(zip(detections, rows.tolist(), strict=True)):
             if not confirmed[u]:
                 continue
@@ -889,7 +879,7 @@ class Tracker:
                 kernels.label_rows(detection.markers, detection.marker_present, detection.links,
                                    detection.link_present, flips[u], parts.part, parts.mirror,
                                    table.velocities[row])  # fmt: skip
-            detection.id = int(table.ids[row])
+            detection.id = ids[u]
             output.append(detection)
         return output
 
