@@ -9,15 +9,16 @@ DESIGN.md: ``p_world = R p_camera + t`` and
 from __future__ import annotations
 
 from collections import Counter
+from typing import NamedTuple
 
 import numpy as np
 
 from hiros_core.calibration import Calibration, CameraCalibration
 from hiros_core.geometry import RigidTransform
-from hiros_core.model import Skeleton, SkeletonGroup
+from hiros_core.model import STATE_WIDTH, Skeleton, SkeletonGroup
 from hiros_tracker import kernels
 
-__all__ = ["CameraCorrection"]
+__all__ = ["CameraCorrection", "MovedFrame", "StackedRows"]
 
 UNCALIBRATED = "uncalibrated camera"
 """Drop reason of a group whose camera has no calibration."""
@@ -86,17 +87,51 @@ class CameraCorrection:
         tell cameras apart); ``src_time`` becomes the corrected stamp. A skeleton without a
         ``src_time`` (0) takes the header stamp.
         """
+        moved = self.move(group)
+        return None if moved is None else moved.group
+
+    def move(self, group: SkeletonGroup) -> MovedFrame | None:
+        """``apply``, keeping the moved rows stacked for a caller working on the whole frame."""
         name = self.camera_name(group)
         if name is None:
             self.uncalibrated.add(group.camera)
             self.drops[UNCALIBRATED] += 1
             return None
         camera = self._cameras[name]
-        skeletons = _moved(group.skeletons, self._transforms[name])
+        skeletons, stack = _moved(group.skeletons, self._transforms[name])
+        stamp_ns = camera.to_reference_ns(group.stamp_ns)
         for moved in skeletons:
-            moved.src_time_ns = camera.to_reference_ns(moved.src_time_ns or group.stamp_ns)
+            source_ns = moved.src_time_ns or group.stamp_ns
+            moved.src_time_ns = (
+                stamp_ns if source_ns == group.stamp_ns else camera.to_reference_ns(source_ns)
+            )
             moved.src_frame = moved.src_frame or group.frame_id
-        return SkeletonGroup(camera.to_reference_ns(group.stamp_ns), self.world_frame, skeletons)
+        return MovedFrame(SkeletonGroup(stamp_ns, self.world_frame, skeletons), stack, name)
+
+
+class StackedRows(NamedTuple):
+    """One frame's moved rows, one array per field over its skeletons (all of one layout).
+
+    The skeletons' own fields are views into these (row ``d`` = skeleton ``d``), so a change
+    made here shows in them: a stage can work on the whole frame in one compiled call.
+    """
+
+    markers: np.ndarray  # (D, J, 20)
+    marker_present: np.ndarray  # (D, J)
+    links: np.ndarray  # (D, L, 20)
+    link_present: np.ndarray  # (D, L)
+
+
+class MovedFrame(NamedTuple):
+    """A camera frame in the world frame and on the reference clock (``CameraCorrection.move``).
+
+    ``stack`` holds its skeletons' rows stacked, or None when their layouts differ;
+    ``camera`` is the calibration's name for the camera.
+    """
+
+    group: SkeletonGroup
+    stack: StackedRows | None
+    camera: str
 
 
 def _row_transform(extrinsics: RigidTransform) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -114,45 +149,67 @@ def _row_transform(extrinsics: RigidTransform) -> tuple[np.ndarray, np.ndarray, 
 
 def _moved(
     skeletons: list[Skeleton], transform: tuple[np.ndarray, np.ndarray, np.ndarray]
-) -> list[Skeleton]:
+) -> tuple[list[Skeleton], StackedRows | None]:
     """New skeletons moved by a ``_row_transform``, all rows of a frame at once.
 
     The result equals ``RigidTransform.apply_to_skeleton`` on each skeleton (a test checks it):
     a field with any NaN stays all NaN, quaternions are normalised first. Every row of the
-    frame (markers and links of all people) is moved by one compiled loop
-    (``kernels.move_rows``): flat in the number of people, which is what the tracker's time
-    budget needs. The new skeletons' rows are views into one array owned by them alone.
+    frame (markers, links and boxes of all people) is moved by one compiled loop
+    (``kernels.move_frame``): flat in the number of people, which is what the tracker's time
+    budget needs. The new skeletons' fields are views into arrays owned by them alone: when
+    they share a layout, the stacked arrays returned (else None).
     """
     if not skeletons:
-        return []
-    rotation, translation, quaternion_product = transform
-    rows = np.concatenate([part for s in skeletons for part in (s.markers, s.links)])
-    kernels.move_rows(rows, rotation, translation, quaternion_product)
+        return [], None
+    layout = skeletons[0].layout
     boxes = np.array([s.bounding_box for s in skeletons])
-    kernels.move_boxes(boxes, rotation, translation, quaternion_product)
-    moved = []
-    start = 0
-    for skeleton, box in zip(skeletons, boxes, strict=True):
-        middle = start + len(skeleton.markers)
-        end = middle + len(skeleton.links)
-        moved.append(
-            Skeleton(
-                id=skeleton.id,
-                src_time_ns=skeleton.src_time_ns,
-                src_frame=skeleton.src_frame,
-                layout=skeleton.layout,
-                markers=rows[start:middle],
-                links=rows[middle:end],
-                marker_present=skeleton.marker_present.copy(),
-                link_present=skeleton.link_present.copy(),
-                confidence=skeleton.confidence,
-                bounding_box=box,
-                max_markers=skeleton.max_markers,
-                max_links=skeleton.max_links,
-            )
+    if all(skeleton.layout is layout for skeleton in skeletons):
+        stack = StackedRows(
+            np.array([s.markers for s in skeletons]),
+            np.array([s.marker_present for s in skeletons]),
+            np.array([s.links for s in skeletons]),
+            np.array([s.link_present for s in skeletons]),
         )
-        start = end
-    return moved
+        kernels.move_frame(stack.markers, stack.links, boxes, *transform)
+        markers, links = stack.markers, stack.links
+    else:  # one array of every row, then split back
+        stack = None
+        parts = [part for s in skeletons for part in (s.markers, s.links)]
+        rows = np.concatenate(parts)
+        kernels.move_frame(rows[None], np.empty((1, 0, STATE_WIDTH)), boxes, *transform)
+        pieces = np.split(rows, np.cumsum([len(part) for part in parts])[:-1])
+        markers, links = pieces[0::2], pieces[1::2]
+    return [
+        _copy_with(skeleton, markers[d], links[d], boxes[d], stack, d)
+        for d, skeleton in enumerate(skeletons)
+    ], stack
+
+
+def _copy_with(  # noqa: PLR0917
+    skeleton: Skeleton,
+    markers: np.ndarray,
+    links: np.ndarray,
+    box: np.ndarray,
+    stack: StackedRows | None,
+    index: int,
+) -> Skeleton:
+    """A skeleton like ``skeleton`` with the moved rows (presence views into ``stack``)."""
+    return Skeleton(
+        id=skeleton.id,
+        src_time_ns=skeleton.src_time_ns,
+        src_frame=skeleton.src_frame,
+        layout=skeleton.layout,
+        markers=markers,
+        links=links,
+        marker_present=(
+            skeleton.marker_present.copy() if stack is None else stack.marker_present[index]
+        ),
+        link_present=skeleton.link_present.copy() if stack is None else stack.link_present[index],
+        confidence=skeleton.confidence,
+        bounding_box=box,
+        max_markers=skeleton.max_markers,
+        max_links=skeleton.max_links,
+    )
 
 
 def _left_product(rotation: np.ndarray) -> np.ndarray:

@@ -18,14 +18,23 @@ import numpy as np
 from numba import njit
 
 __all__ = [
+    "INFEASIBLE",
     "canonical_poses",
-    "facing_evidence",
-    "hit_update",
+    "fold_hits",
+    "frame_costs",
+    "gate_costs",
+    "label_frame",
     "label_rows",
+    "live_tracks",
     "masked_positions",
     "match_costs",
-    "solve_velocities",
+    "move_frame",
+    "relabel",
+    "turn_facing",
 ]
+
+INFEASIBLE = 1e9
+"""Cost given to gated-out pairs so that the assignment solver still sees a full matrix."""
 
 
 @njit(cache=True, error_model="numpy")
@@ -213,93 +222,336 @@ def canonical_poses(  # noqa: PLR0917
 
 
 @njit(cache=True, error_model="numpy")
-def hit_update(  # noqa: PLR0917
+def frame_costs(  # noqa: PLR0917 - match_costs' and gate_costs' arguments
     positions: np.ndarray,
     velocity: np.ndarray,
     times_ns: np.ndarray,
-    epochs_ns: np.ndarray,
-    alpha: np.ndarray,
-    canonical: np.ndarray,
-    time_ns: int,
+    stamp_ns: int,
     max_prediction: float,
-) -> tuple[np.ndarray, np.ndarray]:
-    """Tracks' new smoothed poses and the velocity-fit terms of their new detections.
-
-    Each track is predicted to ``max(its time, time_ns)``; a measured joint moves by ``alpha``
-    towards the detection, an unmeasured one keeps the prediction (or takes the detection
-    where the prediction is not finite).
+    detections: np.ndarray,
+    weights: np.ndarray,
+    part: np.ndarray,
+    mirror: np.ndarray,
+    n_parts: int,
+    use_parts: bool,
+    min_joints: int,
+    margin: float,
+    last_hit_ns: np.ndarray,
+    confirmed: np.ndarray,
+    body_ids: np.ndarray,
+    seen: np.ndarray,
+    det_ids: np.ndarray,
+    camera: int,
+    gate_stamp_ns: int,
+    recent_ns: int,
+    bonus: float,
+    gate_distance: float,
+    gate_growth: float,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """``match_costs`` then ``gate_costs`` in one call (each takes its own arguments, in order).
 
     Returns:
-        ``(U, J, 3)`` updated poses and ``(U, J, 9)`` terms n, t, t², p (3), t·p (3) of the
-        least-squares slope, ``t`` in seconds from each track's epoch.
+        ``(T, D)`` costs, ``(T, D, K)`` mirrored parts, ``(T, D)`` feasible pairs and ``(T,)``
+        cascade levels.
 
     """
-    n_pairs, n_joints = canonical.shape[:2]
-    updated = np.empty((n_pairs, n_joints, 3))
-    terms = np.zeros((n_pairs, n_joints, 9))
-    for u in range(n_pairs):
-        now = max(times_ns[u], time_ns)
-        dt = (now - times_ns[u]) * 1e-9
-        dt = min(max(dt, -max_prediction), max_prediction)
-        t = (time_ns - epochs_ns[u]) * 1e-9
-        for j in range(n_joints):
-            measured = (
-                math.isfinite(canonical[u, j, 0])
-                and math.isfinite(canonical[u, j, 1])
-                and math.isfinite(canonical[u, j, 2])
-            )
-            for a in range(3):
-                predicted = positions[u, j, a] + velocity[u, a] * dt
-                value = predicted
-                if measured:
-                    value = predicted + alpha[u] * (canonical[u, j, a] - predicted)
-                if not math.isfinite(value):
-                    value = canonical[u, j, a]
-                updated[u, j, a] = value
-            if measured:
-                terms[u, j, 0] = 1.0
-                terms[u, j, 1] = t
-                terms[u, j, 2] = t * t
-                for a in range(3):
-                    terms[u, j, 3 + a] = canonical[u, j, a]
-                    terms[u, j, 6 + a] = canonical[u, j, a] * t
-    return updated, terms
+    cost, flips = match_costs(positions, velocity, times_ns, stamp_ns, max_prediction,
+                              detections, weights, part, mirror, n_parts, use_parts,
+                              min_joints, margin)  # fmt: skip
+    feasible, levels = gate_costs(cost, last_hit_ns, confirmed, body_ids, seen, det_ids,
+                                  camera, gate_stamp_ns, recent_ns, bonus, gate_distance,
+                                  gate_growth)  # fmt: skip
+    return cost, flips, feasible, levels
 
 
 @njit(cache=True, error_model="numpy")
-def solve_velocities(
-    sums: np.ndarray, weights: np.ndarray
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Slopes from per-camera sums ``(U, C, J, 9)``: one intercept per camera (fixed effects).
+def gate_costs(  # noqa: PLR0917
+    cost: np.ndarray,
+    last_hit_ns: np.ndarray,
+    confirmed: np.ndarray,
+    body_ids: np.ndarray,
+    seen: np.ndarray,
+    det_ids: np.ndarray,
+    camera: int,
+    stamp_ns: int,
+    recent_ns: int,
+    bonus: float,
+    gate_distance: float,
+    gate_growth: float,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Finish the costs ``(T, D)`` in place: body-id evidence added, gated-out pairs excluded.
 
-    Returns ``(U, J, 3)`` joint velocities (0 where undetermined), ``(U, 3)`` body velocities
-    pooled with ``weights`` ``(J,)`` and ``(U,)`` whether anything was determined.
+    Body-id evidence (times ``bonus`` metres, when not 0): -1 where the camera keeps the body
+    id it gave the track last time (``body_ids``/``seen`` ``(T, C)``), +1 for the track's other
+    candidates when that id is in the frame (``det_ids`` ``(D,)``): the camera still follows
+    the track's body as another detection. A pair is feasible when its cost is finite and
+    within the track's gate, ``gate_distance`` widened by ``gate_growth`` per second unseen;
+    the others get ``INFEASIBLE`` so that the solver still sees a full matrix.
+
+    Returns:
+        ``(T, D)`` feasible pairs and ``(T,)`` each track's level in the matching cascade:
+        0 confirmed and hit since ``recent_ns``, 1 other confirmed, 2 tentative.
+
     """
-    n_pairs, n_cameras, n_joints = sums.shape[:3]
-    velocities = np.zeros((n_pairs, n_joints, 3))
-    body = np.zeros((n_pairs, 3))
-    determined = np.zeros(n_pairs, dtype=np.bool_)
-    sxy = np.empty(3)
-    for u in range(n_pairs):
-        pooled = 0.0
-        moment = np.zeros(3)
-        for j in range(n_joints):
-            sxx = 0.0
-            sxy[:] = 0.0
-            for c in range(n_cameras):
-                n = max(sums[u, c, j, 0], 1.0)
-                sxx += sums[u, c, j, 2] - sums[u, c, j, 1] ** 2 / n
-                for a in range(3):
-                    sxy[a] += sums[u, c, j, 6 + a] - sums[u, c, j, 1] * sums[u, c, j, 3 + a] / n
-            if sxx > 1e-5:
-                determined[u] = True
-                pooled += sxx * weights[j]
-                for a in range(3):
-                    velocities[u, j, a] = sxy[a] / sxx
-                    moment[a] += sxy[a] * weights[j]
+    n_tracks, n_det = cost.shape
+    feasible = np.zeros((n_tracks, n_det), dtype=np.bool_)
+    levels = np.empty(n_tracks, dtype=np.int64)
+    for t in range(n_tracks):
+        known = body_ids[t, camera] if seen[t, camera] else -1
+        elsewhere = 0.0
+        for d in range(n_det):
+            if known >= 0 and det_ids[d] == known:
+                elsewhere = 1.0
+        gate = gate_distance + gate_growth * max((stamp_ns - last_hit_ns[t]) * 1e-9, 0.0)
+        for d in range(n_det):
+            if bonus:
+                term = -1.0 if known == det_ids[d] and det_ids[d] >= 0 else elsewhere
+                cost[t, d] += bonus * term
+            feasible[t, d] = math.isfinite(cost[t, d]) and cost[t, d] <= gate
+            if not feasible[t, d]:
+                cost[t, d] = INFEASIBLE
+        levels[t] = (0 if last_hit_ns[t] >= recent_ns else 1) if confirmed[t] else 2
+    return feasible, levels
+
+
+@njit(cache=True, error_model="numpy")
+def live_tracks(  # noqa: PLR0917
+    last_hit_ns: np.ndarray,
+    confirmed: np.ndarray,
+    n_tracks: int,
+    now_ns: int,
+    track_timeout: float,
+    tentative_timeout: float,
+) -> tuple[int, np.ndarray]:
+    """How many of the first ``n_tracks`` tracks were hit within their timeout, and which."""
+    keep = np.empty(n_tracks, dtype=np.bool_)
+    count = 0
+    for t in range(n_tracks):
+        timeout = track_timeout if confirmed[t] else tentative_timeout
+        keep[t] = (now_ns - last_hit_ns[t]) * 1e-9 <= timeout
+        count += keep[t]
+    return count, keep
+
+
+@njit(cache=True, error_model="numpy")
+def fold_hits(  # noqa: PLR0917 - the TrackTable's fields and one frame's hits
+    positions: np.ndarray,
+    velocities: np.ndarray,
+    velocity: np.ndarray,
+    time_ns: np.ndarray,
+    last_hit_ns: np.ndarray,
+    epoch_ns: np.ndarray,
+    hits: np.ndarray,
+    n_cameras: np.ndarray,
+    body_ids: np.ndarray,
+    seen: np.ndarray,
+    sums: np.ndarray,
+    record_ns: np.ndarray,
+    record_camera: np.ndarray,
+    record_terms: np.ndarray,
+    record_start: np.ndarray,
+    record_count: np.ndarray,
+    rows: np.ndarray,
+    canonical: np.ndarray,
+    det_ids: np.ndarray,
+    camera: int,
+    stamp_ns: int,
+    smoothing: float,
+    max_prediction: float,
+    window_ns: int,
+    weights: np.ndarray,
+) -> bool:
+    """Fold one frame's detections into their tracks (``TrackTable`` fields, in place).
+
+    Track ``rows[u]`` (distinct) takes ``canonical[u]`` ``(J, 3)`` (its detection in its
+    labelling, NaN where unmeasured) and the camera's body id ``det_ids[u]``: its pose is
+    predicted and smoothed (``_hit_one``), the detection enters its velocity window (older
+    ones leave; every ``REBASE_NS`` the time origin moves, see ``_rebase``) and its velocities
+    are refitted over the cameras of all the frame's tracks (``_solve_one``).
+
+    Returns:
+        whether some track's record ring is now full (the caller grows it before the next frame).
+
+    """
+    slots = record_ns.shape[1]
+    for u in range(len(rows)):
+        r = rows[u]
+        slot = (record_start[r] + record_count[r]) % slots
+        alpha = smoothing if hits[r] else 1.0
+        _hit_one(positions[r], velocity[r], time_ns[r], epoch_ns[r], alpha, canonical[u],
+                 stamp_ns, max_prediction, record_terms[r, slot])  # fmt: skip
+        time_ns[r] = max(time_ns[r], stamp_ns)
+        last_hit_ns[r] = max(last_hit_ns[r], stamp_ns)
+        hits[r] += 1
+        body_ids[r, camera] = det_ids[u]
+        seen[r, camera] = True
+        n_cameras[r] = max(n_cameras[r], camera + 1)
+        record_ns[r, slot] = stamp_ns
+        record_camera[r, slot] = camera
+        record_count[r] += 1
+        sums[r, camera] += record_terms[r, slot]
+        while record_count[r] and record_ns[r, record_start[r]] < stamp_ns - window_ns:
+            old = record_start[r]
+            sums[r, record_camera[r, old]] -= record_terms[r, old]
+            record_start[r] = (old + 1) % slots
+            record_count[r] -= 1
+        if stamp_ns - epoch_ns[r] > REBASE_NS:
+            _rebase(r, stamp_ns, epoch_ns, sums, record_ns, record_camera, record_terms,
+                    record_start, record_count)  # fmt: skip
+    n_fit = 1
+    for u in range(len(rows)):
+        n_fit = max(n_fit, n_cameras[rows[u]])
+    fitted = np.zeros(velocities.shape[1:])
+    body = np.zeros(3)
+    full = False
+    for u in range(len(rows)):
+        r = rows[u]
+        if _solve_one(sums[r], n_fit, weights, fitted, body):
+            velocities[r] = fitted
+            velocity[r] = body
+        full |= record_count[r] == slots
+    return full
+
+
+REBASE_NS = 30_000_000_000
+"""How often (ns) a track's running sums are rebuilt around a new time origin (precision)."""
+
+
+@njit(cache=True, error_model="numpy")
+def _hit_one(  # noqa: PLR0917
+    position: np.ndarray,
+    velocity: np.ndarray,
+    time_ns: int,
+    epoch_ns: int,
+    alpha: float,
+    canonical: np.ndarray,
+    stamp_ns: int,
+    max_prediction: float,
+    terms: np.ndarray,
+) -> None:
+    """A track's pose ``(J, 3)`` updated in place; its detection's fit terms into ``terms``.
+
+    The track is predicted to ``max(time_ns, stamp_ns)``; a measured joint moves by ``alpha``
+    towards the detection, an unmeasured one keeps the prediction (or takes the detection
+    where the prediction is not finite). ``terms`` ``(J, 9)``: n, t, t², p (3), t·p (3) of
+    the least-squares slope, ``t`` in seconds from ``epoch_ns``, zero for unmeasured joints.
+    """
+    now = max(time_ns, stamp_ns)
+    dt = (now - time_ns) * 1e-9
+    dt = min(max(dt, -max_prediction), max_prediction)
+    t = (stamp_ns - epoch_ns) * 1e-9
+    for j in range(len(position)):
+        measured = (
+            math.isfinite(canonical[j, 0])
+            and math.isfinite(canonical[j, 1])
+            and math.isfinite(canonical[j, 2])
+        )
         for a in range(3):
-            body[u, a] = moment[a] / max(pooled, 1e-12)
-    return velocities, body, determined
+            predicted = position[j, a] + velocity[a] * dt
+            value = predicted
+            if measured:
+                value = predicted + alpha * (canonical[j, a] - predicted)
+            if not math.isfinite(value):
+                value = canonical[j, a]
+            position[j, a] = value
+        terms[j, :] = 0.0
+        if measured:
+            terms[j, 0] = 1.0
+            terms[j, 1] = t
+            terms[j, 2] = t * t
+            for a in range(3):
+                terms[j, 3 + a] = canonical[j, a]
+                terms[j, 6 + a] = canonical[j, a] * t
+
+
+@njit(cache=True, error_model="numpy")
+def _rebase(  # noqa: PLR0917
+    r: int,
+    stamp_ns: int,
+    epoch_ns: np.ndarray,
+    sums: np.ndarray,
+    record_ns: np.ndarray,
+    record_camera: np.ndarray,
+    record_terms: np.ndarray,
+    record_start: np.ndarray,
+    record_count: np.ndarray,
+) -> None:
+    """Move track ``r``'s time origin to ``stamp_ns`` and rebuild its sums, so ``t²`` stays small.
+
+    A record's terms keep n and p; t, t² and t·p are recomputed for the new origin.
+    """
+    slots = record_ns.shape[1]
+    epoch_ns[r] = stamp_ns
+    sums[r] = 0.0
+    for i in range(record_count[r]):
+        slot = (record_start[r] + i) % slots
+        t = (record_ns[r, slot] - stamp_ns) * 1e-9
+        terms = record_terms[r, slot]
+        for j in range(len(terms)):
+            if terms[j, 0]:
+                terms[j, 1] = t
+                terms[j, 2] = t * t
+                for a in range(3):
+                    terms[j, 6 + a] = terms[j, 3 + a] * t
+        sums[r, record_camera[r, slot]] += terms
+
+
+@njit(cache=True, error_model="numpy")
+def _solve_one(
+    sums: np.ndarray, n_cameras: int, weights: np.ndarray, velocities: np.ndarray, body: np.ndarray
+) -> bool:
+    """Slopes from one track's per-camera sums ``(C, J, 9)``: one intercept per camera.
+
+    Fits over the first ``n_cameras`` cameras; writes ``(J, 3)`` joint velocities (0 where
+    undetermined) and the ``(3,)`` body velocity pooled with ``weights`` ``(J,)``; returns
+    whether anything was determined.
+    """
+    determined = False
+    pooled = 0.0
+    moment = np.zeros(3)
+    sxy = np.empty(3)
+    for j in range(len(weights)):
+        sxx = 0.0
+        sxy[:] = 0.0
+        for c in range(n_cameras):
+            n = max(sums[c, j, 0], 1.0)
+            sxx += sums[c, j, 2] - sums[c, j, 1] ** 2 / n
+            for a in range(3):
+                sxy[a] += sums[c, j, 6 + a] - sums[c, j, 1] * sums[c, j, 3 + a] / n
+        velocities[j, :] = 0.0
+        if sxx > 1e-5:
+            determined = True
+            pooled += sxx * weights[j]
+            for a in range(3):
+                velocities[j, a] = sxy[a] / sxx
+                moment[a] += sxy[a] * weights[j]
+    for a in range(3):
+        body[a] = moment[a] / max(pooled, 1e-12)
+    return determined
+
+
+@njit(cache=True, error_model="numpy")
+def relabel(  # noqa: PLR0917
+    r: int,
+    permutation: np.ndarray,
+    positions: np.ndarray,
+    orientations: np.ndarray,
+    velocities: np.ndarray,
+    sums: np.ndarray,
+    record_terms: np.ndarray,
+    record_start: np.ndarray,
+    record_count: np.ndarray,
+) -> None:
+    """Reorder track ``r``'s joints (swap the sides of some parts) in every per-joint field."""
+    positions[r] = positions[r][permutation]
+    orientations[r] = orientations[r][permutation]
+    velocities[r] = velocities[r][permutation]
+    for c in range(sums.shape[1]):
+        sums[r, c] = sums[r, c][permutation]
+    slots = record_terms.shape[1]
+    for i in range(record_count[r]):
+        slot = (record_start[r] + i) % slots
+        record_terms[r, slot] = record_terms[r, slot][permutation]
 
 
 @njit(cache=True, error_model="numpy")
@@ -321,15 +573,17 @@ def _flat3(  # noqa: PLR0917 - two vectors as scalars (no arrays in the inner lo
 
 
 @njit(cache=True, error_model="numpy")
-def trunk_mean(positions: np.ndarray, root: int, neck: int) -> tuple[np.ndarray, int]:
-    """``(3,)`` mean unit root -> neck over the poses where it is finite, and how many."""
+def _trunk_mean(
+    positions: np.ndarray, rows: np.ndarray, root: int, neck: int
+) -> tuple[np.ndarray, int]:
+    """``(3,)`` mean unit root -> neck over tracks ``rows`` where it is finite, and how many."""
     mean = np.zeros(3)
     count = 0
-    for u in range(len(positions)):
+    for r in rows:
         x, y, z = _unit3(
-            positions[u, neck, 0] - positions[u, root, 0],
-            positions[u, neck, 1] - positions[u, root, 1],
-            positions[u, neck, 2] - positions[u, root, 2],
+            positions[r, neck, 0] - positions[r, root, 0],
+            positions[r, neck, 1] - positions[r, root, 1],
+            positions[r, neck, 2] - positions[r, root, 2],
         )
         if math.isfinite(x) and math.isfinite(y) and math.isfinite(z):
             mean[0] += x
@@ -342,8 +596,9 @@ def trunk_mean(positions: np.ndarray, root: int, neck: int) -> tuple[np.ndarray,
 
 
 @njit(cache=True, error_model="numpy")
-def facing_evidence(  # noqa: PLR0917
+def _facing_evidence(  # noqa: PLR0917
     positions: np.ndarray,
+    rows: np.ndarray,
     canonical: np.ndarray,
     velocity: np.ndarray,
     up: np.ndarray,
@@ -360,24 +615,26 @@ def facing_evidence(  # noqa: PLR0917
 ) -> np.ndarray:
     """``(U,)`` log-odds each detection gives that its track faces the way its sides say.
 
-    ``positions`` ``(U, J, 3)`` the tracks' poses, ``canonical`` their detections, ``velocity``
-    ``(U, 3)`` the tracks' body velocities, ``up`` ``(3,)`` the world's up, ``camera`` ``(3,)``
-    the camera's position (used when ``has_camera``); see ``Tracker._facing``.
+    ``positions`` ``(T, J, 3)`` the tracks' poses and ``velocity`` ``(T, 3)`` their body
+    velocities, of which tracks ``rows`` ``(U,)`` were hit by ``canonical`` ``(U, J, 3)``;
+    ``up`` ``(3,)`` the world's up, ``camera`` ``(3,)`` the camera's position (used when
+    ``has_camera``); see ``turn_facing``.
     """
-    n_pairs = len(positions)
+    n_pairs = len(rows)
     evidence = np.zeros(n_pairs)
     ux, uy, uz = up[0], up[1], up[2]
     for u in range(n_pairs):
+        r = rows[u]
         lx = ly = lz = 0.0
         for i in range(len(left)):
-            lx += positions[u, left[i], 0]
-            ly += positions[u, left[i], 1]
-            lz += positions[u, left[i], 2]
+            lx += positions[r, left[i], 0]
+            ly += positions[r, left[i], 1]
+            lz += positions[r, left[i], 2]
         rx = ry = rz = 0.0
         for i in range(len(right)):
-            rx += positions[u, right[i], 0]
-            ry += positions[u, right[i], 1]
-            rz += positions[u, right[i], 2]
+            rx += positions[r, right[i], 0]
+            ry += positions[r, right[i], 1]
+            rz += positions[r, right[i], 2]
         lx, ly, lz = lx - rx, ly - ry, lz - rz
         fx, fy, fz = _unit3(ly * uz - lz * uy, lz * ux - lx * uz, lx * uy - ly * ux)
         ax = ay = az = 0.0
@@ -399,9 +656,9 @@ def facing_evidence(  # noqa: PLR0917
         flipped = ax * fx + ay * fy + az * fz < 0
         if has_camera:
             cx, cy, cz = _flat3(
-                camera[0] - positions[u, root, 0],
-                camera[1] - positions[u, root, 1],
-                camera[2] - positions[u, root, 2],
+                camera[0] - positions[r, root, 0],
+                camera[1] - positions[r, root, 1],
+                camera[2] - positions[r, root, 2],
                 ux,
                 uy,
                 uz,
@@ -415,7 +672,7 @@ def facing_evidence(  # noqa: PLR0917
             value = math.log(likely_right / likely_wrong)
         else:  # no camera pose: a flipped-looking detection is simply evidence against
             value = (-1.0 if flipped else 1.0) * math.log((1.0 - flip_prior) / flip_prior)
-        wx, wy, wz = _flat3(velocity[u, 0], velocity[u, 1], velocity[u, 2], ux, uy, uz)
+        wx, wy, wz = _flat3(velocity[r, 0], velocity[r, 1], velocity[r, 2], ux, uy, uz)
         speed = math.sqrt(wx * wx + wy * wy + wz * wz)
         along = (wx * fx + wy * fy + wz * fz) / max(speed, 1e-9)
         if speed > walking_speed:
@@ -427,6 +684,120 @@ def facing_evidence(  # noqa: PLR0917
                 value = np.nan
         evidence[u] = value if math.isfinite(value) else 0.0
     return evidence
+
+
+@njit(cache=True, error_model="numpy")
+def turn_facing(  # noqa: PLR0917 - the TrackTable's fields and one frame's evidence
+    positions: np.ndarray,
+    orientations: np.ndarray,
+    velocities: np.ndarray,
+    velocity: np.ndarray,
+    sums: np.ndarray,
+    record_terms: np.ndarray,
+    record_start: np.ndarray,
+    record_count: np.ndarray,
+    facing: np.ndarray,
+    facing_ns: np.ndarray,
+    rows: np.ndarray,
+    canonical: np.ndarray,
+    up: np.ndarray,
+    camera: np.ndarray,
+    has_camera: bool,
+    body: tuple[int, int, np.ndarray, np.ndarray, np.ndarray, np.ndarray],
+    priors: tuple[float, float, float, float, float, float],
+    stamp_ns: int,
+) -> np.ndarray:
+    """Weigh one frame's evidence on each hit track's facing; relabel tracks found reversed.
+
+    For a detection (in its track's labelling) with anatomical forward ``a`` and a track
+    front ``f``: if the track is right, the detection is flipped iff ``a·f < 0``; if the
+    track is mirrored, the opposite, and its front is ``-f``. Each hypothesis' likelihood
+    uses the flip prior for the view the camera would have (back: cos(f, to camera) < -0.5);
+    walking forward adds evidence (``_facing_evidence``). Evidence fades over the facing
+    memory; a track whose log-odds fall below minus the threshold is relabelled (all parts).
+
+    ``positions`` to ``facing_ns`` are the ``TrackTable``'s fields (changed in place;
+    ``facing`` ``(T,)`` is each track's log-odds that its sides are right, set at
+    ``facing_ns``); ``rows`` ``(U,)`` are the tracks hit by ``canonical`` ``(U, J, 3)``;
+    ``up`` ``(4,)`` is the world's up (``_update_up``, changed in place); ``camera`` ``(3,)``
+    the camera's position, used when ``has_camera``; ``body`` the root, neck, left ``(2,)``,
+    right ``(2,)``, forward pointers ``(k, 2)`` (``_BodyFrame``) and the mirror permutation
+    ``(J,)``; ``priors`` the flip prior, the flip prior seen from the back, walking speed,
+    walking evidence, facing memory (s) and facing threshold.
+
+    Returns:
+        ``(U,)`` which tracks were relabelled.
+
+    """
+    root, neck, left, right, pointers, mirror = body
+    flip_prior, flip_prior_back, walking_speed, walking_evidence, memory, threshold = priors
+    world_up = _update_up(up, positions, rows, root, neck)
+    evidence = _facing_evidence(
+        positions, rows, canonical, velocity, world_up, camera, has_camera, root, left, right,
+        pointers, flip_prior, flip_prior_back, walking_speed, walking_evidence,
+    )  # fmt: skip
+    turned = np.zeros(len(rows), dtype=np.bool_)
+    for u in range(len(rows)):
+        r = rows[u]
+        fade = math.exp(-max(stamp_ns - facing_ns[r], 0) * 1e-9 / memory)
+        facing[r] = facing[r] * fade + evidence[u]
+        facing_ns[r] = stamp_ns
+        if facing[r] < -threshold:
+            relabel(r, mirror, positions, orientations, velocities, sums, record_terms,
+                    record_start, record_count)  # fmt: skip
+            facing[r] = -facing[r]
+            turned[u] = True
+    return turned
+
+
+@njit(cache=True, error_model="numpy")
+def _update_up(
+    up: np.ndarray, positions: np.ndarray, rows: np.ndarray, root: int, neck: int
+) -> np.ndarray:
+    """``(3,)`` the world's up: a running mean of the hit tracks' trunks (root -> neck).
+
+    ``up`` ``(4,)`` is the state: x, y, z and whether it is known (0 before the first trunk;
+    NaN is returned then). The world frame may be a camera's (y down) or z-up; people stand
+    most of the time, and one bending person must not tilt the front the facing compares with.
+    """
+    mean, count = _trunk_mean(positions, rows, root, neck)
+    if count:
+        for a in range(3):
+            up[a] = mean[a] if up[3] == 0.0 else up[a] + 0.01 * (mean[a] - up[a])
+        norm = math.sqrt(up[0] * up[0] + up[1] * up[1] + up[2] * up[2])
+        for a in range(3):
+            up[a] = up[a] / norm
+        up[3] = 1.0
+    if up[3] == 0.0:
+        return np.full(3, np.nan)
+    return up[:3].copy()
+
+
+@njit(cache=True, error_model="numpy")
+def label_frame(  # noqa: PLR0917
+    markers: np.ndarray,
+    present: np.ndarray,
+    links: np.ndarray,
+    link_present: np.ndarray,
+    index: np.ndarray,
+    flips: np.ndarray,
+    part: np.ndarray,
+    mirror: np.ndarray,
+    velocities: np.ndarray,
+    rows: np.ndarray,
+    confirmed: np.ndarray,
+) -> None:
+    """``label_rows`` on a stacked frame: each pair ``u`` whose track ``rows[u]`` is confirmed.
+
+    ``markers`` ``(D, J, 20)``, ``present`` ``(D, J)`` and the links alike are the frame's
+    detections; pair ``u`` is detection ``index[u]`` with flips ``flips[u]`` and its track's
+    ``velocities[rows[u]]`` (``(T, J, 3)``, ``confirmed`` ``(T,)``: the track table's).
+    """
+    for u in range(len(rows)):
+        if confirmed[rows[u]]:
+            d = index[u]
+            label_rows(markers[d], present[d], links[d], link_present[d], flips[u], part,
+                       mirror, velocities[rows[u]])  # fmt: skip
 
 
 @njit(cache=True, error_model="numpy")
@@ -465,6 +836,26 @@ def label_rows(  # noqa: PLR0917
             markers[j, 8] = track_velocities[j, 0]
             markers[j, 9] = track_velocities[j, 1]
             markers[j, 10] = track_velocities[j, 2]
+
+
+@njit(cache=True, error_model="numpy")
+def move_frame(  # noqa: PLR0917
+    markers: np.ndarray,
+    links: np.ndarray,
+    boxes: np.ndarray,
+    rotation: np.ndarray,
+    translation: np.ndarray,
+    quaternion: np.ndarray,
+) -> None:
+    """A frame's marker and link rows ``(D, N, 20)`` and boxes ``(D, 22)`` moved in place.
+
+    One call for the whole frame (see ``move_rows`` and ``move_boxes``).
+    """
+    for d in range(len(markers)):
+        move_rows(markers[d], rotation, translation, quaternion)
+    for d in range(len(links)):
+        move_rows(links[d], rotation, translation, quaternion)
+    move_boxes(boxes, rotation, translation, quaternion)
 
 
 @njit(cache=True, error_model="numpy")

@@ -39,8 +39,7 @@ from __future__ import annotations
 
 import heapq
 import itertools
-import math
-from collections import Counter, deque
+from collections import Counter
 from dataclasses import dataclass
 from functools import cache, cached_property
 
@@ -51,13 +50,12 @@ from hiros_core.calibration import Calibration, CameraCalibration
 from hiros_core.layouts import AZURE_KINECT, Layout
 from hiros_core.model import Skeleton, SkeletonGroup
 from hiros_tracker import kernels
-from hiros_tracker.correction import CameraCorrection
+from hiros_tracker.correction import CameraCorrection, MovedFrame
+from hiros_tracker.tracks import TrackTable
 
 __all__ = ["Tracker", "TrackerParams"]
 
 _NS = 1e-9
-_INFEASIBLE = 1e9
-"""Cost given to gated-out pairs so that the solver still sees a full matrix."""
 _NO_CAMERA = np.zeros(3)
 """Placeholder camera position for the facing kernel when the camera's pose is unknown."""
 
@@ -298,6 +296,12 @@ class _LayoutInfo:
     frame: _BodyFrame
     sides: tuple[np.ndarray, np.ndarray, np.ndarray]  # _side_arrays
 
+    @cached_property
+    def facing_body(self) -> tuple[int, int, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """What ``kernels.turn_facing`` needs of the layout: body frame joints and mirror."""
+        frame = self.frame
+        return frame.root, frame.neck, frame.left, frame.right, frame.pointers, self.parts.mirror
+
 
 @cache
 def _joint_weights(layout: Layout, decay: float) -> np.ndarray:
@@ -313,117 +317,6 @@ def _joint_weights(layout: Layout, decay: float) -> np.ndarray:
             depth[joint] += 1
             parent = layout.parents[parent]
     return decay**depth
-
-
-def _velocity_sums(times: np.ndarray, positions: np.ndarray) -> np.ndarray:
-    """``(U, J, 9)`` each sample's terms of the least-squares slope: n, t, t², p (3), t·p (3).
-
-    Args:
-        times: ``(U,)`` seconds from each track's time origin.
-        positions: ``(U, J, 3)``, NaN for joints not seen.
-
-    """
-    valid = np.isfinite(positions).all(axis=2)[..., None]
-    filled = np.where(valid, positions, 0.0)
-    ones = valid.astype(float)
-    t = times[:, None, None]
-    return np.concatenate([ones, ones * t, ones * (t * t), filled, filled * t], axis=2)
-
-
-_REBASE_NS = 30_000_000_000
-"""How often (ns) a track's running sums are rebuilt around a new time origin (precision)."""
-
-
-class _Track:
-    """One person's state.
-
-    ``positions`` ``(J, 3)`` is the smoothed pose at ``time_ns``; ``velocities`` ``(J, 3)`` is
-    the least-squares slope of the recent detections with one intercept per camera (so that a
-    constant offset between two cameras' calibrations does not read as motion), kept as running
-    sums per camera (``sums[camera]`` ``(J, 9)``, times from ``epoch_ns``) over
-    ``velocity_window``; ``records`` holds the detections inside the window.
-    """
-
-    __slots__ = (
-        "born_ns",
-        "cameras",
-        "confirmed",
-        "epoch_ns",
-        "facing",
-        "facing_ns",
-        "hits",
-        "id",
-        "last_hit_ns",
-        "mirrored",
-        "orientations",
-        "positions",
-        "records",
-        "sums",
-        "time_ns",
-        "velocities",
-        "velocity",
-        "votes",
-    )
-
-    def __init__(self, track_id: int, positions: np.ndarray, time_ns: int) -> None:
-        self.id = track_id
-        self.positions = positions.copy()
-        self.orientations = np.full((len(positions), 4), np.nan)
-        self.velocities = np.zeros_like(positions)
-        self.velocity = np.zeros(3)
-        self.born_ns = self.time_ns = self.last_hit_ns = time_ns
-        self.hits = 0
-        self.confirmed = False
-        self.cameras: dict[int, int] = {}  # camera code -> the camera's last body id for it
-        self.records: deque[tuple[int, int, np.ndarray, np.ndarray]] = deque()
-        self.sums = np.zeros((1, len(positions), 9))  # (cameras, J, 9)
-        self.epoch_ns = time_ns
-        self.votes: dict[int, tuple[int, np.ndarray]] = {}
-        self.mirrored: set[int] = set()  # cameras whose last vote flips some part
-        self.facing = 0.0  # log-odds that the track's sides (hence its front) are right
-        self.facing_ns = time_ns
-
-    def predict(self, time_ns: int, max_prediction: float) -> np.ndarray:
-        """``(J, 3)`` pose extrapolated to ``time_ns`` with the body's mean velocity."""
-        dt = min(max((time_ns - self.time_ns) * _NS, -max_prediction), max_prediction)
-        return self.positions + self.velocity * dt
-
-    def add_record(
-        self, time_ns: int, camera: int, positions: np.ndarray, sums: np.ndarray, window_ns: int
-    ) -> None:
-        """Add a detection's terms (``sums`` ``(J, 9)``, see ``_velocity_sums``) to the fit.
-
-        Detections older than the window leave it. Every ``_REBASE_NS`` the time origin moves
-        to the newest detection and the sums are rebuilt, so that ``t²`` stays small.
-        """
-        if camera >= len(self.sums):
-            grown = np.zeros((camera + 1, *self.sums.shape[1:]))
-            grown[: len(self.sums)] = self.sums
-            self.sums = grown
-        self.records.append((time_ns, camera, positions, sums))
-        self.sums[camera] += sums
-        while self.records[0][0] < time_ns - window_ns:
-            _, old_camera, _, old = self.records.popleft()
-            self.sums[old_camera] -= old
-        if time_ns - self.epoch_ns > _REBASE_NS:
-            self.epoch_ns = time_ns
-            self.sums[:] = 0.0
-            rebuilt = deque()
-            for t, cam, pos, _ in self.records:
-                terms = _velocity_sums(np.array([(t - time_ns) * _NS]), pos[None])[0]
-                self.sums[cam] += terms
-                rebuilt.append((t, cam, pos, terms))
-            self.records = rebuilt
-
-    def relabel(self, permutation: np.ndarray) -> None:
-        """Reorder the track's joints (swap the sides of some parts); votes are the caller's."""
-        self.positions = self.positions[permutation]
-        self.orientations = self.orientations[permutation]
-        self.velocities = self.velocities[permutation]
-        self.records = deque(
-            (t, cam, pos[permutation], terms[permutation]) for t, cam, pos, terms in self.records
-        )
-        self.sums = self.sums[:, permutation]
 
 
 class Tracker:
@@ -443,14 +336,15 @@ class Tracker:
         self.params = params or TrackerParams()
         self.drops: Counter[str] = Counter()
         self.correction = CameraCorrection(calibration, self.drops)
-        self._tracks: list[_Track] = []
+        self._table: TrackTable | None = None  # made for the first detections' joint count
+        self._doomed: list[int] = []  # rows of duplicate tracks, removed at the frame's end
         self._next_id = 0
-        self._buffer: list[tuple[int, int, str, SkeletonGroup]] = []
+        self._buffer: list[tuple[int, int, str, MovedFrame]] = []
         self._sequence = itertools.count()
         self._camera_codes: dict[str, int] = {}
         self._newest_ns: int | None = None
         self._released_ns: int | None = None
-        self._up: np.ndarray | None = None
+        self._up = np.zeros(4)  # the world's up (x, y, z, known): see kernels._update_up
         self._info: _LayoutInfo | None = None
         self._camera_positions: dict[str, tuple[CameraCalibration, np.ndarray]] = {}
 
@@ -472,7 +366,10 @@ class Tracker:
     @property
     def track_ids(self) -> list[int]:
         """Ids of the confirmed tracks."""
-        return [track.id for track in self._tracks if track.confirmed]
+        table = self._table
+        if table is None:
+            return []
+        return table.ids[: table.n][table.confirmed[: table.n]].tolist()
 
     @property
     def pending(self) -> int:
@@ -487,16 +384,17 @@ class Tracker:
         by this call (zero or more frames, in reference-time order): world frame, header stamp
         = the last released frame's corrected stamp.
         """
-        corrected = self.correction.apply(group)
+        corrected = self.correction.move(group)
         if corrected is None:
             return self._output([])
-        if self._released_ns is not None and corrected.stamp_ns < self._released_ns:
+        stamp_ns = corrected.group.stamp_ns
+        if self._released_ns is not None and stamp_ns < self._released_ns:
             self.drops["late frame"] += 1
             return self._output([])
-        camera = self.correction.camera_name(group) or group.camera
-        heapq.heappush(self._buffer, (corrected.stamp_ns, next(self._sequence), camera, corrected))
-        if self._newest_ns is None or corrected.stamp_ns > self._newest_ns:
-            self._newest_ns = corrected.stamp_ns
+        camera = corrected.camera or group.camera
+        heapq.heappush(self._buffer, (stamp_ns, next(self._sequence), camera, corrected))
+        if self._newest_ns is None or stamp_ns > self._newest_ns:
+            self._newest_ns = stamp_ns
         return self._release(self._newest_ns - round(self.params.max_delay * 1e9))
 
     def flush(self) -> SkeletonGroup:
@@ -516,116 +414,102 @@ class Tracker:
         return SkeletonGroup(stamp, self.correction.world_frame, skeletons)
 
     # ---------------------------------------------------------------------------- association
-    def _process(self, frame: SkeletonGroup, camera: str) -> list[Skeleton]:
+    def _process(self, frame: MovedFrame, camera: str) -> list[Skeleton]:
         """Associate one world-frame camera frame with the tracks; return confirmed outputs."""
         code = self._camera_codes.setdefault(camera, len(self._camera_codes))
-        self._expire(frame.stamp_ns)
-        detections, positions, kept = self._valid_detections(frame.skeletons)
+        self._expire(frame.group.stamp_ns)
+        detections, positions, kept, index = self._valid_detections(frame)
         if not detections:
             return []
-        params = self.params
         info = self._layout_info(detections[0].layout)
-        parts = info.parts
+        table = self._tracks_for(positions.shape[1], code)
         stamp = detections[0].src_time_ns
-
-        no_flip = np.zeros(parts.count, dtype=bool)
-        assigned: dict[int, tuple[_Track, np.ndarray]] = {}
-        free = list(range(len(detections)))
-        recent_ns = stamp - round(params.recent_window * 1e9)
-        for tracks in self._cascade(recent_ns):
-            if tracks and free:
-                for det, track, flips in self._match(
-                    tracks, detections, positions, free, stamp=stamp, camera=code, info=info
-                ):
-                    assigned[det] = (track, flips)
-                free = [d for d in free if d not in assigned]
-
-        pairs: list[tuple[int, _Track, np.ndarray]] = []
-        for det in range(len(detections)):
-            if det in assigned:
-                pairs.append((det, *assigned[det]))
-            elif kept[det] >= params.min_joints:
-                pairs.append((det, self._new_track(positions[det], stamp), no_flip))
-            else:
-                self.drops["too few joints"] += 1
-        if not pairs:
+        det_ids = np.array([d.id for d in detections], dtype=np.int64)
+        matched, flips = self._match(table, detections, positions, det_ids, stamp, code, info)
+        rows, dets, pair_flips = self._pairs(table, matched, flips, positions, kept, stamp, info)
+        if not len(rows):
             return []
         # Detections in their tracks' labelling; which hip, eye or ear is left is then
         # geometry once the shoulders are labelled (with the facing check).
         shoulders, side_pairs, side_parts = info.sides
-        canonical, flips = kernels.canonical_poses(
+        params = self.params
+        canonical, pair_flips = kernels.canonical_poses(
             positions,
-            np.array([det for det, _, _ in pairs]),
-            np.array([f for _, _, f in pairs]),
-            parts.part,
-            parts.mirror,
+            dets,
+            pair_flips,
+            info.parts.part,
+            info.parts.mirror,
             params.mirror_check and params.facing_check,
             shoulders,
             side_pairs,
             side_parts,
         )
-        tracks = [track for _, track, _ in pairs]
-        chosen = [detections[det] for det, _, _ in pairs]
-        flips = flips ^ self._hit(
-            tracks, canonical, chosen, info, stamp, code, flips, self._camera_position(camera)
-        )
-        return [
-            self._labelled(detection, track, flips[u], parts)
-            for u, (detection, track) in enumerate(zip(chosen, tracks, strict=True))
-            if track.confirmed
-        ]
-
-    def _cascade(self, recent_ns: int) -> tuple[list[_Track], list[_Track], list[_Track]]:
-        """Tracks in matching order: confirmed and seen recently, confirmed, tentative.
-
-        Like DeepSORT's matching cascade: a track that has just lost its person (who left,
-        or whom every camera lost) must not take a detection that a live track explains.
-        """
-        live = [t for t in self._tracks if t.confirmed and t.last_hit_ns >= recent_ns]
-        stale = [t for t in self._tracks if t.confirmed and t.last_hit_ns < recent_ns]
-        return live, stale, [t for t in self._tracks if not t.confirmed]
+        chosen = [detections[det] for det in dets.tolist()]
+        pair_flips ^= self._hit(
+            table, rows, canonical, chosen, det_ids[dets], info, stamp, code, pair_flips,
+            self._camera_position(camera),
+        )  # fmt: skip
+        output = self._labelled(frame, chosen, None if index is None else index[dets], rows,
+                                pair_flips, info.parts)  # fmt: skip
+        self._remove_doomed()
+        return output
 
     def _valid_detections(
-        self, skeletons: list[Skeleton]
-    ) -> tuple[list[Skeleton], np.ndarray, np.ndarray]:
+        self, frame: MovedFrame
+    ) -> tuple[list[Skeleton], np.ndarray, np.ndarray, np.ndarray | None]:
         """Skeletons with a finite joint and the layout of the first one (and of the tracks).
 
         Returns them, their ``(D, J, 3)`` positions (NaN where absent or below
-        ``min_confidence``) and ``(D,)`` how many finite joints each keeps.
+        ``min_confidence``), ``(D,)`` how many finite joints each keeps and ``(D,)`` their
+        rows in ``frame.stack`` (None without a stack).
         """
-        empty = ([], np.empty((0, 0, 3)), np.empty(0, dtype=np.int64))
+        skeletons = frame.group.skeletons
+        empty = ([], np.empty((0, 0, 3)), np.empty(0, dtype=np.int64), None)
         if not skeletons:
             return empty
-        layout = skeletons[0].layout
-        if any(skeleton.layout is not layout for skeleton in skeletons):
-            valid: list[Skeleton] = []
-            for skeleton in skeletons:
-                if valid and skeleton.layout is not valid[0].layout:
-                    self.drops["layout differs within a frame"] += 1
-                elif not (skeleton.marker_present & np.isfinite(skeleton.positions).all(1)).any():
-                    self.drops["no finite joint"] += 1
-                else:
-                    valid.append(skeleton)
-            if not valid:
+        if frame.stack is not None:
+            markers, present = frame.stack.markers, frame.stack.marker_present
+            index = np.arange(len(skeletons))
+        else:
+            skeletons = self._one_layout(skeletons)
+            if not skeletons:
                 return empty
-            skeletons = valid
+            markers = np.array([s.markers for s in skeletons])
+            present = np.array([s.marker_present for s in skeletons])
+            index = None
         positions, usable, kept = kernels.masked_positions(
-            np.array([s.markers for s in skeletons]),
-            np.array([s.marker_present for s in skeletons]),
-            self.params.min_confidence,
+            markers, present, self.params.min_confidence
         )
         if not usable.all():
             self.drops["no finite joint"] += int((~usable).sum())
             skeletons = [s for s, ok in zip(skeletons, usable.tolist(), strict=True) if ok]
             positions, kept = positions[usable], kept[usable]
-        if (
-            skeletons
-            and self._tracks
-            and skeletons[0].layout.n_joints != len(self._tracks[0].positions)
-        ):
+            index = None if index is None else index[usable]
+        table = self._table
+        if skeletons and table is not None and table.n and positions.shape[1] != table.n_joints:
             self.drops["layout differs from the tracks"] += len(skeletons)
             return empty
-        return skeletons, positions, kept
+        return skeletons, positions, kept, index
+
+    def _one_layout(self, skeletons: list[Skeleton]) -> list[Skeleton]:
+        """Skeletons of the first usable one's layout (the others dropped, counted)."""
+        valid: list[Skeleton] = []
+        for skeleton in skeletons:
+            if valid and skeleton.layout is not valid[0].layout:
+                self.drops["layout differs within a frame"] += 1
+            elif not (skeleton.marker_present & np.isfinite(skeleton.positions).all(1)).any():
+                self.drops["no finite joint"] += 1
+            else:
+                valid.append(skeleton)
+        return valid
+
+    def _tracks_for(self, n_joints: int, camera: int) -> TrackTable:
+        """The track table, (re)made for ``n_joints`` when empty, holding camera code ``camera``."""
+        table = self._table
+        if table is None or (not table.n and table.n_joints != n_joints):
+            table = self._table = TrackTable(n_joints, len(self._camera_codes))
+        table.ensure_cameras(camera + 1)
+        return table
 
     def _camera_position(self, camera: str) -> np.ndarray | None:
         """``(3,)`` the camera's position in the world (from its current calibration) or None."""
@@ -651,77 +535,84 @@ class Tracker:
             )
         return self._info
 
-    def _match(
+    def _match(  # noqa: PLR0917
         self,
-        tracks: list[_Track],
+        table: TrackTable,
         detections: list[Skeleton],
         positions: np.ndarray,
-        free: list[int],
-        *,
+        det_ids: np.ndarray,
         stamp: int,
         camera: int,
         info: _LayoutInfo,
-    ) -> list[tuple[int, _Track, np.ndarray]]:
-        """Optimal assignment of ``free`` detections to ``tracks``: (detection, track, flips)."""
+    ) -> tuple[list[int], np.ndarray]:
+        """Assign detections to tracks in a cascade (DeepSORT-like), each level optimally.
+
+        Levels: confirmed tracks seen within ``recent_window``, other confirmed tracks,
+        tentative tracks (``kernels.gate_costs``): a track that has just lost its person (who
+        left, or whom every camera lost) must not take a detection that a live track explains.
+
+        Returns:
+            each detection's track row (-1: none) and ``(T, D, K)`` the mirrored parts
+            of every pair.
+
+        """
+        cost, flips, feasible, levels = self._costs(table, detections, positions, det_ids,
+                                                    stamp, camera, info)  # fmt: skip
+        n_tracks, n_det = cost.shape
+        matched = [-1] * n_det
+        free = list(range(n_det))
+        track_levels = levels.tolist()
+        for level in range(3):
+            rows = [t for t, at in enumerate(track_levels) if at == level]
+            if not rows or not free:
+                continue
+            whole = len(rows) == n_tracks and len(free) == n_det
+            allowed = feasible if whole else feasible[rows][:, free]
+            r, c = linear_sum_assignment(cost if whole else cost[rows][:, free])
+            for i, j in zip(r.tolist(), c.tolist(), strict=True):
+                if allowed[i, j]:
+                    matched[free[j]] = rows[i]
+            free = [d for d in free if matched[d] < 0]
+        return matched, flips
+
+    def _costs(  # noqa: PLR0917
+        self,
+        table: TrackTable,
+        detections: list[Skeleton],
+        positions: np.ndarray,
+        det_ids: np.ndarray,
+        stamp: int,
+        camera: int,
+        info: _LayoutInfo,
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """Every (track, detection) pair's cost, flips, feasibility and the tracks' levels.
+
+        Each pair's cost is independent of the others, so the whole matrix is computed once
+        per frame and each cascade level takes its rows.
+        """
         params = self.params
         parts = info.parts
-        cost, flips = kernels.match_costs(
-            *_motion_state(tracks),
-            stamp,
-            params.max_prediction,
-            positions if len(free) == len(positions) else positions[free],
-            info.weights,
-            parts.part,
-            parts.mirror,
-            parts.count,
-            params.mirror_check,
-            params.min_joints,
-            params.mirror_margin,
-        )
-        if params.velocity_weight > 0 or params.orientation_weight > 0:
-            cost = cost + self._motion_costs(tracks, [detections[d] for d in free], parts, flips)
-        if params.body_id_bonus:
-            cost = cost + params.body_id_bonus * np.array(
-                self._body_id_terms(tracks, detections, free, camera)
-            )
-        gate = np.array(
-            [
-                params.gate_distance + params.gate_growth * max((stamp - t.last_hit_ns) * _NS, 0.0)
-                for t in tracks
-            ]
-        )
-        feasible = np.isfinite(cost) & (cost <= gate[:, None])
-        if not feasible.any():
-            return []
-        rows, cols = linear_sum_assignment(np.where(feasible, cost, _INFEASIBLE))
-        return [
-            (free[c], tracks[r], flips[r, c])
-            for r, c in zip(rows.tolist(), cols.tolist(), strict=True)
-            if feasible[r, c]
-        ]
-
-    @staticmethod
-    def _body_id_terms(
-        tracks: list[_Track], detections: list[Skeleton], free: list[int], camera: int
-    ) -> list[list[float]]:
-        """``(T, D)`` body-id evidence: -1 agrees, +1 contradicts, 0 says nothing.
-
-        -1 where the camera keeps the body id it gave the track last time; +1 for the track's
-        other candidates when that id is in the frame (the camera still follows the track's
-        body as another detection). A few dozen pairs: plain Python beats numpy here.
-        """
-        ids = [detections[d].id for d in free]
-        frame_ids = {detection.id for detection in detections if detection.id >= 0}
-        terms = []
-        for track in tracks:
-            known = track.cameras.get(camera, -1)
-            elsewhere = 1.0 if known >= 0 and known in frame_ids else 0.0
-            terms.append([-1.0 if known == i and i >= 0 else elsewhere for i in ids])
-        return terms
+        n = table.n
+        match_args = (
+            table.positions[:n], table.velocity[:n], table.time_ns[:n], stamp,
+            params.max_prediction, positions, info.weights, parts.part, parts.mirror, parts.count,
+            params.mirror_check, params.min_joints, params.mirror_margin,
+        )  # fmt: skip
+        gate_args = (
+            table.last_hit_ns, table.confirmed, table.body_ids, table.seen, det_ids, camera, stamp,
+            stamp - round(params.recent_window * 1e9), params.body_id_bonus,
+            params.gate_distance, params.gate_growth,
+        )  # fmt: skip
+        if params.velocity_weight <= 0 and params.orientation_weight <= 0:
+            return kernels.frame_costs(*match_args, *gate_args)
+        cost, flips = kernels.match_costs(*match_args)
+        cost = cost + self._motion_costs(table, detections, parts, flips)
+        feasible, levels = kernels.gate_costs(cost, *gate_args)
+        return cost, flips, feasible, levels
 
     def _motion_costs(
         self,
-        tracks: list[_Track],
+        table: TrackTable,
         detections: list[Skeleton],
         parts: _MirrorParts,
         flips: np.ndarray,
@@ -733,28 +624,56 @@ class Tracker:
         cost = np.zeros(flips.shape[:2])
         if params.velocity_weight > 0:
             det_v = np.array([d.velocities for d in detections])[pick, order]  # (T, D, J, 3)
-            track_v = np.array([t.velocities for t in tracks])[:, None]
+            track_v = table.velocities[: table.n, None]
             cost += params.velocity_weight * _nan_mean(np.linalg.norm(det_v - track_v, axis=3))
         if params.orientation_weight > 0:
             det_q = np.array([d.orientations for d in detections])[pick, order]
-            track_q = np.array([t.orientations for t in tracks])[:, None]
+            track_q = table.orientations[: table.n, None]
             dot = np.abs((det_q * track_q).sum(axis=3))
             angle = 2.0 * np.arccos(np.clip(dot, 0.0, 1.0))
             cost += params.orientation_weight * _nan_mean(angle)
         return cost
 
-    # -------------------------------------------------------------------------------- updates
-    def _new_track(self, positions: np.ndarray, time_ns: int) -> _Track:
-        track = _Track(self._next_id, positions, time_ns)
-        self._next_id += 1
-        self._tracks.append(track)
-        return track
-
-    def _hit(  # noqa: PLR0912, PLR0917 - one frame's matched pairs, all positional for brevity
+    def _pairs(  # noqa: PLR0917
         self,
-        tracks: list[_Track],
+        table: TrackTable,
+        matched: list[int],
+        flips: np.ndarray,
+        positions: np.ndarray,
+        kept: np.ndarray,
+        stamp: int,
+        info: _LayoutInfo,
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Each detection's track: its match, else a new tentative track if it has the joints.
+
+        Returns ``(U,)`` track rows, ``(U,)`` their detections (in detection order, so new
+        tracks are made in that order) and ``(U, K)`` the parts to relabel in each.
+        """
+        rows, dets, pair_flips = [], [], []
+        no_flip = np.zeros(info.parts.count, dtype=bool)
+        for det, row in enumerate(matched):
+            if row >= 0:
+                pair_flips.append(flips[row, det])
+            elif kept[det] >= self.params.min_joints:
+                row = table.add(self._next_id, positions[det], stamp)  # noqa: PLW2901
+                self._next_id += 1
+                pair_flips.append(no_flip)
+            else:
+                self.drops["too few joints"] += 1
+                continue
+            rows.append(row)
+            dets.append(det)
+        flip_array = np.array(pair_flips, dtype=bool).reshape(len(rows), info.parts.count)
+        return np.array(rows, dtype=np.int64), np.array(dets, dtype=np.int64), flip_array
+
+    # -------------------------------------------------------------------------------- updates
+    def _hit(  # noqa: PLR0917 - one frame's matched pairs, all positional for brevity
+        self,
+        table: TrackTable,
+        rows: np.ndarray,
         canonical: np.ndarray,
         detections: list[Skeleton],
+        det_ids: np.ndarray,
         info: _LayoutInfo,
         time_ns: int,
         camera: int,
@@ -764,9 +683,11 @@ class Tracker:
         """Fold one frame's detections (already in their tracks' labelling) into the tracks.
 
         Args:
-            tracks: the U tracks hit (distinct).
+            table: the tracks.
+            rows: ``(U,)`` the rows of the tracks hit (distinct).
             canonical: ``(U, J, 3)`` their detections, relabelled to the tracks' sides.
-            detections: the U detections as received (ids, orientations).
+            detections: the U detections as received (orientations).
+            det_ids: ``(U,)`` the camera's body ids of the detections.
             info: the layout's mirror parts, weights and body frame.
             time_ns: the frame's corrected stamp.
             camera: the frame's camera code.
@@ -774,175 +695,126 @@ class Tracker:
             camera_position: ``(3,)`` the camera's position in the world, None if unknown.
 
         Returns:
-            ``(U, K)`` the parts whose sides a track itself swapped (mirror vote), which the
-            caller swaps in that detection's output too.
+            ``(U, K)`` the parts whose sides a track itself swapped (facing check or mirror
+            vote), which the caller swaps in that detection's output too.
 
         """
         params = self.params
         parts = info.parts
-        updated, terms = kernels.hit_update(
-            np.array([t.positions for t in tracks]),
-            np.array([t.velocity for t in tracks]),
-            np.array([t.time_ns for t in tracks], dtype=np.int64),
-            np.array([t.epoch_ns for t in tracks], dtype=np.int64),
-            np.array([params.position_smoothing if t.hits else 1.0 for t in tracks]),
-            canonical,
-            time_ns,
-            params.max_prediction,
-        )
-        window_ns = round(params.velocity_window * 1e9)
-        for u, track in enumerate(tracks):
-            track.positions = updated[u]
-            track.time_ns = max(track.time_ns, time_ns)
-            track.last_hit_ns = max(track.last_hit_ns, time_ns)
-            track.hits += 1
-            track.cameras[camera] = detections[u].id
-            track.add_record(time_ns, camera, canonical[u], terms[u], window_ns)
+        full = kernels.fold_hits(
+            table.positions, table.velocities, table.velocity, table.time_ns,
+            table.last_hit_ns, table.epoch_ns, table.hits, table.n_cameras, table.body_ids,
+            table.seen, table.sums, table.record_ns, table.record_camera, table.record_terms,
+            table.record_start, table.record_count, rows, canonical, det_ids, camera, time_ns,
+            params.position_smoothing, params.max_prediction,
+            round(params.velocity_window * 1e9), info.weights,
+        )  # fmt: skip
+        if full:
+            table.grow_records()
         if params.orientation_weight > 0:
-            for track, detection, order in zip(
-                tracks, detections, parts.permutation(flips), strict=True
+            for row, detection, order in zip(
+                rows.tolist(), detections, parts.permutation(flips), strict=True
             ):
                 if np.isfinite(detection.orientations).any():
-                    track.orientations = detection.orientations[order]
-        cameras = max(len(t.sums) for t in tracks)
-        if all(len(t.sums) == cameras for t in tracks):
-            sums = np.array([t.sums for t in tracks])
-        else:
-            sums = np.zeros((len(tracks), cameras, *tracks[0].sums.shape[1:]))
-            for u, track in enumerate(tracks):
-                sums[u, : len(track.sums)] = track.sums
-        velocities, body, determined = kernels.solve_velocities(sums, info.weights)
-        for u, track in enumerate(tracks):
-            if determined[u]:
-                track.velocities = velocities[u]
-                track.velocity = body[u]
+                    table.orientations[row] = detection.orientations[order]
         swaps = np.zeros_like(flips)
-        frame = info.frame
-        facing = params.mirror_check and params.facing_check and bool(frame.usable)
+        facing = params.mirror_check and params.facing_check and bool(info.frame.usable)
         if facing:
-            turned = self._facing(
-                tracks,
-                updated,
-                canonical,
-                frame,
-                mirror=parts.mirror,
-                time_ns=time_ns,
-                camera_position=camera_position,
-            )
-            swaps[turned] = True
-        for u, track in enumerate(tracks):
-            if not track.confirmed and track.hits >= params.min_hits:
-                self._confirm(track, info, time_ns)
-            if params.mirror_check and params.mirror_vote and track.confirmed and not facing:
-                swaps[u] ^= self._vote(track, parts, camera, time_ns, flips[u] ^ swaps[u])
+            swaps[self._facing(table, rows, canonical, info, time_ns, camera_position)] = True
+        voting = params.mirror_check and params.mirror_vote and not facing
+        confirmed, hits = table.confirmed[rows].tolist(), table.hits[rows].tolist()
+        for u, row in enumerate(rows.tolist()):
+            if not confirmed[u] and hits[u] >= params.min_hits:
+                self._confirm(table, row, info, time_ns)
+            if voting and table.confirmed[row]:
+                swaps[u] ^= self._vote(table, row, parts, camera, time_ns, flips[u] ^ swaps[u])
         return swaps
 
-    def _world_up(self, positions: np.ndarray, frame: _BodyFrame) -> np.ndarray:
-        """``(3,)`` the world's up, a running mean of people's trunks (root -> neck).
-
-        The world frame may be a camera's (y down) or z-up; people stand most of the time,
-        and one bending person must not tilt the front the facing check compares with.
-        """
-        mean, count = kernels.trunk_mean(positions, frame.root, frame.neck)
-        if count:
-            self._up = mean if self._up is None else self._up + 0.01 * (mean - self._up)
-            self._up = self._up / np.linalg.norm(self._up)
-        return self._up if self._up is not None else np.full(3, np.nan)
-
-    def _facing(
+    def _facing(  # noqa: PLR0917
         self,
-        tracks: list[_Track],
-        positions: np.ndarray,
+        table: TrackTable,
+        rows: np.ndarray,
         canonical: np.ndarray,
-        frame: _BodyFrame,
-        *,
-        mirror: np.ndarray,
+        info: _LayoutInfo,
         time_ns: int,
         camera_position: np.ndarray | None,
     ) -> np.ndarray:
-        """Weigh one frame's evidence on each track's facing; relabel tracks found reversed.
-
-        For a detection (in its track's labelling) with anatomical forward ``a`` and a track
-        front ``f`` (``positions`` ``(U, J, 3)``: the tracks' poses): if the track is right,
-        the detection is flipped iff ``a·f < 0``; if the track is mirrored, the opposite, and
-        its front is ``-f``. Each hypothesis' likelihood uses the flip prior for the view the
-        camera would have (back: cos(f, to camera) < -0.5); walking forward adds evidence
-        (``kernels.facing_evidence`` computes it).
+        """Weigh one frame's evidence on each track's facing (``kernels.turn_facing``).
 
         Returns:
             ``(U,)`` which tracks were relabelled (all their parts swapped).
 
         """
         params = self.params
-        up = self._world_up(positions, frame)
-        evidence = kernels.facing_evidence(
-            positions,
-            canonical,
-            np.array([t.velocity for t in tracks]),
-            up,
+        turned = kernels.turn_facing(
+            table.positions, table.orientations, table.velocities, table.velocity, table.sums,
+            table.record_terms, table.record_start, table.record_count, table.facing,
+            table.facing_ns, rows, canonical, self._up,
             _NO_CAMERA if camera_position is None else camera_position,
             camera_position is not None,
-            frame.root,
-            frame.left,
-            frame.right,
-            frame.pointers,
-            params.flip_prior,
-            params.flip_prior_back,
-            params.walking_speed,
-            params.walking_evidence,
-        ).tolist()
-        turned = np.zeros(len(tracks), dtype=bool)
-        for u, track in enumerate(tracks):
-            fade = math.exp(-max(time_ns - track.facing_ns, 0) * _NS / params.facing_memory)
-            track.facing = track.facing * fade + evidence[u]
-            track.facing_ns = time_ns
-            if track.facing < -params.facing_threshold:
-                track.relabel(mirror)
-                track.votes = {cam: (t, ~vote) for cam, (t, vote) in track.votes.items()}
-                track.mirrored = {cam for cam, (_, vote) in track.votes.items() if vote.any()}
-                track.facing = -track.facing
-                turned[u] = True
+            info.facing_body,
+            (params.flip_prior, params.flip_prior_back, params.walking_speed,
+             params.walking_evidence, params.facing_memory, params.facing_threshold),
+            time_ns,
+        )  # fmt: skip
+        for row in rows[turned].tolist():
+            votes = table.votes[row]
+            table.votes[row] = {cam: (t, ~vote) for cam, (t, vote) in votes.items()}
+            table.mirrored[row] = {cam for cam, (_, vote) in table.votes[row].items() if vote.any()}
         return turned
 
-    def _vote(
-        self, track: _Track, parts: _MirrorParts, camera: int, time_ns: int, flips: np.ndarray
+    def _vote(  # noqa: PLR0917
+        self,
+        table: TrackTable,
+        row: int,
+        parts: _MirrorParts,
+        camera: int,
+        time_ns: int,
+        flips: np.ndarray,
     ) -> np.ndarray:
         """Swap a track's sides of the parts that most cameras seeing it now call mirrored.
 
         The fallback for layouts without the joints the facing check needs.
         """
-        track.votes[camera] = (time_ns, flips)
+        votes, mirrored = table.votes[row], table.mirrored[row]
+        votes[camera] = (time_ns, flips)
         if not flips.any():
-            track.mirrored.discard(camera)
-            if not track.mirrored:  # nobody calls the sides mirrored: nothing to count
+            mirrored.discard(camera)
+            if not mirrored:  # nobody calls the sides mirrored: nothing to count
                 return np.zeros_like(flips)
         else:
-            track.mirrored.add(camera)
+            mirrored.add(camera)
         recent = time_ns - round(self.params.velocity_window * 1e9)
-        votes = [vote for t, vote in track.votes.values() if t >= recent]
-        if len(votes) < 2:
+        recent_votes = [vote for t, vote in votes.values() if t >= recent]
+        if len(recent_votes) < 2:
             return np.zeros_like(flips)
-        swap = 2 * np.sum(votes, axis=0) > len(votes)
+        swap = 2 * np.sum(recent_votes, axis=0) > len(recent_votes)
         if swap.any():
-            track.relabel(parts.permutation(swap))
-            track.votes = {cam: (t, vote ^ swap) for cam, (t, vote) in track.votes.items()}
-            track.mirrored = {cam for cam, (_, vote) in track.votes.items() if vote.any()}
+            table.relabel(row, parts.permutation(swap))
+            table.votes[row] = {cam: (t, vote ^ swap) for cam, (t, vote) in votes.items()}
+            table.mirrored[row] = {cam for cam, (_, vote) in table.votes[row].items() if vote.any()}
         return swap
 
-    def _confirm(self, track: _Track, info: _LayoutInfo, time_ns: int) -> None:
-        """Confirm a tentative track seen enough, unless it duplicates a confirmed one."""
+    def _confirm(self, table: TrackTable, row: int, info: _LayoutInfo, time_ns: int) -> None:
+        """Confirm a tentative track seen enough, unless it duplicates a confirmed one.
+
+        A duplicate is removed at the end of the frame (``_remove_doomed``): rows stay put
+        while the frame's pairs refer to them.
+        """
         params = self.params
         cameras = min(params.min_cameras, max(len(self.correction.cameras), 1))
-        old_enough = (time_ns - track.born_ns) * _NS >= params.single_camera_confirm
-        if len(track.cameras) < cameras and not old_enough:
+        old_enough = (time_ns - int(table.born_ns[row])) * _NS >= params.single_camera_confirm
+        if int(table.seen[row].sum()) < cameras and not old_enough:
             return
-        confirmed = [t for t in self._tracks if t.confirmed]
-        if confirmed:
+        confirmed = table.confirmed[: table.n]
+        if confirmed.any():
             distance, _ = kernels.match_costs(
-                *_motion_state(confirmed),
+                table.positions[: table.n][confirmed],
+                table.velocity[: table.n][confirmed],
+                table.time_ns[: table.n][confirmed],
                 time_ns,
                 params.max_prediction,
-                track.positions[None],
+                table.positions[row][None],
                 info.weights,
                 info.parts.part,
                 info.parts.mirror,
@@ -952,51 +824,64 @@ class Tracker:
                 0.0,
             )
             if (distance < params.duplicate_distance).any():
-                self._tracks.remove(track)
+                self._doomed.append(row)
                 self.drops["duplicate of a confirmed track"] += 1
                 return
-        track.confirmed = True
+        table.confirmed[row] = True
+
+    def _remove_doomed(self) -> None:
+        """Remove the tracks ``_confirm`` found to duplicate confirmed ones."""
+        if self._doomed and self._table is not None:
+            keep = np.ones(self._table.n, dtype=bool)
+            keep[self._doomed] = False
+            self._table.keep(keep)
+            self._doomed.clear()
 
     def _expire(self, now_ns: int) -> None:
-        params = self.params
-        self._tracks = [
-            track
-            for track in self._tracks
-            if (now_ns - track.last_hit_ns) * _NS
-            <= (params.track_timeout if track.confirmed else params.tentative_timeout)
-        ]
+        """Remove the tracks not hit within their timeout."""
+        table, params = self._table, self.params
+        if table is None or not table.n:
+            return
+        count, keep = kernels.live_tracks(
+            table.last_hit_ns, table.confirmed, table.n, now_ns,
+            params.track_timeout, params.tentative_timeout,
+        )  # fmt: skip
+        if count < table.n:
+            table.keep(keep)
 
-    @staticmethod
-    def _labelled(
-        detection: Skeleton, track: _Track, flips: np.ndarray, parts: _MirrorParts
-    ) -> Skeleton:
-        """The output skeleton of one detection: track id, sides fixed, velocities filled.
+    def _labelled(  # noqa: PLR0917
+        self,
+        frame: MovedFrame,
+        detections: list[Skeleton],
+        index: np.ndarray | None,
+        rows: np.ndarray,
+        flips: np.ndarray,
+        parts: _MirrorParts,
+    ) -> list[Skeleton]:
+        """The output skeletons of the detections of confirmed tracks: track id, sides fixed.
 
-        The detection is the tracker's own copy (made by the correction), so it is changed in
-        place: the parts in ``flips`` relabelled (links too: link ids are child joint ids),
-        present joints without a velocity given the track's.
+        The detections are the tracker's own copies (made by the correction), so they are
+        changed in place: the parts in ``flips`` ``(U, K)`` relabelled (links too: link ids are
+        child joint ids), present joints without a velocity given their track's (track
+        ``rows[u]``). With the frame's rows stacked (``index`` ``(U,)`` into them), that is one
+        compiled call.
         """
-        kernels.label_rows(
-            detection.markers,
-            detection.marker_present,
-            detection.links,
-            detection.link_present,
-            flips,
-            parts.part,
-            parts.mirror,
-            track.velocities,
-        )
-        detection.id = track.id
-        return detection
-
-
-def _motion_state(tracks: list[_Track]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Poses, body velocities and times (ns): what ``kernels.match_costs`` predicts from."""
-    return (
-        np.array([t.positions for t in tracks]),
-        np.array([t.velocity for t in tracks]),
-        np.array([t.time_ns for t in tracks], dtype=np.int64),
-    )
+        table = self._table
+        if index is not None:
+            kernels.label_frame(*frame.stack, index, flips, parts.part, parts.mirror,
+                                table.velocities, rows, table.confirmed)  # fmt: skip
+        output = []
+        confirmed, ids = table.confirmed[rows].tolist(), table.ids[rows].tolist()
+        for u, (detection, row) in enumerate(zip(detections, rows.tolist(), strict=True)):
+            if not confirmed[u]:
+                continue
+            if index is None:
+                kernels.label_rows(detection.markers, detection.marker_present, detection.links,
+                                   detection.link_present, flips[u], parts.part, parts.mirror,
+                                   table.velocities[row])  # fmt: skip
+            detection.id = ids[u]
+            output.append(detection)
+        return output
 
 
 def _nan_mean(values: np.ndarray) -> np.ndarray:

@@ -1,0 +1,162 @@
+"""The tracker's state: every track's fields stacked, one array per field (row = track).
+
+A frame predicts and compares every track and updates a few; with the fields stacked, that is
+a handful of compiled calls on whole arrays (``kernels``) instead of Python loops over track
+objects, whose small numpy calls (stacking, copies, per-track sums) cost the tracker most of
+its time. Rows are tracks in creation order, the order matching sees them in (ties in the
+assignment resolve alike); removing tracks compacts the rows. Arrays keep spare rows
+(``capacity``) so that a new track seldom reallocates: only rows ``[:n]`` are tracks.
+
+Per track (``J`` joints, ``C`` cameras, ``R`` record slots):
+
+- ``positions`` ``(J, 3)``: the smoothed pose at ``time_ns``; ``orientations`` ``(J, 4)``;
+- ``velocities`` ``(J, 3)``: least-squares slopes of the recent detections with one intercept
+  per camera (a constant offset between two cameras' calibrations must not read as motion),
+  kept as running sums ``sums`` ``(C, J, 9)`` (terms n, t, t², p, t·p; t from ``epoch_ns``)
+  over the velocity window; ``velocity`` ``(3,)`` the body's pooled velocity;
+- the detections inside the window, a ring of ``R`` slots: ``record_ns``, ``record_camera``,
+  ``record_terms`` ``(R, J, 9)`` from ``record_start``, ``record_count`` long (their terms
+  leave the sums when they leave the window);
+- ``n_cameras``: how many camera codes the sums span (1 + the highest code seen, at least 1);
+- ``body_ids`` ``(C,)``/``seen`` ``(C,)``: each camera's last body id for the track;
+- counters and stamps (ns): ``hits``, ``confirmed``, ``born_ns``, ``time_ns``, ``last_hit_ns``,
+  ``epoch_ns``, ``facing`` (log-odds that its sides are right) and ``facing_ns``;
+- ``votes``/``mirrored``: Python, for the mirror-vote fallback only (camera -> (ns, flips)).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from hiros_tracker import kernels
+
+__all__ = ["TrackTable"]
+
+_RECORDS = 32
+"""Initial record slots per track (3 cameras x 30 Hz fill ~23 in a 0.25 s window)."""
+
+_FLOAT_FIELDS = ("positions", "orientations", "velocities", "velocity", "facing", "sums")
+_INT_FIELDS = (
+    "ids", "born_ns", "time_ns", "last_hit_ns", "epoch_ns", "facing_ns", "hits", "n_cameras",
+    "body_ids", "record_ns", "record_camera", "record_start", "record_count",
+)  # fmt: skip
+_ROW_FIELDS = (*_FLOAT_FIELDS, *_INT_FIELDS, "confirmed", "seen", "record_terms")
+
+
+class TrackTable:
+    """All tracks' state (see the module docstring); ``n`` tracks in rows ``[:n]``."""
+
+    def __init__(self, n_joints: int, n_cameras: int = 1, capacity: int = 8) -> None:
+        self.n = 0
+        self.n_joints = n_joints
+        self.votes: list[dict[int, tuple[int, np.ndarray]]] = []
+        self.mirrored: list[set[int]] = []
+        joints, cameras, records = n_joints, max(n_cameras, 1), _RECORDS
+        shapes = {
+            "positions": (joints, 3), "orientations": (joints, 4), "velocities": (joints, 3),
+            "velocity": (3,), "sums": (cameras, joints, 9), "body_ids": (cameras,),
+            "seen": (cameras,), "record_ns": (records,), "record_camera": (records,),
+            "record_terms": (records, joints, 9),
+        }  # fmt: skip
+        for name in _ROW_FIELDS:
+            dtype = float if name in _FLOAT_FIELDS or name == "record_terms" else np.int64
+            dtype = bool if name in {"confirmed", "seen"} else dtype
+            setattr(self, name, np.zeros((capacity, *shapes.get(name, ())), dtype=dtype))
+
+    positions: np.ndarray
+    orientations: np.ndarray
+    velocities: np.ndarray
+    velocity: np.ndarray
+    facing: np.ndarray
+    sums: np.ndarray
+    ids: np.ndarray
+    born_ns: np.ndarray
+    time_ns: np.ndarray
+    last_hit_ns: np.ndarray
+    epoch_ns: np.ndarray
+    facing_ns: np.ndarray
+    hits: np.ndarray
+    n_cameras: np.ndarray
+    body_ids: np.ndarray
+    record_ns: np.ndarray
+    record_camera: np.ndarray
+    record_start: np.ndarray
+    record_count: np.ndarray
+    confirmed: np.ndarray
+    seen: np.ndarray
+    record_terms: np.ndarray
+
+    @property
+    def capacity(self) -> int:
+        """Rows allocated."""
+        return len(self.ids)
+
+    @property
+    def camera_capacity(self) -> int:
+        """Camera codes the per-camera fields hold."""
+        return self.sums.shape[1]
+
+    def add(self, track_id: int, positions: np.ndarray, time_ns: int) -> int:
+        """Start a tentative track at a detection's pose; return its row."""
+        if self.n == self.capacity:
+            self._grow_rows()
+        row = self.n
+        self.n += 1
+        for name in _ROW_FIELDS:
+            getattr(self, name)[row] = 0
+        self.ids[row] = track_id
+        self.positions[row] = positions
+        self.orientations[row] = np.nan
+        self.born_ns[row] = self.time_ns[row] = self.last_hit_ns[row] = time_ns
+        self.epoch_ns[row] = self.facing_ns[row] = time_ns
+        self.n_cameras[row] = 1
+        self.votes.append({})
+        self.mirrored.append(set())
+        return row
+
+    def keep(self, mask: np.ndarray) -> None:
+        """Remove the tracks not in ``mask`` ``(n,)``, keeping the others' order."""
+        kept = int(mask.sum())
+        for name in _ROW_FIELDS:
+            field = getattr(self, name)
+            field[:kept] = field[: self.n][mask]
+        self.votes = [v for v, k in zip(self.votes, mask.tolist(), strict=True) if k]
+        self.mirrored = [m for m, k in zip(self.mirrored, mask.tolist(), strict=True) if k]
+        self.n = kept
+
+    def ensure_cameras(self, n_cameras: int) -> None:
+        """Widen the per-camera fields to hold camera codes ``< n_cameras``."""
+        if n_cameras > self.camera_capacity:
+            for name in ("sums", "body_ids", "seen"):
+                self._widen(name, 1, n_cameras)
+
+    def grow_records(self) -> None:
+        """Double the record slots (a track's ring is full), unrolling every ring to start at 0."""
+        slots = self.record_ns.shape[1]
+        order = (self.record_start[:, None] + np.arange(slots)) % slots
+        for name in ("record_ns", "record_camera", "record_terms"):
+            field = getattr(self, name)
+            index = order.reshape(order.shape + (1,) * (field.ndim - 2))
+            setattr(self, name, np.take_along_axis(field, index, 1))
+            self._widen(name, 1, 2 * slots)
+        self.record_start[:] = 0
+
+    def relabel(self, row: int, permutation: np.ndarray) -> None:
+        """Reorder a track's joints (swap the sides of some parts); votes are the caller's."""
+        kernels.relabel(
+            row, permutation, self.positions, self.orientations, self.velocities, self.sums,
+            self.record_terms, self.record_start, self.record_count,
+        )  # fmt: skip
+
+    def _grow_rows(self) -> None:
+        for name in _ROW_FIELDS:
+            self._widen(name, 0, 2 * self.capacity)
+
+    def _widen(self, name: str, axis: int, size: int) -> None:
+        """Zero-pad field ``name`` along ``axis`` to ``size``."""
+        field = getattr(self, name)
+        shape = list(field.shape)
+        shape[axis] = size
+        grown = np.zeros(shape, dtype=field.dtype)
+        grown[tuple(slice(0, n) for n in field.shape)] = field
+        setattr(self, name, grown)
