@@ -612,6 +612,7 @@ def _facing_evidence(  # noqa: PLR0917
     flip_prior_back: float,
     walking_speed: float,
     walking_evidence: float,
+    episodes: tuple[int, np.ndarray, np.ndarray, np.ndarray, float, float, int],
 ) -> np.ndarray:
     """``(U,)`` log-odds each detection gives that its track faces the way its sides say.
 
@@ -623,6 +624,7 @@ def _facing_evidence(  # noqa: PLR0917
     n_pairs = len(rows)
     evidence = np.zeros(n_pairs)
     ux, uy, uz = up[0], up[1], up[2]
+    cam, flip_state, flip_ns, flip_known, episode, noise, stamp_ns = episodes
     for u in range(n_pairs):
         r = rows[u]
         lx = ly = lz = 0.0
@@ -667,9 +669,14 @@ def _facing_evidence(  # noqa: PLR0917
             cosine = fx * cx + fy * cy + fz * cz
             prior_right = flip_prior_back if cosine < -0.5 else flip_prior
             prior_wrong = flip_prior_back if -cosine < -0.5 else flip_prior
-            likely_right = prior_right if flipped else 1.0 - prior_right
-            likely_wrong = 1.0 - prior_wrong if flipped else prior_wrong
-            value = math.log(likely_right / likely_wrong)
+            if episode > 0.0 and math.isfinite(cosine):
+                value = _episode_evidence(
+                    flip_state[r, cam], flipped, prior_right, prior_wrong, episode, noise,
+                    (stamp_ns - flip_ns[r, cam]) * 1e-9 if flip_known[r, cam] else -1.0,
+                )  # fmt: skip
+                flip_ns[r, cam], flip_known[r, cam] = stamp_ns, True
+            else:
+                value = _independent_evidence(flipped, prior_right, prior_wrong)
         else:  # no camera pose: a flipped-looking detection is simply evidence against
             value = (-1.0 if flipped else 1.0) * math.log((1.0 - flip_prior) / flip_prior)
         wx, wy, wz = _flat3(velocity[r, 0], velocity[r, 1], velocity[r, 2], ux, uy, uz)
@@ -684,6 +691,56 @@ def _facing_evidence(  # noqa: PLR0917
                 value = np.nan
         evidence[u] = value if math.isfinite(value) else 0.0
     return evidence
+
+
+@njit(cache=True, error_model="numpy")
+def _independent_evidence(flipped: bool, prior_right: float, prior_wrong: float) -> float:
+    """Log-odds of one detection taken on its own (each hypothesis' view prior)."""
+    likely_right = prior_right if flipped else 1.0 - prior_right
+    likely_wrong = 1.0 - prior_wrong if flipped else prior_wrong
+    return math.log(likely_right / likely_wrong)
+
+
+@njit(cache=True, error_model="numpy")
+def _episode_evidence(  # noqa: PLR0917
+    state: np.ndarray,
+    flipped: bool,
+    prior_right: float,
+    prior_wrong: float,
+    episode: float,
+    noise: float,
+    elapsed: float,
+) -> float:
+    """Log-odds one detection adds for its track's facing, knowing SDK flips last seconds.
+
+    An SDK flips a body front/back for seconds at a time, so one camera's consecutive flipped
+    detections are one event, not independent votes. For each hypothesis (the track's sides
+    right, or reversed) a two-state filter follows whether this camera's SDK is in a flip
+    episode: episodes last ``episode`` s on average and cover the share of time the view's
+    flip prior says; an observation is misread with probability ``noise``. The detection adds
+    the log ratio of the two hypotheses' predictive likelihoods; a run of flipped detections
+    then costs about one flip prior, plus little per frame, instead of a prior per frame.
+
+    ``state`` ``(2,)``: P(SDK flipped) under "right" and "reversed", updated in place;
+    ``elapsed`` s since this camera's previous detection of the track (< 0: the first).
+    """
+    priors = (prior_right, prior_wrong)
+    likely = np.empty(2)
+    for h in range(2):
+        if elapsed < 0.0:
+            before = priors[h]
+        else:  # relax towards the view's prior: leave rate 1/episode, share = prior
+            keep = math.exp(-elapsed / (episode * (1.0 - priors[h])))
+            before = state[h] * keep + priors[h] * (1.0 - keep)
+        # under "right" a flipped observation means the SDK flipped; under "reversed", not
+        sdk_flip_seen = flipped if h == 0 else not flipped
+        if sdk_flip_seen:
+            with_flip, without_flip = before * (1.0 - noise), (1.0 - before) * noise
+        else:
+            with_flip, without_flip = before * noise, (1.0 - before) * (1.0 - noise)
+        likely[h] = with_flip + without_flip
+        state[h] = with_flip / likely[h]
+    return math.log(likely[0] / likely[1])
 
 
 @njit(cache=True, error_model="numpy")
@@ -704,8 +761,9 @@ def turn_facing(  # noqa: PLR0917 - the TrackTable's fields and one frame's evid
     camera: np.ndarray,
     has_camera: bool,
     body: tuple[int, int, np.ndarray, np.ndarray, np.ndarray, np.ndarray],
-    priors: tuple[float, float, float, float, float, float],
+    priors: tuple[float, float, float, float, float, float, float, float],
     stamp_ns: int,
+    episodes: tuple[int, np.ndarray, np.ndarray, np.ndarray],
 ) -> np.ndarray:
     """Weigh one frame's evidence on each hit track's facing; relabel tracks found reversed.
 
@@ -723,18 +781,24 @@ def turn_facing(  # noqa: PLR0917 - the TrackTable's fields and one frame's evid
     the camera's position, used when ``has_camera``; ``body`` the root, neck, left ``(2,)``,
     right ``(2,)``, forward pointers ``(k, 2)`` (``_BodyFrame``) and the mirror permutation
     ``(J,)``; ``priors`` the flip prior, the flip prior seen from the back, walking speed,
-    walking evidence, facing memory (s) and facing threshold.
+    walking evidence, facing memory (s), facing threshold, mean flip episode (s; 0 treats
+    detections as independent) and the chance a detection's facing is misread;
+    ``episodes`` the camera's code and the ``TrackTable``'s ``flip_state`` ``(T, C, 2)``,
+    ``flip_ns`` ``(T, C)`` and ``flip_known`` ``(T, C)`` (see ``_episode_evidence``).
 
     Returns:
         ``(U,)`` which tracks were relabelled.
 
     """
     root, neck, left, right, pointers, mirror = body
-    flip_prior, flip_prior_back, walking_speed, walking_evidence, memory, threshold = priors
+    flip_prior, flip_prior_back, walking_speed, walking_evidence = priors[:4]
+    memory, threshold, episode, noise = priors[4:]
+    cam, flip_state, flip_ns, flip_known = episodes
     world_up = _update_up(up, positions, rows, root, neck)
     evidence = _facing_evidence(
         positions, rows, canonical, velocity, world_up, camera, has_camera, root, left, right,
         pointers, flip_prior, flip_prior_back, walking_speed, walking_evidence,
+        (cam, flip_state, flip_ns, flip_known, episode, noise, stamp_ns),
     )  # fmt: skip
     turned = np.zeros(len(rows), dtype=np.bool_)
     for u in range(len(rows)):
@@ -746,6 +810,8 @@ def turn_facing(  # noqa: PLR0917 - the TrackTable's fields and one frame's evid
             relabel(r, mirror, positions, orientations, velocities, sums, record_terms,
                     record_start, record_count)  # fmt: skip
             facing[r] = -facing[r]
+            for c in range(flip_state.shape[1]):  # the hypotheses trade places
+                flip_state[r, c, 0], flip_state[r, c, 1] = flip_state[r, c, 1], flip_state[r, c, 0]
             turned[u] = True
     return turned
 

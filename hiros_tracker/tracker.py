@@ -106,6 +106,10 @@ class TrackerParams:
             person's front or side.
         flip_prior_back: the same when the camera sees the person's back (cos < -0.5).
         facing_memory: seconds over which the facing evidence fades.
+        flip_episode: mean seconds an SDK keeps a body front/back flipped once it flips it;
+            a camera's consecutive flipped detections then weigh as one event, so one
+            camera's episode cannot outvote the others (0: every detection independent).
+        flip_misread: chance that a detection's facing is misread (pointers across the body).
         facing_threshold: log-odds against the track's facing at which it is relabelled.
         walking_speed: m/s above which a person is taken to face where they walk.
         walking_evidence: log-odds added per detection for facing the walking direction.
@@ -142,6 +146,8 @@ class TrackerParams:
     flip_prior: float = 0.1
     flip_prior_back: float = 0.7
     facing_memory: float = 3.0
+    flip_episode: float = 1.5
+    flip_misread: float = 0.05
     facing_threshold: float = 3.0
     walking_speed: float = 0.4
     walking_evidence: float = 0.3
@@ -720,7 +726,8 @@ class Tracker:
         swaps = np.zeros_like(flips)
         facing = params.mirror_check and params.facing_check and bool(info.frame.usable)
         if facing:
-            swaps[self._facing(table, rows, canonical, info, time_ns, camera_position)] = True
+            turned = self._facing(table, rows, canonical, info, time_ns, camera_position, camera)
+            swaps[turned] = True
         voting = params.mirror_check and params.mirror_vote and not facing
         confirmed, hits = table.confirmed[rows].tolist(), table.hits[rows].tolist()
         for u, row in enumerate(rows.tolist()):
@@ -738,6 +745,7 @@ class Tracker:
         info: _LayoutInfo,
         time_ns: int,
         camera_position: np.ndarray | None,
+        camera: int,
     ) -> np.ndarray:
         """Weigh one frame's evidence on each track's facing (``kernels.turn_facing``).
 
@@ -754,8 +762,10 @@ class Tracker:
             camera_position is not None,
             info.facing_body,
             (params.flip_prior, params.flip_prior_back, params.walking_speed,
-             params.walking_evidence, params.facing_memory, params.facing_threshold),
+             params.walking_evidence, params.facing_memory, params.facing_threshold,
+             params.flip_episode, params.flip_misread),
             time_ns,
+            (camera, table.flip_state, table.flip_ns, table.flip_known),
         )  # fmt: skip
         for row in rows[turned].tolist():
             votes = table.votes[row]

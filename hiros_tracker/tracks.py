@@ -21,6 +21,9 @@ Per track (``J`` joints, ``C`` cameras, ``R`` record slots):
 - ``body_ids`` ``(C,)``/``seen`` ``(C,)``: each camera's last body id for the track;
 - counters and stamps (ns): ``hits``, ``confirmed``, ``born_ns``, ``time_ns``, ``last_hit_ns``,
   ``epoch_ns``, ``facing`` (log-odds that its sides are right) and ``facing_ns``;
+- per camera, whether its SDK is in a front/back flip episode for the track: ``flip_state``
+  ``(C, 2)`` P(flipped) if the track's sides are right / reversed, at ``flip_ns`` ``(C,)``,
+  ``flip_known`` ``(C,)`` once the camera has seen the track (``kernels._episode_evidence``);
 - ``votes``/``mirrored``: Python, for the mirror-vote fallback only (camera -> (ns, flips)).
 """
 
@@ -35,12 +38,16 @@ __all__ = ["TrackTable"]
 _RECORDS = 32
 """Initial record slots per track (3 cameras x 30 Hz fill ~23 in a 0.25 s window)."""
 
-_FLOAT_FIELDS = ("positions", "orientations", "velocities", "velocity", "facing", "sums")
+_FLOAT_FIELDS = (
+    "positions", "orientations", "velocities", "velocity", "facing", "sums", "flip_state",
+)  # fmt: skip
 _INT_FIELDS = (
     "ids", "born_ns", "time_ns", "last_hit_ns", "epoch_ns", "facing_ns", "hits", "n_cameras",
-    "body_ids", "record_ns", "record_camera", "record_start", "record_count",
+    "body_ids", "record_ns", "record_camera", "record_start", "record_count", "flip_ns",
 )  # fmt: skip
-_ROW_FIELDS = (*_FLOAT_FIELDS, *_INT_FIELDS, "confirmed", "seen", "record_terms")
+_BOOL_FIELDS = ("confirmed", "seen", "flip_known")
+_CAMERA_FIELDS = ("sums", "body_ids", "seen", "flip_state", "flip_ns", "flip_known")
+_ROW_FIELDS = (*_FLOAT_FIELDS, *_INT_FIELDS, *_BOOL_FIELDS, "record_terms")
 
 
 class TrackTable:
@@ -56,11 +63,12 @@ class TrackTable:
             "positions": (joints, 3), "orientations": (joints, 4), "velocities": (joints, 3),
             "velocity": (3,), "sums": (cameras, joints, 9), "body_ids": (cameras,),
             "seen": (cameras,), "record_ns": (records,), "record_camera": (records,),
-            "record_terms": (records, joints, 9),
+            "record_terms": (records, joints, 9), "flip_state": (cameras, 2),
+            "flip_ns": (cameras,), "flip_known": (cameras,),
         }  # fmt: skip
         for name in _ROW_FIELDS:
             dtype = float if name in _FLOAT_FIELDS or name == "record_terms" else np.int64
-            dtype = bool if name in {"confirmed", "seen"} else dtype
+            dtype = bool if name in _BOOL_FIELDS else dtype
             setattr(self, name, np.zeros((capacity, *shapes.get(name, ())), dtype=dtype))
 
     positions: np.ndarray
@@ -85,6 +93,9 @@ class TrackTable:
     confirmed: np.ndarray
     seen: np.ndarray
     record_terms: np.ndarray
+    flip_state: np.ndarray
+    flip_ns: np.ndarray
+    flip_known: np.ndarray
 
     @property
     def capacity(self) -> int:
@@ -127,7 +138,7 @@ class TrackTable:
     def ensure_cameras(self, n_cameras: int) -> None:
         """Widen the per-camera fields to hold camera codes ``< n_cameras``."""
         if n_cameras > self.camera_capacity:
-            for name in ("sums", "body_ids", "seen"):
+            for name in _CAMERA_FIELDS:
                 self._widen(name, 1, n_cameras)
 
     def grow_records(self) -> None:
