@@ -519,7 +519,9 @@ class _BatchPeople:
         links, link_present = link_rows(markers, present, self.layout)
         boxes = np.full((len(markers), BOX_WIDTH), np.nan)
         self.made, self.mixed = made.tolist(), mixed.tolist()
-        self.stamps = stamps[first[:-1]].tolist()
+        # a message without markers starts at the end of the stamps: pad one (it is unusual
+        # and goes through update_bytes; its stamp here is never used)
+        self.stamps = np.append(stamps, 0)[first[:-1]].tolist()
         self.people, self.bodies = people.tolist(), bodies.tolist()
         self.rows = (list(markers), list(links), list(present), list(link_present), list(boxes))
 
