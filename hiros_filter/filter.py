@@ -146,6 +146,27 @@ class _Tracks:
         )
         self.low_pass: ButterworthBank | None = None
         self.designed_for = np.zeros(capacity)  # rate each slot's low-pass state belongs to
+        self._kernel_arguments: tuple | None = None
+
+    def kernel_arguments(self, params: FilterParams) -> tuple:
+        """The state and constants :func:`~hiros_filter.compiled.filter_step` takes, grouped.
+
+        Built once (and again after the tables grow): packing them is a dozen attribute
+        look-ups and conversions per frame otherwise.
+        """
+        if self._kernel_arguments is None:
+            kalman = self.kalman
+            self._kernel_arguments = (
+                (kalman.x, kalman.P, kalman.scale),
+                (float(kalman.q), float(kalman.r), float(kalman.max_noise_scale),
+                 float(kalman.adaptation_rate), kalman.initial),
+                (bool(params.keep_link_lengths), self.keeper.tree.parents,
+                 self.keeper.tree.order, self.last_lengths),
+                (self.quaternions, self.angular_velocities, self.angular_accelerations,
+                 float(params.orientation_cutoff_frequency)),
+                (self.link_parents, self.link_children),
+            )  # fmt: skip
+        return self._kernel_arguments
 
     def slot(self, track_id: int) -> int:
         """The row of ``track_id``, allocating (and growing the arrays) when new."""
@@ -162,6 +183,7 @@ class _Tracks:
 
     def _grow(self, capacity: int) -> None:
         old = len(self.time_ns)
+        self._kernel_arguments = None  # it holds the arrays being replaced
         self.free.extend(range(capacity - 1, old - 1, -1))
         for name, fill in (
             ("time_ns", 0),
@@ -233,7 +255,7 @@ class Filter:
                 result = skeleton.copy()
                 starts.append(result)
             else:
-                elapsed = skeleton.src_time_ns - tracks.time_ns[tracks.slots[skeleton.id]]
+                elapsed = skeleton.src_time_ns - tracks.time_ns.item(tracks.slots[skeleton.id])
                 if elapsed <= 0:
                     self.drops["stamp not after the track's previous one"] += 1
                     continue
@@ -335,18 +357,11 @@ class Filter:
         """:meth:`_step_rows` and the links in Kalman mode, as one kernel call (same numbers)."""
         from hiros_filter.compiled import filter_step
 
-        kalman = tracks.kalman
+        kalman, model, lengths, orientations, link_ends = tracks.kernel_arguments(self.params)
         return filter_step(
-            (kalman.x, kalman.P, kalman.scale),
-            (float(kalman.q), float(kalman.r), float(kalman.max_noise_scale),
-             float(kalman.adaptation_rate), kalman.initial),
+            kalman, model,
             (rows, tracks.time_ns, tracks.joint_time_ns, round(self.params.max_gap * 1e9)),
-            (markers, present, stamps),
-            (bool(self.params.keep_link_lengths), tracks.keeper.tree.parents,
-             tracks.keeper.tree.order, tracks.last_lengths),
-            (tracks.quaternions, tracks.angular_velocities, tracks.angular_accelerations,
-             float(self.params.orientation_cutoff_frequency)),
-            (tracks.link_parents, tracks.link_children),
+            (markers, present, stamps), lengths, orientations, link_ends,
         )  # fmt: skip
 
     def _step_rows(
@@ -528,8 +543,9 @@ class Filter:
     def _forget_old_tracks(self, stamp_ns: int) -> None:
         timeout_ns = round(self.params.track_timeout * 1e9)
         for tracks in self._layouts.values():
+            times = tracks.time_ns.tolist()  # Python ints: cheaper to compare one by one
             for track_id, row in list(tracks.slots.items()):
-                if stamp_ns - tracks.time_ns[row] > timeout_ns:
+                if stamp_ns - times[row] > timeout_ns:
                     tracks.release(track_id)
                     self._layout_of.pop(track_id, None)
 

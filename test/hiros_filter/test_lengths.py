@@ -147,3 +147,23 @@ def test_compiled_filter_equals_the_numpy_filter(mode):
             np.testing.assert_allclose(b.markers, a.markers, atol=1e-9, equal_nan=True)
             np.testing.assert_array_equal(a.link_present, b.link_present)
             np.testing.assert_allclose(b.links, a.links, atol=1e-9, equal_nan=True)
+
+
+def test_compiled_filter_follows_its_tables_when_they_grow():
+    """Six people: the track tables (4 slots at first) are re-allocated mid-run."""
+    people = [swinging_person(12, seed=seed) for seed in range(6)]
+    stages = [Filter(FilterParams(compiled=compiled)) for compiled in (False, True)]
+    for frame in range(12):
+        stamp = sec_to_ns(frame / RATE)
+        count = 2 if frame < 5 else 6  # the newcomers arrive once the kernel has run
+        skeletons = [
+            Skeleton.from_positions(p[frame], skeleton_id=i, src_time_ns=stamp)
+            for i, p in enumerate(people[:count])
+        ]
+        reference, compiled = (
+            stage.update(SkeletonGroup(stamp, "world", [s.copy() for s in skeletons])).skeletons
+            for stage in stages
+        )
+        for a, b in zip(reference, compiled, strict=True):
+            np.testing.assert_allclose(b.markers, a.markers, atol=1e-9, equal_nan=True)
+    assert len(stages[1]._layouts["azure_kinect"].time_ns) > 4
