@@ -8,18 +8,24 @@ two); at a few people the numpy calls' overhead, not the arithmetic, was the fil
 Subtree sums of the projection are one root -> leaves pass (each joint moves by the
 corrections of the links above it) instead of a product with the ``(J, J)`` subtree matrix.
 
+:func:`filter_step` is a whole Kalman-mode frame in one call (the three kernels above plus the
+joint bookkeeping and ``hiros_core.model.link_rows``): at ~3 people per frame, each kernel call
+and the numpy glue between them cost more than the arithmetic.
+
 Compiled on first use (cached on disk with ``cache=True``), never at import of the package.
 """
 
 # Numba kernels: untyped array arguments passed positionally, long straight-line loops.
-# ruff: noqa: ANN001, ANN201, ANN202, PLR0912, PLR0915, PLR0917
+# ruff: noqa: ANN001, ANN201, PLR0912, PLR0915, PLR0917
 
 from __future__ import annotations
 
 import numpy as np
 from numba import njit
 
-__all__ = ["kalman_step", "keep_lengths"]
+from hiros_core.compiled import _link_rows
+
+__all__ = ["filter_step", "kalman_step", "keep_lengths", "smooth_orientations"]
 
 _EPS = 1e-12
 _SAME_LENGTH = 1e-9
@@ -252,3 +258,73 @@ def smooth_orientations(markers, present, rows, dt, quaternions, velocities, acc
             for k in range(3):
                 markers[i, j, 11 + k] = velocities[s, j, k]
                 markers[i, j, 17 + k] = accelerations[s, j, k]
+
+
+@njit(cache=True)
+def filter_step(kalman, model, tracks, frame, lengths, orientations, link_ends):
+    """``Filter._step`` in Kalman mode for a frame's running tracks, one call (same numbers).
+
+    Args:
+        kalman: ``(x, P, scale)`` of the ``KalmanBank`` (updated in place).
+        model: ``(q, r, max_scale, rate, initial (3, 3))`` its constants.
+        tracks: ``(rows, time_ns, joint_time_ns, max_gap_ns)``: the tracks' slots and stamps
+            (updated in place).
+        frame: ``(markers (n, J, 20), present (n, J), stamps (n,))``: the input rows, which
+            become the output rows in place.
+        lengths: ``(keep, parents, order, last_lengths)``: whether to keep link lengths, the
+            layout's tree and the tracks' previous input lengths (updated in place).
+        orientations: ``(quaternions, velocities, accelerations, cutoff)`` their state.
+        link_ends: ``(parents, children)`` of the layout's links.
+
+    Returns:
+        ``(n, J, 20)`` link rows and ``(n, J)`` link presence of the output rows.
+
+    """
+    x, P, scale = kalman
+    q, r, max_scale, rate, initial = model
+    rows, time_ns, joint_time_ns, max_gap_ns = tracks
+    markers, present, stamps = frame
+    n, n_joints = present.shape
+    dt = np.empty(n)
+    for i in range(n):
+        dt[i] = (stamps[i] - time_ns[rows[i]]) * 1e-9
+    measured = markers[:, :, 1:4].copy()
+    restart = np.zeros((n, n_joints), dtype=np.bool_)
+    for i in range(n):
+        for j in range(n_joints):
+            restart[i, j] = present[i, j] and stamps[i] - joint_time_ns[rows[i], j] > max_gap_ns
+    kalman_step(
+        x, P, scale, rows, dt, np.round(dt, 6), present & ~restart, measured, q, r, max_scale,
+        rate,
+    )  # fmt: skip
+    states = np.empty((3, n, n_joints, 3))  # positions, velocities, accelerations
+    for i in range(n):
+        s = rows[i]
+        for j in range(n_joints):
+            if restart[i, j]:  # KalmanBank.reset: at rest on the measurement
+                x[s, :, :, j] = 0.0
+                x[s, 0, :, j] = measured[i, j]
+                P[s, :, :, j] = initial
+                scale[s, j] = 1.0
+            if present[i, j]:
+                joint_time_ns[s, j] = stamps[i]
+            for quantity in range(3):
+                for axis in range(3):
+                    states[quantity, i, j, axis] = x[s, quantity, axis, j]
+    keep, parents, order, last_lengths = lengths
+    if keep:
+        input_lengths = keep_lengths(parents, order, states, measured, present, last_lengths[rows])
+        for i in range(n):
+            last_lengths[rows[i]] = input_lengths[i]
+    for i in range(n):
+        time_ns[rows[i]] = stamps[i]
+    quaternions, velocities, accelerations, cutoff = orientations
+    smooth_orientations(markers, present, rows, dt, quaternions, velocities, accelerations, cutoff)
+    for i in range(n):
+        for j in range(n_joints):
+            if present[i, j]:
+                for axis in range(3):
+                    markers[i, j, 1 + axis] = states[0, i, j, axis]
+                    markers[i, j, 8 + axis] = states[1, i, j, axis]
+                    markers[i, j, 14 + axis] = states[2, i, j, axis]
+    return _link_rows(markers, present, link_ends[0], link_ends[1])

@@ -76,6 +76,7 @@ class KalmanBank:
         P: ``(S, 3, 3, J)`` covariance over [position, velocity, acceleration], per joint.
         q: spectral density of the white jerk, m^2/s^5.
         r: variance of a position measurement, m^2.
+        initial: ``(3, 3)`` covariance a joint (re)starts from.
         scale: ``(S, J)`` adaptive factor on ``q``: the smoothed normalised innovation squared
             ``|ν|² / (3 S)`` (about 1 when the model fits), clipped to ``[1, max_noise_scale]``.
 
@@ -97,7 +98,7 @@ class KalmanBank:
         self.adaptation_rate = adaptation_rate
         self.scale = np.ones(shape)
         self.r = measurement_noise**2
-        self._initial = np.diag([self.r, initial_velocity_sd**2, initial_acceleration_sd**2])
+        self.initial = np.diag([self.r, initial_velocity_sd**2, initial_acceleration_sd**2])
         slots, joints = shape
         self.x = np.zeros((slots, 3, 3, joints))
         self.P = np.zeros((slots, 3, 3, joints))
@@ -114,7 +115,7 @@ class KalmanBank:
         """Start (slot, joint) pairs at rest at ``(n, 3)`` positions, wide velocity prior."""
         self.x[slots, :, :, joints] = 0.0
         self.x[slots, 0, :, joints] = positions
-        self.P[slots, :, :, joints] = self._initial
+        self.P[slots, :, :, joints] = self.initial
         self.scale[slots, joints] = 1.0
 
     def state(self, slots: np.ndarray) -> np.ndarray:

@@ -29,6 +29,7 @@ from __future__ import annotations
 from collections import Counter, deque
 from dataclasses import dataclass
 from functools import lru_cache
+from typing import NamedTuple
 
 import numpy as np
 
@@ -38,7 +39,7 @@ from hiros_core.model import Skeleton, SkeletonGroup, link_rows
 from hiros_filter.estimators import ButterworthBank, KalmanBank, rotation_vectors, slerp
 from hiros_filter.lengths import LengthKeeper, held_links
 from hiros_optimizer.kinematics import KinematicTree
-from hiros_optimizer.stacking import stack_frame
+from hiros_optimizer.stacking import LayoutRows, stack_frame, with_rows
 
 __all__ = ["Filter", "FilterParams"]
 
@@ -109,6 +110,14 @@ class FilterParams:
             raise ConfigError(msg)
 
 
+class _Running(NamedTuple):
+    """A skeleton of a running track: its place in the output group and its stack row."""
+
+    index: int
+    skeleton: Skeleton
+    row: int
+
+
 class _Tracks:
     """State of every track of one layout, one row (slot) per track id."""
 
@@ -124,6 +133,8 @@ class _Tracks:
         self.last_output = np.full((capacity, self.n_joints, 3), np.nan)
         self.last_lengths = np.full((capacity, self.n_joints), np.nan)  # input link lengths
         self.keeper = LengthKeeper(KinematicTree.from_layout(layout))
+        self.link_parents = np.asarray(layout.link_parents, dtype=np.intp)
+        self.link_children = np.asarray(layout.link_children, dtype=np.intp)
         self.quaternions = np.full((capacity, self.n_joints, 4), np.nan)
         self.angular_velocities = np.full((capacity, self.n_joints, 3), np.nan)
         self.angular_accelerations = np.full((capacity, self.n_joints, 3), np.nan)
@@ -135,6 +146,27 @@ class _Tracks:
         )
         self.low_pass: ButterworthBank | None = None
         self.designed_for = np.zeros(capacity)  # rate each slot's low-pass state belongs to
+        self._kernel_arguments: tuple | None = None
+
+    def kernel_arguments(self, params: FilterParams) -> tuple:
+        """The state and constants :func:`~hiros_filter.compiled.filter_step` takes, grouped.
+
+        Built once (and again after the tables grow): packing them is a dozen attribute
+        look-ups and conversions per frame otherwise.
+        """
+        if self._kernel_arguments is None:
+            kalman = self.kalman
+            self._kernel_arguments = (
+                (kalman.x, kalman.P, kalman.scale),
+                (float(kalman.q), float(kalman.r), float(kalman.max_noise_scale),
+                 float(kalman.adaptation_rate), kalman.initial),
+                (bool(params.keep_link_lengths), self.keeper.tree.parents,
+                 self.keeper.tree.order, self.last_lengths),
+                (self.quaternions, self.angular_velocities, self.angular_accelerations,
+                 float(params.orientation_cutoff_frequency)),
+                (self.link_parents, self.link_children),
+            )  # fmt: skip
+        return self._kernel_arguments
 
     def slot(self, track_id: int) -> int:
         """The row of ``track_id``, allocating (and growing the arrays) when new."""
@@ -151,6 +183,7 @@ class _Tracks:
 
     def _grow(self, capacity: int) -> None:
         old = len(self.time_ns)
+        self._kernel_arguments = None  # it holds the arrays being replaced
         self.free.extend(range(capacity - 1, old - 1, -1))
         for name, fill in (
             ("time_ns", 0),
@@ -207,7 +240,7 @@ class Filter:
     def update(self, group: SkeletonGroup) -> SkeletonGroup:
         """Filter every tracked person of ``group``; returns new skeletons, input untouched."""
         out = SkeletonGroup(group.stamp_ns, group.frame_id, [])
-        batches: dict[str, tuple[list[Skeleton], list[tuple[int, Skeleton]]]] = {}
+        batches: dict[str, tuple[list[Skeleton], list[_Running], LayoutRows]] = {}
         seen: set[int] = set()
         max_gap_ns = round(self.params.max_gap * 1e9)
         places = stack_frame(group.skeletons, self.drops) if group.skeletons else []
@@ -217,12 +250,12 @@ class Filter:
                     out.skeletons.append(skeleton.copy())
                 continue
             tracks = self._tracks_for(skeleton)
-            starts, steps = batches.setdefault(skeleton.layout.name, ([], []))
+            starts, steps, _ = batches.setdefault(skeleton.layout.name, ([], [], place[0]))
             if skeleton.id not in tracks.slots:
                 result = skeleton.copy()
                 starts.append(result)
             else:
-                elapsed = skeleton.src_time_ns - tracks.time_ns[tracks.slots[skeleton.id]]
+                elapsed = skeleton.src_time_ns - tracks.time_ns.item(tracks.slots[skeleton.id])
                 if elapsed <= 0:
                     self.drops["stamp not after the track's previous one"] += 1
                     continue
@@ -232,17 +265,17 @@ class Filter:
                 else:
                     self._intervals.append(elapsed * 1e-9)
                     # Its output is built by ``_step`` from the batch; hold its place.
-                    steps.append((len(out.skeletons), skeleton))
+                    steps.append(_Running(len(out.skeletons), skeleton, place[1]))
                     result = skeleton
             out.skeletons.append(result)
-        for name, (starts, steps) in batches.items():
+        for name, (starts, steps, stack) in batches.items():
             tracks = self._layouts[name]
             if starts:
                 self._start(tracks, starts)
             if steps:
-                results = self._step(tracks, [skeleton for _, skeleton in steps])
-                for (index, _), result in zip(steps, results, strict=True):
-                    out.skeletons[index] = result
+                results = self._step(tracks, stack, steps)
+                for step, result in zip(steps, results, strict=True):
+                    out.skeletons[step.index] = result
         self._forget_old_tracks(group.stamp_ns)
         return out
 
@@ -291,18 +324,56 @@ class Filter:
         for n, skeleton in enumerate(skeletons):  # the stage's own copies: rows replaced
             skeleton.markers = markers[n]
 
-    def _step(self, tracks: _Tracks, skeletons: list[Skeleton]) -> list[Skeleton]:
-        """Continue running tracks: the filtered copies of ``skeletons`` (input untouched).
+    def _step(self, tracks: _Tracks, stack: LayoutRows, steps: list[_Running]) -> list[Skeleton]:
+        """Continue running tracks: the filtered copies of their skeletons (input untouched).
 
-        Every track of the frame in one batch: the rows of all people are stacked once,
-        filtered, and the output skeletons are views of the stacked result (links rebuilt
-        for all of them at once).
+        Every track of the frame in one batch: their rows of the frame's stack (already
+        copies) are filtered in place, and the output skeletons are views of them (links
+        rebuilt for all of them at once). In Kalman mode, compiled, that is one kernel call.
         """
-        rows = np.array([tracks.slots[s.id] for s in skeletons])
+        skeletons = [step.skeleton for step in steps]
+        markers, present = stack.take([step.row for step in steps])
+        rows = np.array([tracks.slots[s.id] for s in skeletons], dtype=np.int64)
         stamps = np.array([s.src_time_ns for s in skeletons], dtype=np.int64)
+        if self.params.compiled and self.params.filter == "kalman":
+            links, link_present = self._step_compiled(tracks, rows, stamps, markers, present)
+        else:
+            self._step_rows(tracks, rows, stamps, markers, present)
+            links, link_present = link_rows(markers, present, tracks.layout)
+        return [
+            with_rows(s, s.id, markers=markers[n], links=links[n], present=present[n],
+                      link_present=link_present[n])
+            for n, s in enumerate(skeletons)
+        ]  # fmt: skip
+
+    def _step_compiled(
+        self,
+        tracks: _Tracks,
+        rows: np.ndarray,
+        stamps: np.ndarray,
+        markers: np.ndarray,
+        present: np.ndarray,
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`_step_rows` and the links in Kalman mode, as one kernel call (same numbers)."""
+        from hiros_filter.compiled import filter_step
+
+        kalman, model, lengths, orientations, link_ends = tracks.kernel_arguments(self.params)
+        return filter_step(
+            kalman, model,
+            (rows, tracks.time_ns, tracks.joint_time_ns, round(self.params.max_gap * 1e9)),
+            (markers, present, stamps), lengths, orientations, link_ends,
+        )  # fmt: skip
+
+    def _step_rows(
+        self,
+        tracks: _Tracks,
+        rows: np.ndarray,
+        stamps: np.ndarray,
+        markers: np.ndarray,
+        present: np.ndarray,
+    ) -> None:
+        """Filter the ``(n, J, 20)`` rows of running tracks in place (and their state)."""
         dt = (stamps - tracks.time_ns[rows]) * 1e-9
-        markers = np.array([s.markers for s in skeletons])  # (n, J, 20): the output rows
-        present = np.array([s.marker_present for s in skeletons])
         measured = markers[..., 1:4]
         max_gap_ns = round(self.params.max_gap * 1e9)
         joint_time_ns = tracks.joint_time_ns[rows]
@@ -355,13 +426,6 @@ class Filter:
         np.copyto(markers[..., 1:4], smoothed, where=mask)
         np.copyto(markers[..., 8:11], velocities, where=mask)
         np.copyto(markers[..., 14:17], accelerations, where=mask)
-        links, link_present = link_rows(markers, present, tracks.layout)
-        return [
-            Skeleton(s.id, s.src_time_ns, s.src_frame, s.layout, markers[n], links[n],
-                     present[n], link_present[n], s.confidence, s.bounding_box.copy(),
-                     s.max_markers, s.max_links)
-            for n, s in enumerate(skeletons)
-        ]  # fmt: skip
 
     def _low_pass(
         self,
@@ -479,8 +543,9 @@ class Filter:
     def _forget_old_tracks(self, stamp_ns: int) -> None:
         timeout_ns = round(self.params.track_timeout * 1e9)
         for tracks in self._layouts.values():
+            times = tracks.time_ns.tolist()  # Python ints: cheaper to compare one by one
             for track_id, row in list(tracks.slots.items()):
-                if stamp_ns - tracks.time_ns[row] > timeout_ns:
+                if stamp_ns - times[row] > timeout_ns:
                     tracks.release(track_id)
                     self._layout_of.pop(track_id, None)
 
@@ -489,30 +554,19 @@ class Filter:
 def _warm_up() -> None:
     """Compile (or load from numba's disk cache) the kernels when the first stage is built.
 
-    Once per process, so a live node does not stall on its first frames.
+    Once per process, so a live node does not stall on its first frames: two frames of one
+    person through each mode (Kalman: the one-call frame kernel; Butterworth: the Kalman,
+    length and orientation kernels one by one).
     """
     from hiros_core.layouts import AZURE_KINECT
 
-    stage = Filter(FilterParams(compiled=False))  # its tracks' tables, without recursion
-    tracks = _Tracks(AZURE_KINECT, stage.params)
-    rows = np.array([0])
-    positions = np.zeros((1, AZURE_KINECT.n_joints, 3))
-    present = np.ones((1, AZURE_KINECT.n_joints), dtype=bool)
-    tracks.kalman.reset(rows.repeat(AZURE_KINECT.n_joints), np.arange(32), positions[0])
-    tracks.kalman.step(rows, np.array([1 / 30]), present, positions)
-    from hiros_filter.compiled import keep_lengths, smooth_orientations
-
-    markers = np.zeros((1, AZURE_KINECT.n_joints, 20))
-    markers[..., 7] = 1.0
-    smooth_orientations(
-        markers, present, rows, np.array([1 / 30]), tracks.quaternions,
-        tracks.angular_velocities, tracks.angular_accelerations, 6.0,
-    )  # fmt: skip
-    keep_lengths(
-        tracks.keeper.tree.parents,
-        tracks.keeper.tree.order,
-        np.zeros((3, *positions.shape)),
-        positions,
-        present,
-        np.zeros((1, AZURE_KINECT.n_joints)),
-    )
+    positions = np.zeros((AZURE_KINECT.n_joints, 3))
+    for mode in _FILTERS:
+        stage = Filter(FilterParams(filter=mode, compiled=False))  # no recursion into here
+        stage.params.compiled = True
+        for frame in range(2):
+            stamp = frame * 33_333_333
+            skeleton = Skeleton.from_positions(
+                positions, AZURE_KINECT, skeleton_id=0, src_time_ns=stamp
+            )
+            stage.update(SkeletonGroup(stamp, "world", [skeleton]))

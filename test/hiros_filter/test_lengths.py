@@ -1,4 +1,5 @@
 import numpy as np
+import pytest
 from scipy.spatial.transform import Rotation
 
 from hiros_core.layouts import AZURE_KINECT
@@ -114,9 +115,10 @@ def test_missing_joint_keeps_the_other_lengths_and_nothing_explodes():
     assert all(np.isfinite(s.velocities[s.marker_present]).all() for s in out)
 
 
-def test_compiled_filter_equals_the_numpy_filter():
+@pytest.mark.parametrize("mode", ["kalman", "butterworth"])
+def test_compiled_filter_equals_the_numpy_filter(mode):
     """Two tracks, held and free links, a joint lost past max_gap (restart), a late frame,
-    orientations with sign flips and a gap."""
+    orientations with sign flips and a gap (Kalman mode: the one-call frame kernel)."""
     rng = np.random.default_rng(5)
     first = swinging_person(80, seed=5)
     second = swinging_person(80, seed=6) + rng.normal(scale=0.01, size=(80, J, 3))
@@ -124,7 +126,7 @@ def test_compiled_filter_equals_the_numpy_filter():
     turning = Rotation.from_rotvec(rng.normal(scale=0.3, size=(80 * J, 3))).as_quat()
     turning = turning.reshape(80, J, 4) * rng.choice([-1.0, 1.0], size=(80, J, 1))
     turning[10:14, 3] = np.nan  # an orientation missing for a few frames
-    stages = [Filter(FilterParams(compiled=compiled)) for compiled in (False, True)]
+    stages = [Filter(FilterParams(filter=mode, compiled=compiled)) for compiled in (False, True)]
     outputs = [[], []]
     for frame in range(80):
         if frame == 40:
@@ -143,3 +145,25 @@ def test_compiled_filter_equals_the_numpy_filter():
         for a, b in zip(reference, compiled, strict=True):
             np.testing.assert_array_equal(a.marker_present, b.marker_present)
             np.testing.assert_allclose(b.markers, a.markers, atol=1e-9, equal_nan=True)
+            np.testing.assert_array_equal(a.link_present, b.link_present)
+            np.testing.assert_allclose(b.links, a.links, atol=1e-9, equal_nan=True)
+
+
+def test_compiled_filter_follows_its_tables_when_they_grow():
+    """Six people: the track tables (4 slots at first) are re-allocated mid-run."""
+    people = [swinging_person(12, seed=seed) for seed in range(6)]
+    stages = [Filter(FilterParams(compiled=compiled)) for compiled in (False, True)]
+    for frame in range(12):
+        stamp = sec_to_ns(frame / RATE)
+        count = 2 if frame < 5 else 6  # the newcomers arrive once the kernel has run
+        skeletons = [
+            Skeleton.from_positions(p[frame], skeleton_id=i, src_time_ns=stamp)
+            for i, p in enumerate(people[:count])
+        ]
+        reference, compiled = (
+            stage.update(SkeletonGroup(stamp, "world", [s.copy() for s in skeletons])).skeletons
+            for stage in stages
+        )
+        for a, b in zip(reference, compiled, strict=True):
+            np.testing.assert_allclose(b.markers, a.markers, atol=1e-9, equal_nan=True)
+    assert len(stages[1]._layouts["azure_kinect"].time_ns) > 4
