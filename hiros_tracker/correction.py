@@ -98,14 +98,13 @@ class CameraCorrection:
             self.drops[UNCALIBRATED] += 1
             return None
         camera = self._cameras[name]
-        skeletons, stack = _moved(group.skeletons, self._transforms[name])
-        stamp_ns = camera.to_reference_ns(group.stamp_ns)
-        for moved in skeletons:
-            source_ns = moved.src_time_ns or group.stamp_ns
-            moved.src_time_ns = (
-                stamp_ns if source_ns == group.stamp_ns else camera.to_reference_ns(source_ns)
-            )
-            moved.src_frame = moved.src_frame or group.frame_id
+        header_ns = group.stamp_ns
+        stamp_ns = camera.to_reference_ns(header_ns)
+        times = [
+            stamp_ns if source_ns in (0, header_ns) else camera.to_reference_ns(source_ns)
+            for source_ns in (skeleton.src_time_ns for skeleton in group.skeletons)
+        ]
+        skeletons, stack = _moved(group.skeletons, self._transforms[name], times, group.frame_id)
         return MovedFrame(SkeletonGroup(stamp_ns, self.world_frame, skeletons), stack, name)
 
 
@@ -148,9 +147,15 @@ def _row_transform(extrinsics: RigidTransform) -> tuple[np.ndarray, np.ndarray, 
 
 
 def _moved(
-    skeletons: list[Skeleton], transform: tuple[np.ndarray, np.ndarray, np.ndarray]
+    skeletons: list[Skeleton],
+    transform: tuple[np.ndarray, np.ndarray, np.ndarray],
+    times_ns: list[int],
+    frame_id: str,
 ) -> tuple[list[Skeleton], StackedRows | None]:
     """New skeletons moved by a ``_row_transform``, all rows of a frame at once.
+
+    They are stamped ``times_ns`` (one per skeleton) and keep their ``src_frame``, else take
+    ``frame_id``: set here rather than on the finished skeletons (one pass per frame).
 
     The result equals ``RigidTransform.apply_to_skeleton`` on each skeleton (a test checks it):
     a field with any NaN stays all NaN, quaternions are normalised first. Every row of the
@@ -180,36 +185,22 @@ def _moved(
         pieces = np.split(rows, np.cumsum([len(part) for part in parts])[:-1])
         markers, links = pieces[0::2], pieces[1::2]
     return [
-        _copy_with(skeleton, markers[d], links[d], boxes[d], stack, d)
+        Skeleton(
+            skeleton.id,
+            times_ns[d],
+            skeleton.src_frame or frame_id,
+            skeleton.layout,
+            markers[d],
+            links[d],
+            skeleton.marker_present.copy() if stack is None else stack.marker_present[d],
+            skeleton.link_present.copy() if stack is None else stack.link_present[d],
+            skeleton.confidence,
+            boxes[d],
+            skeleton.max_markers,
+            skeleton.max_links,
+        )
         for d, skeleton in enumerate(skeletons)
     ], stack
-
-
-def _copy_with(  # noqa: PLR0917
-    skeleton: Skeleton,
-    markers: np.ndarray,
-    links: np.ndarray,
-    box: np.ndarray,
-    stack: StackedRows | None,
-    index: int,
-) -> Skeleton:
-    """A skeleton like ``skeleton`` with the moved rows (presence views into ``stack``)."""
-    return Skeleton(
-        id=skeleton.id,
-        src_time_ns=skeleton.src_time_ns,
-        src_frame=skeleton.src_frame,
-        layout=skeleton.layout,
-        markers=markers,
-        links=links,
-        marker_present=(
-            skeleton.marker_present.copy() if stack is None else stack.marker_present[index]
-        ),
-        link_present=skeleton.link_present.copy() if stack is None else stack.link_present[index],
-        confidence=skeleton.confidence,
-        bounding_box=box,
-        max_markers=skeleton.max_markers,
-        max_links=skeleton.max_links,
-    )
 
 
 def _left_product(rotation: np.ndarray) -> np.ndarray:

@@ -303,6 +303,11 @@ class _LayoutInfo:
     sides: tuple[np.ndarray, np.ndarray, np.ndarray]  # _side_arrays
 
     @cached_property
+    def usable(self) -> bool:
+        """Whether the layout names the joints the facing check needs (``_BodyFrame.usable``)."""
+        return bool(self.frame.usable)
+
+    @cached_property
     def facing_body(self) -> tuple[int, int, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """What ``kernels.turn_facing`` needs of the layout: body frame joints and mirror."""
         frame = self.frame
@@ -566,8 +571,14 @@ class Tracker:
                                                     stamp, camera, info)  # fmt: skip
         n_tracks, n_det = cost.shape
         matched = [-1] * n_det
-        free = list(range(n_det))
         track_levels = levels.tolist()
+        if n_tracks and min(track_levels) == max(track_levels):  # one level (usual): one solve
+            r, c = linear_sum_assignment(cost)
+            for i, j, ok in zip(r.tolist(), c.tolist(), feasible[r, c].tolist(), strict=True):
+                if ok:
+                    matched[j] = i
+            return matched, flips
+        free = list(range(n_det))
         for level in range(3):
             rows = [t for t, at in enumerate(track_levels) if at == level]
             if not rows or not free:
@@ -723,13 +734,16 @@ class Tracker:
             ):
                 if np.isfinite(detection.orientations).any():
                     table.orientations[row] = detection.orientations[order]
-        swaps = np.zeros_like(flips)
-        facing = params.mirror_check and params.facing_check and bool(info.frame.usable)
+        swaps = np.zeros(flips.shape, dtype=bool)
+        facing = params.mirror_check and params.facing_check and info.usable
         if facing:
             turned = self._facing(table, rows, canonical, info, time_ns, camera_position, camera)
             swaps[turned] = True
         voting = params.mirror_check and params.mirror_vote and not facing
-        confirmed, hits = table.confirmed[rows].tolist(), table.hits[rows].tolist()
+        confirmed = table.confirmed[rows]
+        if not voting and confirmed.all():  # nothing to confirm or count (the usual frame)
+            return swaps
+        confirmed, hits = confirmed.tolist(), table.hits[rows].tolist()
         for u, row in enumerate(rows.tolist()):
             if not confirmed[u] and hits[u] >= params.min_hits:
                 self._confirm(table, row, info, time_ns)
