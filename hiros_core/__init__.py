@@ -16,7 +16,15 @@ from hiros_core.errors import (
 )
 from hiros_core.geometry import RigidTransform
 from hiros_core.layouts import AZURE_KINECT, KINECT_V2, Layout, get_layout, load_layout
-from hiros_core.model import Skeleton, SkeletonGroup, camera_from_frame, ns_to_sec, sec_to_ns
+from hiros_core.model import (
+    Skeleton,
+    SkeletonGroup,
+    SkeletonRows,
+    camera_from_frame,
+    ns_to_sec,
+    sec_to_ns,
+    stack_rows,
+)
 
 __all__ = [
     "AZURE_KINECT",
@@ -33,6 +41,7 @@ __all__ = [
     "RigidTransform",
     "Skeleton",
     "SkeletonGroup",
+    "SkeletonRows",
     "camera_from_frame",
     "get_layout",
     "load_calibration",
@@ -40,4 +49,5 @@ __all__ = [
     "ns_to_sec",
     "save_calibration",
     "sec_to_ns",
+    "stack_rows",
 ]

@@ -18,6 +18,7 @@ import math
 import sys
 from collections.abc import Sequence
 from dataclasses import dataclass, field
+from typing import NamedTuple
 
 import numpy as np
 
@@ -29,10 +30,12 @@ __all__ = [
     "STATE_WIDTH",
     "Skeleton",
     "SkeletonGroup",
+    "SkeletonRows",
     "camera_from_frame",
     "link_rows",
     "ns_to_sec",
     "sec_to_ns",
+    "stack_rows",
 ]
 
 STATE_WIDTH = 20
@@ -169,6 +172,10 @@ class Skeleton:
     bounding_box: np.ndarray = field(default_factory=lambda: np.full(BOX_WIDTH, np.nan))
     max_markers: int = -1
     max_links: int = -1
+    _rows: tuple[SkeletonRows, int] | None = field(
+        default=None, init=False, repr=False, compare=False
+    )
+    """The stack this skeleton's fields are row ``[1]`` of (set by ``SkeletonRows.skeletons``)."""
 
     def __post_init__(self) -> None:
         if self.max_markers < 0:
@@ -276,14 +283,8 @@ class Skeleton:
         """
         links, link_present = link_rows(markers, marker_present, layout)
         boxes = np.full((len(markers), BOX_WIDTH), np.nan)
-        n_joints, n_links = layout.n_joints, layout.n_links
-        # Positional arguments in field order: this runs for every person of every frame.
-        fields = (math.nan, n_joints, n_links)
-        return [
-            cls(int(i), src_time_ns, src_frame, layout, markers[p], links[p],
-                marker_present[p], link_present[p], fields[0], boxes[p], *fields[1:])
-            for p, i in enumerate(skeleton_ids)
-        ]  # fmt: skip
+        rows = SkeletonRows(markers, marker_present, links, link_present, boxes)
+        return rows.skeletons(skeleton_ids, src_time_ns, src_frame, layout)
 
     def update_links(self) -> None:
         """Recompute link rows from marker rows: midpoint, child orientation, min confidence."""
@@ -389,6 +390,95 @@ def _same_floats(a: np.ndarray, b: np.ndarray) -> bool:
     return a.shape == b.shape and bool(np.all((a == b) | (np.isnan(a) & np.isnan(b))))
 
 
+class SkeletonRows(NamedTuple):
+    """Several skeletons' rows, one array per field: row ``p`` is skeleton ``p``.
+
+    Stages work on a frame's people at once; when the skeletons are views of one such stack
+    (the reader, the bridge, the merger and the tracker make them so), ``stack_rows`` hands the
+    stack back without copying a row.
+    """
+
+    markers: np.ndarray  # (P, J, 20)
+    marker_present: np.ndarray  # (P, J)
+    links: np.ndarray  # (P, L, 20)
+    link_present: np.ndarray  # (P, L)
+    bounding_boxes: np.ndarray  # (P, 22)
+
+    def skeletons(
+        self,
+        skeleton_ids: Sequence[int],
+        src_time_ns: int | Sequence[int],
+        src_frame: str,
+        layout: Layout,
+        confidences: Sequence[float] | None = None,
+    ) -> list[Skeleton]:
+        """One skeleton per row, its fields views of the row (taken, not copied).
+
+        ``src_time_ns`` is one stamp for all or one per row. The skeletons remember the stack,
+        so ``stack_rows`` of them, in this order, returns it as it is.
+        """
+        markers, present, links, link_present, boxes = self
+        n_joints, n_links = layout.n_joints, layout.n_links
+        stamps = [src_time_ns] * len(markers) if isinstance(src_time_ns, int) else src_time_ns
+        scores = [math.nan] * len(markers) if confidences is None else confidences
+        made = []
+        # Positional arguments in field order: this runs for every person of every frame.
+        for p, skeleton_id in enumerate(skeleton_ids):
+            skeleton = Skeleton(
+                int(skeleton_id), stamps[p], src_frame, layout, markers[p], links[p],
+                present[p], link_present[p], scores[p], boxes[p], n_joints, n_links,
+            )  # fmt: skip
+            skeleton._rows = (self, p)
+            made.append(skeleton)
+        return made
+
+
+def stack_rows(skeletons: Sequence[Skeleton]) -> SkeletonRows:
+    """The skeletons' rows stacked, ``(P, J, 20)`` and so on; they must share their sizes.
+
+    When the skeletons are rows ``a, a+1, ...`` of one ``SkeletonRows`` and still hold its
+    views, the result is that stack (or a slice of it): no row is copied, and a frame's
+    skeletons usually come so. Otherwise each field is stacked into new arrays. So treat the
+    result as read-only: writing to it may write to the skeletons.
+    """
+    stacked = _shared_stack(skeletons)
+    if stacked is not None:
+        return stacked
+    return SkeletonRows(
+        np.array([s.markers for s in skeletons]),
+        np.array([s.marker_present for s in skeletons]),
+        np.array([s.links for s in skeletons]),
+        np.array([s.link_present for s in skeletons]),
+        np.array([s.bounding_box for s in skeletons]),
+    )
+
+
+def _shared_stack(skeletons: Sequence[Skeleton]) -> SkeletonRows | None:
+    """The stack (or a slice of it) the skeletons are consecutive rows of, or None."""
+    if not skeletons or skeletons[0]._rows is None:
+        return None
+    rows, first = skeletons[0]._rows
+    roots = [field[:0].base for field in rows]  # what numpy makes any view's base
+    for offset, skeleton in enumerate(skeletons):
+        if skeleton._rows is None:
+            return None
+        stack, p = skeleton._rows
+        if (
+            stack is not rows
+            or p != first + offset
+            # a field replaced since (views of one owner share its ``base``)
+            or skeleton.markers.base is not roots[0]
+            or skeleton.marker_present.base is not roots[1]
+            or skeleton.links.base is not roots[2]
+            or skeleton.link_present.base is not roots[3]
+            or skeleton.bounding_box.base is not roots[4]
+        ):
+            return None
+    if first == 0 and len(skeletons) == len(rows.markers):
+        return rows
+    return SkeletonRows(*(field[first : first + len(skeletons)] for field in rows))
+
+
 @dataclass(eq=False)
 class SkeletonGroup:
     """All skeletons of one camera frame (or one pipeline output instant).
@@ -473,26 +563,24 @@ def _stack(skeletons: list[Skeleton]) -> tuple | list[Skeleton]:
          s.max_markers, s.max_links)
         for s in skeletons
     ]  # fmt: skip
-    return (
-        scalars,
-        np.stack([s.markers for s in skeletons]),
-        np.stack([s.links for s in skeletons]),
-        np.stack([s.marker_present for s in skeletons]),
-        np.stack([s.link_present for s in skeletons]),
-        np.stack([s.bounding_box for s in skeletons]),
-    )
+    return (scalars, *stack_rows(skeletons))
 
 
 def _unpickle_group(stamp_ns: int, frame_id: str, stacked: tuple | list[Skeleton]) -> SkeletonGroup:
     """Rebuild a group pickled by ``SkeletonGroup.__reduce__`` (skeletons view distinct rows)."""
     if isinstance(stacked, list):
         return SkeletonGroup(stamp_ns, frame_id, stacked)
-    scalars, markers, links, marker_present, link_present, boxes = stacked
-    skeletons = [
-        Skeleton(sid, src_ns, src_frame, get_layout(layout) if isinstance(layout, str) else layout,
-                 markers[p], links[p], marker_present[p], link_present[p], confidence, boxes[p],
-                 max_markers, max_links)
-        for p, (sid, src_ns, src_frame, layout, confidence, max_markers, max_links)
-        in enumerate(scalars)
-    ]  # fmt: skip
+    rows = SkeletonRows(*stacked[1:])
+    markers, marker_present, links, link_present, boxes = rows
+    skeletons = []
+    for p, (sid, src_ns, src_frame, layout, confidence, max_markers, max_links) in enumerate(
+        stacked[0]
+    ):
+        skeleton = Skeleton(
+            sid, src_ns, src_frame, get_layout(layout) if isinstance(layout, str) else layout,
+            markers[p], links[p], marker_present[p], link_present[p], confidence, boxes[p],
+            max_markers, max_links,
+        )  # fmt: skip
+        skeleton._rows = (rows, p)
+        skeletons.append(skeleton)
     return SkeletonGroup(stamp_ns, frame_id, skeletons)

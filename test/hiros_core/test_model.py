@@ -19,6 +19,7 @@ from hiros_core import (
     get_layout,
     load_calibration,
     save_calibration,
+    stack_rows,
 )
 
 
@@ -174,3 +175,30 @@ def test_groups_of_mixed_layouts_pickle_skeleton_by_skeleton() -> None:
     assert back.same_as(group)
     assert back.skeletons[1].layout.name == "kinect_v2"
     assert pickle.loads(pickle.dumps(SkeletonGroup(1, "w"))).skeletons == []
+
+
+def test_stack_rows_shares_a_frames_stack_and_copies_otherwise() -> None:
+    rng = np.random.default_rng(5)
+    positions = rng.normal(size=(4, 32, 3))
+    people = Skeleton.many_from_positions(positions, skeleton_ids=[3, 4, 5, 6])
+    whole = stack_rows(people)
+    assert np.array_equal(whole.markers[..., 1:4], positions)
+    assert np.shares_memory(whole.markers, people[0].markers)
+    middle = stack_rows(people[1:3])
+    assert np.shares_memory(middle.links, people[1].links)
+    assert np.array_equal(middle.link_present, whole.link_present[1:3])
+    reordered = stack_rows([people[2], people[1]])
+    assert not np.shares_memory(reordered.markers, people[1].markers)
+    assert np.array_equal(reordered.markers[0], people[2].markers, equal_nan=True)
+    people[0].markers = people[0].markers.copy()  # a replaced field breaks the sharing
+    copied = stack_rows(people)
+    assert not np.shares_memory(copied.markers, people[1].markers)
+    assert np.array_equal(copied.bounding_boxes, whole.bounding_boxes, equal_nan=True)
+
+
+def test_unpickled_groups_stack_without_copying() -> None:
+    people = Skeleton.many_from_positions(np.ones((2, 32, 3)), skeleton_ids=[1, 2])
+    back = pickle.loads(pickle.dumps(SkeletonGroup(9, "world", people)))
+    rows = stack_rows(back.skeletons)
+    assert np.shares_memory(rows.markers, back.skeletons[1].markers)
+    assert back.same_as(SkeletonGroup(9, "world", people))
