@@ -15,10 +15,10 @@ import numpy as np
 
 from hiros_core.calibration import Calibration, CameraCalibration
 from hiros_core.geometry import RigidTransform
-from hiros_core.model import STATE_WIDTH, Skeleton, SkeletonGroup
+from hiros_core.model import STATE_WIDTH, Skeleton, SkeletonGroup, SkeletonRows, stack_rows
 from hiros_tracker import kernels
 
-__all__ = ["CameraCorrection", "MovedFrame", "StackedRows"]
+__all__ = ["CameraCorrection", "MovedFrame"]
 
 UNCALIBRATED = "uncalibrated camera"
 """Drop reason of a group whose camera has no calibration."""
@@ -108,28 +108,15 @@ class CameraCorrection:
         return MovedFrame(SkeletonGroup(stamp_ns, self.world_frame, skeletons), stack, name)
 
 
-class StackedRows(NamedTuple):
-    """One frame's moved rows, one array per field over its skeletons (all of one layout).
-
-    The skeletons' own fields are views into these (row ``d`` = skeleton ``d``), so a change
-    made here shows in them: a stage can work on the whole frame in one compiled call.
-    """
-
-    markers: np.ndarray  # (D, J, 20)
-    marker_present: np.ndarray  # (D, J)
-    links: np.ndarray  # (D, L, 20)
-    link_present: np.ndarray  # (D, L)
-
-
 class MovedFrame(NamedTuple):
     """A camera frame in the world frame and on the reference clock (``CameraCorrection.move``).
 
-    ``stack`` holds its skeletons' rows stacked, or None when their layouts differ;
-    ``camera`` is the calibration's name for the camera.
+    ``stack`` holds its skeletons' rows stacked (they are its row views, in order), or None
+    when their layouts differ; ``camera`` is the calibration's name for the camera.
     """
 
     group: SkeletonGroup
-    stack: StackedRows | None
+    stack: SkeletonRows | None
     camera: str
 
 
@@ -151,7 +138,7 @@ def _moved(
     transform: tuple[np.ndarray, np.ndarray, np.ndarray],
     times_ns: list[int],
     frame_id: str,
-) -> tuple[list[Skeleton], StackedRows | None]:
+) -> tuple[list[Skeleton], SkeletonRows | None]:
     """New skeletons moved by a ``_row_transform``, all rows of a frame at once.
 
     They are stamped ``times_ns`` (one per skeleton) and keep their ``src_frame``, else take
@@ -161,46 +148,62 @@ def _moved(
     a field with any NaN stays all NaN, quaternions are normalised first. Every row of the
     frame (markers, links and boxes of all people) is moved by one compiled loop
     (``kernels.move_frame``): flat in the number of people, which is what the tracker's time
-    budget needs. The new skeletons' fields are views into arrays owned by them alone: when
-    they share a layout, the stacked arrays returned (else None).
+    budget needs. When the skeletons share a layout, the new ones are the row views of one
+    ``SkeletonRows`` of their own (returned; else None): a copy of the input's stack, which
+    the bridge and the reader hand over whole (``stack_rows``), so the frame costs a few
+    copies whatever its size, and the stages after the tracker get the stack back for free.
     """
     if not skeletons:
         return [], None
     layout = skeletons[0].layout
+    if any(skeleton.layout is not layout for skeleton in skeletons):
+        return _moved_apart(skeletons, transform, times_ns, frame_id), None
+    stack = stack_rows(skeletons)
+    if np.may_share_memory(stack.markers, skeletons[0].markers):  # the input's own stack
+        stack = SkeletonRows(*(field.copy() for field in stack))
+    kernels.move_frame(stack.markers, stack.links, stack.bounding_boxes, *transform)
+    frame = skeletons[0].src_frame or frame_id
+    ids = [skeleton.id for skeleton in skeletons]
+    scores = [skeleton.confidence for skeleton in skeletons]
+    moved = stack.skeletons(ids, times_ns, frame, layout, scores)
+    sizes = (moved[0].max_markers, moved[0].max_links)  # the layout's
+    for old, new in zip(skeletons, moved, strict=True):
+        if (old.src_frame, old.max_markers, old.max_links) != (frame, *sizes):
+            # a group of mixed sources, or message sizes other than the layout's: as it came
+            new.src_frame = old.src_frame or frame_id
+            new.max_markers, new.max_links = old.max_markers, old.max_links
+    return moved, stack
+
+
+def _moved_apart(
+    skeletons: list[Skeleton],
+    transform: tuple[np.ndarray, np.ndarray, np.ndarray],
+    times_ns: list[int],
+    frame_id: str,
+) -> list[Skeleton]:
+    """``_moved`` for skeletons of different layouts: every row in one array, split back."""
     boxes = np.array([s.bounding_box for s in skeletons])
-    if all(skeleton.layout is layout for skeleton in skeletons):
-        stack = StackedRows(
-            np.array([s.markers for s in skeletons]),
-            np.array([s.marker_present for s in skeletons]),
-            np.array([s.links for s in skeletons]),
-            np.array([s.link_present for s in skeletons]),
-        )
-        kernels.move_frame(stack.markers, stack.links, boxes, *transform)
-        markers, links = stack.markers, stack.links
-    else:  # one array of every row, then split back
-        stack = None
-        parts = [part for s in skeletons for part in (s.markers, s.links)]
-        rows = np.concatenate(parts)
-        kernels.move_frame(rows[None], np.empty((1, 0, STATE_WIDTH)), boxes, *transform)
-        pieces = np.split(rows, np.cumsum([len(part) for part in parts])[:-1])
-        markers, links = pieces[0::2], pieces[1::2]
+    parts = [part for s in skeletons for part in (s.markers, s.links)]
+    rows = np.concatenate(parts)
+    kernels.move_frame(rows[None], np.empty((1, 0, STATE_WIDTH)), boxes, *transform)
+    pieces = np.split(rows, np.cumsum([len(part) for part in parts])[:-1])
     return [
         Skeleton(
             skeleton.id,
             times_ns[d],
             skeleton.src_frame or frame_id,
             skeleton.layout,
-            markers[d],
-            links[d],
-            skeleton.marker_present.copy() if stack is None else stack.marker_present[d],
-            skeleton.link_present.copy() if stack is None else stack.link_present[d],
+            pieces[2 * d],
+            pieces[2 * d + 1],
+            skeleton.marker_present.copy(),
+            skeleton.link_present.copy(),
             skeleton.confidence,
             boxes[d],
             skeleton.max_markers,
             skeleton.max_links,
         )
         for d, skeleton in enumerate(skeletons)
-    ], stack
+    ]
 
 
 def _left_product(rotation: np.ndarray) -> np.ndarray:

@@ -895,7 +895,9 @@ class Tracker:
         """
         table = self._table
         if index is not None:
-            kernels.label_frame(*frame.stack, index, flips, parts.part, parts.mirror,
+            stack = frame.stack
+            kernels.label_frame(stack.markers, stack.marker_present, stack.links,
+                                stack.link_present, index, flips, parts.part, parts.mirror,
                                 table.velocities, rows, table.confirmed)  # fmt: skip
         output = []
         confirmed, ids = table.confirmed[rows].tolist(), table.ids[rows].tolist()
