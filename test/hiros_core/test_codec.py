@@ -20,6 +20,7 @@ from hiros_core.codec import (
     encode_group_into,
     encode_marker_array,
 )
+from hiros_core.model import stack_rows
 
 serialization = pytest.importorskip("rclpy.serialization")
 msgs = pytest.importorskip("hiros_skeleton_msgs.msg")
@@ -149,6 +150,44 @@ def test_group_encoded_into_a_buffer_compiled_and_numpy_alike(
         assert size == len(reference)
         assert buffer[offset : offset + size].tobytes() == reference
         assert (np.delete(buffer, np.arange(offset, offset + size)) == 0xA5).all()
+
+
+def restacked(group: SkeletonGroup) -> tuple[SkeletonGroup, SkeletonGroup]:
+    """The group's skeletons of its first layout, as they are and as rows of one stack."""
+    if not group.skeletons:
+        return group, group
+    layout = group.skeletons[0].layout
+    alike = [s for s in group.skeletons if s.layout is layout]
+    made = stack_rows(alike).skeletons(
+        [s.id for s in alike], [s.src_time_ns for s in alike], "", layout,
+        [s.confidence for s in alike],
+    )  # fmt: skip
+    for skeleton, original in zip(made, alike, strict=True):
+        skeleton.src_frame = original.src_frame
+        skeleton.max_markers, skeleton.max_links = original.max_markers, original.max_links
+    return (
+        SkeletonGroup(group.stamp_ns, group.frame_id, alike),
+        SkeletonGroup(group.stamp_ns, group.frame_id, made),
+    )
+
+
+@settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(groups)
+def test_groups_of_one_stack_encode_as_separate_skeletons(group: SkeletonGroup) -> None:
+    """The compiled stack path (skeletons are rows of one SkeletonRows) gives the same bytes."""
+    import numba  # noqa: F401 - the stack path runs when numba is loaded
+
+    separate, stacked = restacked(group)
+    assert encode_group(stacked) == encode_group(separate)
+    for cut in (slice(1, None), slice(None, -1)):  # a slice of the stack is still one
+        part = SkeletonGroup(group.stamp_ns, group.frame_id, stacked.skeletons[cut])
+        assert encode_group(part) == encode_group(
+            SkeletonGroup(group.stamp_ns, group.frame_id, separate.skeletons[cut])
+        )
+    if stacked.skeletons:  # a skeleton whose rows were replaced leaves the stack
+        stacked.skeletons[0].markers = stacked.skeletons[0].markers + 1.0
+        separate.skeletons[0].markers = separate.skeletons[0].markers + 1.0
+        assert encode_group(stacked) == encode_group(separate)
 
 
 @st.composite
