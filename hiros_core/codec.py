@@ -255,6 +255,22 @@ class _GroupReading:
     mask: np.ndarray
     scratch: int  # float64 position of the scratch row (filled with NaN when decoding)
     skeletons: tuple[tuple[Layout, str, np.ndarray, np.ndarray, int], ...]
+    stack: _StackReading | None = None  # when every skeleton has one layout
+
+
+class _StackReading(NamedTuple):
+    """How a group of one layout is decoded as one ``SkeletonRows``.
+
+    ``floats``: the plan's float indices reordered field by field (every box, then every
+    skeleton's marker rows, then every link rows), so one gather gives the three fields as
+    contiguous blocks; the presence masks and source frames of the skeletons.
+    """
+
+    layout: Layout
+    floats: np.ndarray
+    marker_present: np.ndarray  # (P, J)
+    link_present: np.ndarray  # (P, L)
+    frames: list[str]
 
 
 _GROUP_READINGS: dict[int, list[_GroupReading]] = {}  # by message size, most recent first
@@ -307,6 +323,25 @@ def _group_reading(group: SkeletonGroup, size: int) -> _GroupReading | None:
         mask.view("<u8"),
         (offset + (-offset) % 8) // 8,  # as _build_group_plan places it
         tuple(skeletons),
+        _stack_reading(group, plan),
+    )
+
+
+def _stack_reading(group: SkeletonGroup, plan: _GroupPlan) -> _StackReading | None:
+    """The stack decoding of messages shaped like ``group`` (None: mixed layouts, or none)."""
+    skeletons = group.skeletons
+    if not skeletons or any(s.layout is not skeletons[0].layout for s in skeletons):
+        return None
+    layout = skeletons[0].layout
+    marker_floats = layout.n_joints * STATE_WIDTH
+    per_person = plan.floats.reshape(len(skeletons), -1)
+    fields = np.split(per_person, [BOX_WIDTH, BOX_WIDTH + marker_floats], axis=1)
+    return _StackReading(
+        layout,
+        np.concatenate([field.ravel() for field in fields]),
+        np.array([s.marker_present for s in skeletons]),
+        np.array([s.link_present for s in skeletons]),
+        [s.src_frame for s in skeletons],
     )
 
 
@@ -600,6 +635,8 @@ def _group_from_reading(reading: _GroupReading, buffer: np.ndarray) -> SkeletonG
     plan = reading.plan
     floats = buffer[_LEAD + HEADER_SIZE :].view("<f8")
     floats[reading.scratch : reading.scratch + STATE_WIDTH] = np.nan
+    if reading.stack is not None:
+        return _stacked_group(reading, buffer, floats)
     values = floats[plan.floats]
     sec, nanosec = _STAMP_STRUCT.unpack_from(buffer, plan.stamp_at)
     skeletons = []
@@ -623,6 +660,36 @@ def _group_from_reading(reading: _GroupReading, buffer: np.ndarray) -> SkeletonG
             )
         )  # fmt: skip
     return SkeletonGroup(sec * _NS + nanosec, reading.frame_id, skeletons)
+
+
+def _stacked_group(reading: _GroupReading, buffer: np.ndarray, floats: np.ndarray) -> SkeletonGroup:
+    """A group of one layout, its skeletons the rows of one ``SkeletonRows`` (one gather)."""
+    plan, stack = reading.plan, reading.stack
+    assert stack is not None
+    values = plan.packer.unpack(buffer[plan.field_index].tobytes())
+    n_people = len(stack.frames)
+    rows = floats[stack.floats]
+    boxes_end = n_people * BOX_WIDTH
+    markers_end = boxes_end + stack.marker_present.size * STATE_WIDTH
+    skeletons = SkeletonRows(
+        rows[boxes_end:markers_end].reshape(n_people, -1, STATE_WIDTH),
+        stack.marker_present.copy(),
+        rows[markers_end:].reshape(n_people, -1, STATE_WIDTH),
+        stack.link_present.copy(),
+        rows[:boxes_end].reshape(n_people, BOX_WIDTH),
+    ).skeletons(
+        values[2::6],
+        [sec * _NS + nanosec for sec, nanosec in zip(values[3::6], values[4::6], strict=True)],
+        stack.frames[0],
+        stack.layout,
+        values[7::6],
+    )
+    for skeleton, frame, max_markers, max_links in zip(
+        skeletons, stack.frames, values[5::6], values[6::6], strict=True
+    ):
+        skeleton.src_frame = frame
+        skeleton.max_markers, skeleton.max_links = max_markers, max_links
+    return SkeletonGroup(values[0] * _NS + values[1], reading.frame_id, skeletons)
 
 
 def _decode_group_by_skeleton(data: bytes | bytearray | memoryview) -> SkeletonGroup:

@@ -126,6 +126,12 @@ def test_group_bytes_match_rclpy_and_round_trip(group: SkeletonGroup) -> None:
             s.markers.shape == (s.layout.n_joints, 20) and s.links.shape == s.markers.shape
             for s in decoded.skeletons
         )
+    _, separate = restacked(group)
+    if len(separate.skeletons) == len(group.skeletons) and group.skeletons:
+        # one layout, a known shape: the skeletons are the rows of one stack (no copy)
+        skeletons = decode_group(ours).skeletons
+        assert np.shares_memory(stack_rows(skeletons).markers, skeletons[0].markers)
+        assert np.shares_memory(stack_rows(skeletons).links, skeletons[-1].links)
 
 
 @settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.too_slow])
@@ -341,7 +347,8 @@ def test_embedded_nul_ends_a_string_as_in_rclpy() -> None:
 def test_fast_walk_of_new_shapes_reads_as_the_field_reader(data, media) -> None:
     """A new shape is walked by ``_walk_marker_array``: same columns as the field-by-field
     reader, whatever the padding bytes hold; media attachments and bad bytes go the reader's
-    way (same columns, same errors)."""
+    way (same columns, same errors).
+    """
     from hiros_core.codec import _parse_marker_array, _walk_marker_array
 
     if not media:
