@@ -22,7 +22,9 @@ __all__ = [
     "canonical_poses",
     "fold_hits",
     "frame_costs",
+    "frame_pairs",
     "gate_costs",
+    "hit_frame",
     "label_frame",
     "label_rows",
     "live_tracks",
@@ -40,11 +42,12 @@ INFEASIBLE = 1e9
 @njit(cache=True, error_model="numpy")
 def masked_positions(
     markers: np.ndarray, present: np.ndarray, min_confidence: float
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
     """``(D, J, 3)`` positions, NaN where absent or below ``min_confidence``; ``(D,)`` usable.
 
     A detection is usable when one of its present joints has a finite position (whatever
-    its confidence). Also returns ``(D,)`` how many joints each keeps (finite positions).
+    its confidence). Also returns ``(D,)`` how many joints each keeps (finite positions) and
+    how many detections are not usable.
     """
     n_det, n_joints = present.shape
     positions = np.empty((n_det, n_joints, 3))
@@ -62,7 +65,7 @@ def masked_positions(
                 kept[d] += finite
             else:
                 positions[d, j, :] = np.nan
-    return positions, usable, kept
+    return positions, usable, kept, n_det - int(usable.sum())
 
 
 @njit(cache=True, error_model="numpy")
@@ -312,6 +315,157 @@ def gate_costs(  # noqa: PLR0917
                 cost[t, d] = INFEASIBLE
         levels[t] = (0 if last_hit_ns[t] >= recent_ns else 1) if confirmed[t] else 2
     return feasible, levels
+
+
+@njit(cache=True, error_model="numpy")
+def frame_pairs(  # noqa: PLR0917
+    r: np.ndarray,
+    c: np.ndarray,
+    feasible: np.ndarray,
+    flips: np.ndarray,
+    kept: np.ndarray,
+    min_joints: int,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, int, int]:
+    """Each detection's track from the solver's pairs: its match, else a new track, else none.
+
+    The solver paired tracks ``r`` with detections ``c`` (``(N,)`` each); a pair counts when
+    ``feasible`` ``(T, D)``. A detection left unmatched starts a track when it keeps
+    ``min_joints`` joints (``kept`` ``(D,)``), else it is dropped.
+
+    Returns:
+        ``(U,)`` track rows (-1: a new track, which the caller makes), ``(U,)`` their
+        detections in detection order, ``(U, K)`` the parts to relabel in each (the pair's
+        ``flips`` ``(T, D, K)``, none for a new track), how many new tracks and how many
+        detections were dropped.
+
+    """
+    n_det = len(kept)
+    matched = np.full(n_det, -1, dtype=np.int64)
+    for i in range(len(r)):
+        if feasible[r[i], c[i]]:
+            matched[c[i]] = r[i]
+    count = 0
+    for d in range(n_det):
+        count += matched[d] >= 0 or kept[d] >= min_joints
+    rows = np.empty(count, dtype=np.int64)
+    dets = np.empty(count, dtype=np.int64)
+    pair_flips = np.zeros((count, flips.shape[2]), dtype=np.bool_)
+    u = 0
+    new = 0
+    for d in range(n_det):
+        if matched[d] >= 0:
+            pair_flips[u] = flips[matched[d], d]
+        elif kept[d] >= min_joints:
+            new += 1
+        else:
+            continue
+        rows[u] = matched[d]
+        dets[u] = d
+        u += 1
+    return rows, dets, pair_flips, new, n_det - count
+
+
+@njit(cache=True, error_model="numpy")
+def hit_frame(  # noqa: PLR0917 - a compiled kernel takes plain positional values
+    table: tuple,
+    frame: tuple,
+    pairs: tuple[np.ndarray, np.ndarray, np.ndarray],
+    layout: tuple,
+    camera: int,
+    stamp_ns: int,
+    settings: tuple[float, float, int, bool, bool, bool, bool],
+    facing_args: tuple,
+) -> tuple[np.ndarray, bool, np.ndarray, int, np.ndarray, bool]:
+    """One frame's matched pairs folded into their tracks, in one call (``Tracker._hit``).
+
+    In order: the detections in their tracks' labelling (``canonical_poses``), folded in
+    (``fold_hits``), their orientations taken (when orientations count), the tracks' facing
+    weighed (``turn_facing``), and, when every track hit is confirmed, the output detections
+    labelled in place (``label_frame``); a frame with tracks to confirm or votes to count
+    leaves that to the caller, which must confirm before labelling.
+
+    ``table`` holds the ``TrackTable`` fields in ``TrackTable.hit_fields`` order (changed in
+    place); ``frame`` the detections' ``(D, J, 3)`` positions, ``(D,)`` body ids, ``(D,)``
+    their rows in the stacked rows that follow (markers, presence, links, link presence:
+    labelled in place); ``pairs`` the
+    ``frame_pairs`` rows, detections and flips; ``layout`` the mirror part and permutation,
+    the joint weights, the shoulders, side pairs and their parts (``_side_arrays``) and the
+    body frame (``turn_facing``); ``settings`` the smoothing, the longest prediction (s), the
+    velocity window (ns) and whether to align hips to shoulders, take orientations, weigh the
+    facing and label; ``facing_args`` the world's up, the camera's position and whether it is
+    known, and the facing priors (``turn_facing``).
+
+    Returns:
+        ``(U, K)`` the parts relabelled in each detection (its track's swaps included), whether
+        a record ring is full (``fold_hits``), ``(U,)`` which tracks turned and how many, the
+        ``(U,)`` track ids and whether the detections were labelled.
+
+    """
+    (positions, orientations, velocities, velocity, time_ns, last_hit_ns, epoch_ns, hits,
+     n_cameras, body_ids, seen, sums, record_ns, record_camera, record_terms, record_start,
+     record_count, facing, facing_ns, flip_state, flip_ns, flip_known, confirmed,
+     ids) = table  # fmt: skip
+    detections, det_ids, index, markers, present, links, link_present = frame
+    rows, dets, flips = pairs
+    part, mirror, weights, shoulders, side_pairs, side_parts, body = layout
+    smoothing, max_prediction, window_ns, align, orient, weigh, label = settings
+    up, camera_position, has_camera, priors = facing_args
+    canonical, flips = canonical_poses(detections, dets, flips, part, mirror, align, shoulders,
+                                       side_pairs, side_parts)  # fmt: skip
+    full = fold_hits(positions, velocities, velocity, time_ns, last_hit_ns, epoch_ns, hits,
+                     n_cameras, body_ids, seen, sums, record_ns, record_camera, record_terms,
+                     record_start, record_count, rows, canonical, det_ids[dets], camera,
+                     stamp_ns, smoothing, max_prediction, window_ns, weights)  # fmt: skip
+    if orient:
+        _take_orientations(orientations, rows, markers, index[dets], flips, part, mirror)
+    turned = np.zeros(len(rows), dtype=np.bool_)
+    if weigh:
+        turned = turn_facing(positions, orientations, velocities, velocity, sums, record_terms,
+                             record_start, record_count, facing, facing_ns, rows, canonical,
+                             up, camera_position, has_camera, body, priors, stamp_ns,
+                             (camera, flip_state, flip_ns, flip_known))  # fmt: skip
+    n_turned = 0
+    for u in range(len(rows)):
+        if turned[u]:
+            flips[u, :] = ~flips[u, :]
+            n_turned += 1
+    every = True
+    for u in range(len(rows)):
+        every &= confirmed[rows[u]]
+    labelled = label and every
+    if labelled:
+        label_frame(markers, present, links, link_present, index[dets], flips, part, mirror,
+                    velocities, rows, confirmed)  # fmt: skip
+    return flips, full, turned, n_turned, ids[rows], labelled
+
+
+@njit(cache=True, error_model="numpy")
+def _take_orientations(  # noqa: PLR0917
+    orientations: np.ndarray,
+    rows: np.ndarray,
+    markers: np.ndarray,
+    dets: np.ndarray,
+    flips: np.ndarray,
+    part: np.ndarray,
+    mirror: np.ndarray,
+) -> None:
+    """Track ``rows[u]`` takes the orientations of the detection in row ``dets[u]``.
+
+    Relabelled by ``flips[u]``, when it has any (``markers`` ``(D, J, 20)``, orientation in
+    columns 4:8): the orientation cost compares a detection with its track's last ones.
+    """
+    order = np.empty(len(part), dtype=np.int64)
+    for u in range(len(rows)):
+        d = dets[u]
+        known = False
+        for j in range(len(part)):
+            for a in range(4):
+                known |= math.isfinite(markers[d, j, 4 + a])
+        if known:
+            _order(flips[u], part, mirror, order)
+            for j in range(len(part)):
+                for a in range(4):
+                    orientations[rows[u], j, a] = markers[d, order[j], 4 + a]
 
 
 @njit(cache=True, error_model="numpy")

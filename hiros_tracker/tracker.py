@@ -42,6 +42,7 @@ import itertools
 from collections import Counter
 from dataclasses import dataclass
 from functools import cache, cached_property
+from typing import NamedTuple
 
 import numpy as np
 from scipy.optimize import linear_sum_assignment
@@ -311,10 +312,33 @@ class _LayoutInfo:
         return bool(self.frame.usable)
 
     @cached_property
+    def hit_layout(self) -> tuple:
+        """What ``kernels.hit_frame`` needs of the layout (see there)."""
+        parts = self.parts
+        return (parts.part, parts.mirror, self.weights, *self.sides, self.facing_body)
+
+    @cached_property
     def facing_body(self) -> tuple[int, int, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """What ``kernels.turn_facing`` needs of the layout: body frame joints and mirror."""
         frame = self.frame
         return frame.root, frame.neck, frame.left, frame.right, frame.pointers, self.parts.mirror
+
+
+class _Detections(NamedTuple):
+    """A frame's detections the tracker can use (``Tracker._valid_detections``).
+
+    ``positions`` ``(D, J, 3)`` (NaN where absent or below ``min_confidence``), ``kept``
+    ``(D,)`` how many finite joints each keeps, ``index`` ``(D,)`` their rows in ``rows``
+    (markers, presence, links, link presence): the frame's stack when ``stacked``, else
+    new arrays of the markers and presence (twice), which labelling must not write to.
+    """
+
+    skeletons: list[Skeleton]
+    positions: np.ndarray
+    kept: np.ndarray
+    index: np.ndarray
+    rows: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]
+    stacked: bool
 
 
 @cache
@@ -432,78 +456,60 @@ class Tracker:
         """Associate one world-frame camera frame with the tracks; return confirmed outputs."""
         code = self._camera_codes.setdefault(camera, len(self._camera_codes))
         self._expire(frame.group.stamp_ns)
-        detections, positions, kept, index = self._valid_detections(frame)
-        if not detections:
+        found = self._valid_detections(frame)
+        if found is None:
             return []
+        detections = found.skeletons
         info = self._layout_info(detections[0].layout)
-        table = self._tracks_for(positions.shape[1], code)
+        table = self._tracks_for(found.positions.shape[1], code)
         stamp = detections[0].src_time_ns
         det_ids = np.array([d.id for d in detections], dtype=np.int64)
-        matched, flips = self._match(table, detections, positions, det_ids, stamp, code, info)
-        rows, dets, pair_flips = self._pairs(table, matched, flips, positions, kept, stamp, info)
-        if not len(rows):
+        assigned = self._match(table, detections, found.positions, det_ids, stamp, code, info)
+        pairs = self._pairs(table, *assigned, found, stamp)
+        if not len(pairs[0]):
             return []
-        # Detections in their tracks' labelling; which hip, eye or ear is left is then
-        # geometry once the shoulders are labelled (with the facing check).
-        shoulders, side_pairs, side_parts = info.sides
-        params = self.params
-        canonical, pair_flips = kernels.canonical_poses(
-            positions,
-            dets,
-            pair_flips,
-            info.parts.part,
-            info.parts.mirror,
-            params.mirror_check and params.facing_check,
-            shoulders,
-            side_pairs,
-            side_parts,
+        flips, track_ids, labelled = self._hit(
+            table, found, det_ids, pairs, info, stamp, code, self._camera_position(camera)
         )
-        chosen = [detections[det] for det in dets.tolist()]
-        pair_flips ^= self._hit(
-            table, rows, canonical, chosen, det_ids[dets], info, stamp, code, pair_flips,
-            self._camera_position(camera),
-        )  # fmt: skip
-        output = self._labelled(frame, chosen, None if index is None else index[dets], rows,
-                                pair_flips, info.parts)  # fmt: skip
+        output = self._labelled(found, pairs, flips, track_ids, labelled, info.parts)
         self._remove_doomed()
         return output
 
-    def _valid_detections(
-        self, frame: MovedFrame
-    ) -> tuple[list[Skeleton], np.ndarray, np.ndarray, np.ndarray | None]:
+    def _valid_detections(self, frame: MovedFrame) -> _Detections | None:
         """Skeletons with a finite joint and the layout of the first one (and of the tracks).
 
-        Returns them, their ``(D, J, 3)`` positions (NaN where absent or below
-        ``min_confidence``), ``(D,)`` how many finite joints each keeps and ``(D,)`` their
-        rows in ``frame.stack`` (None without a stack).
+        None when there are none; else see ``_Detections``. With the frame's rows stacked
+        (``frame.stack``), the detections' rows are in it; else in new arrays.
         """
         skeletons = frame.group.skeletons
-        empty = ([], np.empty((0, 0, 3)), np.empty(0, dtype=np.int64), None)
         if not skeletons:
-            return empty
-        if frame.stack is not None:
-            markers, present = frame.stack.markers, frame.stack.marker_present
-            index = np.arange(len(skeletons))
+            return None
+        stack = frame.stack
+        if stack is not None:
+            markers, present = stack.markers, stack.marker_present
+            rows = (markers, present, stack.links, stack.link_present)
         else:
             skeletons = self._one_layout(skeletons)
             if not skeletons:
-                return empty
+                return None
             markers = np.array([s.markers for s in skeletons])
             present = np.array([s.marker_present for s in skeletons])
-            index = None
-        positions, usable, kept = kernels.masked_positions(
+            rows = (markers, present, markers, present)  # the links are never labelled here
+        positions, usable, kept, unusable = kernels.masked_positions(
             markers, present, self.params.min_confidence
         )
-        if not usable.all():
-            self.drops["no finite joint"] += int((~usable).sum())
+        index = np.arange(len(skeletons))
+        if unusable:
+            self.drops["no finite joint"] += unusable
             skeletons = [s for s, ok in zip(skeletons, usable.tolist(), strict=True) if ok]
-            positions, kept = positions[usable], kept[usable]
-            index = None if index is None else index[usable]
+            positions, kept, index = positions[usable], kept[usable], index[usable]
+        if not skeletons:
+            return None
         table = self._table
-        if skeletons and table is not None and table.n and positions.shape[1] != table.n_joints:
+        if table is not None and table.n and positions.shape[1] != table.n_joints:
             self.drops["layout differs from the tracks"] += len(skeletons)
-            return empty
-        return skeletons, positions, kept, index
+            return None
+        return _Detections(skeletons, positions, kept, index, rows, stack is not None)
 
     def _one_layout(self, skeletons: list[Skeleton]) -> list[Skeleton]:
         """Skeletons of the first usable one's layout (the others dropped, counted)."""
@@ -558,7 +564,7 @@ class Tracker:
         stamp: int,
         camera: int,
         info: _LayoutInfo,
-    ) -> tuple[list[int], np.ndarray]:
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """Assign detections to tracks in a cascade (DeepSORT-like), each level optimally.
 
         Levels: confirmed tracks seen within ``recent_window``, other confirmed tracks,
@@ -566,21 +572,19 @@ class Tracker:
         left, or whom every camera lost) must not take a detection that a live track explains.
 
         Returns:
-            each detection's track row (-1: none) and ``(T, D, K)`` the mirrored parts
-            of every pair.
+            the solver's pairs, ``(N,)`` track rows and ``(N,)`` detections (those not
+            ``(T, D)`` feasible left to ``kernels.frame_pairs``), the feasible pairs and
+            ``(T, D, K)`` the mirrored parts of every pair.
 
         """
         cost, flips, feasible, levels = self._costs(table, detections, positions, det_ids,
                                                     stamp, camera, info)  # fmt: skip
         n_tracks, n_det = cost.shape
-        matched = [-1] * n_det
         track_levels = levels.tolist()
         if n_tracks and min(track_levels) == max(track_levels):  # one level (usual): one solve
             r, c = linear_sum_assignment(cost)
-            for i, j, ok in zip(r.tolist(), c.tolist(), feasible[r, c].tolist(), strict=True):
-                if ok:
-                    matched[j] = i
-            return matched, flips
+            return r, c, feasible, flips
+        matched = [-1] * n_det
         free = list(range(n_det))
         for level in range(3):
             rows = [t for t, at in enumerate(track_levels) if at == level]
@@ -593,7 +597,9 @@ class Tracker:
                 if allowed[i, j]:
                     matched[free[j]] = rows[i]
             free = [d for d in free if matched[d] < 0]
-        return matched, flips
+        dets = [d for d, row in enumerate(matched) if row >= 0]
+        r = np.array([matched[d] for d in dets], dtype=np.int64)
+        return r, np.array(dets, dtype=np.int64), feasible, flips
 
     def _costs(  # noqa: PLR0917
         self,
@@ -657,138 +663,107 @@ class Tracker:
     def _pairs(  # noqa: PLR0917
         self,
         table: TrackTable,
-        matched: list[int],
+        r: np.ndarray,
+        c: np.ndarray,
+        feasible: np.ndarray,
         flips: np.ndarray,
-        positions: np.ndarray,
-        kept: np.ndarray,
+        found: _Detections,
         stamp: int,
-        info: _LayoutInfo,
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Each detection's track: its match, else a new tentative track if it has the joints.
 
         Returns ``(U,)`` track rows, ``(U,)`` their detections (in detection order, so new
         tracks are made in that order) and ``(U, K)`` the parts to relabel in each.
         """
-        rows, dets, pair_flips = [], [], []
-        no_flip = np.zeros(info.parts.count, dtype=bool)
-        for det, row in enumerate(matched):
-            if row >= 0:
-                pair_flips.append(flips[row, det])
-            elif kept[det] >= self.params.min_joints:
-                row = table.add(self._next_id, positions[det], stamp)  # noqa: PLW2901
+        rows, dets, pair_flips, new, dropped = kernels.frame_pairs(
+            r, c, feasible, flips, found.kept, self.params.min_joints
+        )
+        if dropped:
+            self.drops["too few joints"] += dropped
+        if new:
+            for u in np.flatnonzero(rows < 0).tolist():
+                rows[u] = table.add(self._next_id, found.positions[dets[u]], stamp)
                 self._next_id += 1
-                pair_flips.append(no_flip)
-            else:
-                self.drops["too few joints"] += 1
-                continue
-            rows.append(row)
-            dets.append(det)
-        flip_array = np.array(pair_flips, dtype=bool).reshape(len(rows), info.parts.count)
-        return np.array(rows, dtype=np.int64), np.array(dets, dtype=np.int64), flip_array
+        return rows, dets, pair_flips
 
     # -------------------------------------------------------------------------------- updates
     def _hit(  # noqa: PLR0917 - one frame's matched pairs, all positional for brevity
         self,
         table: TrackTable,
-        rows: np.ndarray,
-        canonical: np.ndarray,
-        detections: list[Skeleton],
+        found: _Detections,
         det_ids: np.ndarray,
+        pairs: tuple[np.ndarray, np.ndarray, np.ndarray],
         info: _LayoutInfo,
         time_ns: int,
         camera: int,
-        flips: np.ndarray,
         camera_position: np.ndarray | None = None,
-    ) -> np.ndarray:
-        """Fold one frame's detections (already in their tracks' labelling) into the tracks.
+    ) -> tuple[np.ndarray, np.ndarray, bool]:
+        """Fold one frame's detections into the tracks (``kernels.hit_frame``), confirm them.
 
         Args:
             table: the tracks.
-            rows: ``(U,)`` the rows of the tracks hit (distinct).
-            canonical: ``(U, J, 3)`` their detections, relabelled to the tracks' sides.
-            detections: the U detections as received (orientations).
-            det_ids: ``(U,)`` the camera's body ids of the detections.
+            found: the frame's detections.
+            det_ids: ``(D,)`` the camera's body ids of the detections.
+            pairs: ``(U,)`` the rows of the tracks hit (distinct), ``(U,)`` their detections
+                and ``(U, K)`` the parts to relabel in each (``_pairs``).
             info: the layout's mirror parts, weights and body frame.
             time_ns: the frame's corrected stamp.
             camera: the frame's camera code.
-            flips: ``(U, K)`` parts relabelled per detection.
             camera_position: ``(3,)`` the camera's position in the world, None if unknown.
 
         Returns:
-            ``(U, K)`` the parts whose sides a track itself swapped (facing check or mirror
-            vote), which the caller swaps in that detection's output too.
+            ``(U, K)`` the parts to relabel in each detection's output (the detection's own
+            flips and its hips, eyes and ears put on its shoulders' side, then the swaps its
+            track made: facing check or mirror vote), ``(U,)`` the track ids and whether the
+            detections are labelled already (every track confirmed; else ``_labelled`` does).
 
         """
         params = self.params
-        parts = info.parts
-        full = kernels.fold_hits(
-            table.positions, table.velocities, table.velocity, table.time_ns,
-            table.last_hit_ns, table.epoch_ns, table.hits, table.n_cameras, table.body_ids,
-            table.seen, table.sums, table.record_ns, table.record_camera, table.record_terms,
-            table.record_start, table.record_count, rows, canonical, det_ids, camera, time_ns,
-            params.position_smoothing, params.max_prediction,
-            round(params.velocity_window * 1e9), info.weights,
+        rows = pairs[0]
+        facing = params.mirror_check and params.facing_check and info.usable
+        voting = params.mirror_check and params.mirror_vote and not facing
+        settings = (
+            float(params.position_smoothing), float(params.max_prediction),
+            round(params.velocity_window * 1e9), params.mirror_check and params.facing_check,
+            params.orientation_weight > 0, facing, found.stacked and not voting,
+        )  # fmt: skip
+        flips, full, turned, n_turned, track_ids, labelled = kernels.hit_frame(
+            table.hit_fields(), (found.positions, det_ids, found.index, *found.rows), pairs,
+            info.hit_layout, camera, time_ns, settings, self._facing_args(camera_position),
         )  # fmt: skip
         if full:
             table.grow_records()
-        if params.orientation_weight > 0:
-            for row, detection, order in zip(
-                rows.tolist(), detections, parts.permutation(flips), strict=True
-            ):
-                if np.isfinite(detection.orientations).any():
-                    table.orientations[row] = detection.orientations[order]
-        swaps = np.zeros(flips.shape, dtype=bool)
-        facing = params.mirror_check and params.facing_check and info.usable
-        if facing:
-            turned = self._facing(table, rows, canonical, info, time_ns, camera_position, camera)
-            swaps[turned] = True
-        voting = params.mirror_check and params.mirror_vote and not facing
-        confirmed = table.confirmed[rows]
-        if not voting and confirmed.all():  # nothing to confirm or count (the usual frame)
-            return swaps
-        confirmed, hits = confirmed.tolist(), table.hits[rows].tolist()
+        if n_turned:
+            self._turned(table, rows[turned])
+        if labelled or (not voting and table.confirmed[rows].all()):
+            return flips, track_ids, labelled
+        confirmed, hits = table.confirmed[rows].tolist(), table.hits[rows].tolist()
         for u, row in enumerate(rows.tolist()):
             if not confirmed[u] and hits[u] >= params.min_hits:
                 self._confirm(table, row, info, time_ns)
             if voting and table.confirmed[row]:
-                swaps[u] ^= self._vote(table, row, parts, camera, time_ns, flips[u] ^ swaps[u])
-        return swaps
+                flips[u] ^= self._vote(table, row, info.parts, camera, time_ns, flips[u].copy())
+        return flips, track_ids, False
 
-    def _facing(  # noqa: PLR0917
-        self,
-        table: TrackTable,
-        rows: np.ndarray,
-        canonical: np.ndarray,
-        info: _LayoutInfo,
-        time_ns: int,
-        camera_position: np.ndarray | None,
-        camera: int,
-    ) -> np.ndarray:
-        """Weigh one frame's evidence on each track's facing (``kernels.turn_facing``).
-
-        Returns:
-            ``(U,)`` which tracks were relabelled (all their parts swapped).
-
-        """
+    def _facing_args(self, camera_position: np.ndarray | None) -> tuple:
+        """What ``kernels.turn_facing`` needs beyond the tracks: up, camera, priors."""
         params = self.params
-        turned = kernels.turn_facing(
-            table.positions, table.orientations, table.velocities, table.velocity, table.sums,
-            table.record_terms, table.record_start, table.record_count, table.facing,
-            table.facing_ns, rows, canonical, self._up,
+        return (
+            self._up,
             _NO_CAMERA if camera_position is None else camera_position,
             camera_position is not None,
-            info.facing_body,
             (params.flip_prior, params.flip_prior_back, params.walking_speed,
              params.walking_evidence, params.facing_memory, params.facing_threshold,
              params.flip_episode, params.flip_misread),
-            time_ns,
-            (camera, table.flip_state, table.flip_ns, table.flip_known),
         )  # fmt: skip
-        for row in rows[turned].tolist():
+
+    @staticmethod
+    def _turned(table: TrackTable, rows: np.ndarray) -> None:
+        """The votes of tracks the facing check relabelled, turned with them."""
+        for row in rows.tolist():
             votes = table.votes[row]
             table.votes[row] = {cam: (t, ~vote) for cam, (t, vote) in votes.items()}
             table.mirrored[row] = {cam for cam, (_, vote) in table.votes[row].items() if vote.any()}
-        return turned
 
     def _vote(  # noqa: PLR0917
         self,
@@ -878,11 +853,11 @@ class Tracker:
 
     def _labelled(  # noqa: PLR0917
         self,
-        frame: MovedFrame,
-        detections: list[Skeleton],
-        index: np.ndarray | None,
-        rows: np.ndarray,
+        found: _Detections,
+        pairs: tuple[np.ndarray, np.ndarray, np.ndarray],
         flips: np.ndarray,
+        track_ids: np.ndarray,
+        labelled: bool,
         parts: _MirrorParts,
     ) -> list[Skeleton]:
         """The output skeletons of the detections of confirmed tracks: track id, sides fixed.
@@ -890,25 +865,31 @@ class Tracker:
         The detections are the tracker's own copies (made by the correction), so they are
         changed in place: the parts in ``flips`` ``(U, K)`` relabelled (links too: link ids are
         child joint ids), present joints without a velocity given their track's (track
-        ``rows[u]``). With the frame's rows stacked (``index`` ``(U,)`` into them), that is one
-        compiled call.
+        ``rows[u]``). ``hit_frame`` did that when ``labelled``; else it takes one compiled call
+        with the frame's rows stacked, one per detection without.
         """
         table = self._table
-        if index is not None:
-            stack = frame.stack
-            kernels.label_frame(stack.markers, stack.marker_present, stack.links,
-                                stack.link_present, index, flips, parts.part, parts.mirror,
+        rows, dets, _ = pairs
+        detections = found.skeletons
+        if len(dets) < len(detections):
+            detections = [detections[det] for det in dets.tolist()]
+        if labelled:  # every track confirmed: the usual frame
+            for detection, track_id in zip(detections, track_ids.tolist(), strict=True):
+                detection.id = track_id
+            return detections
+        if found.stacked:
+            kernels.label_frame(*found.rows, found.index[dets], flips, parts.part, parts.mirror,
                                 table.velocities, rows, table.confirmed)  # fmt: skip
         output = []
-        confirmed, ids = table.confirmed[rows].tolist(), table.ids[rows].tolist()
+        confirmed = table.confirmed[rows].tolist()
         for u, (detection, row) in enumerate(zip(detections, rows.tolist(), strict=True)):
             if not confirmed[u]:
                 continue
-            if index is None:
+            if not found.stacked:
                 kernels.label_rows(detection.markers, detection.marker_present, detection.links,
                                    detection.link_present, flips[u], parts.part, parts.mirror,
                                    table.velocities[row])  # fmt: skip
-            detection.id = ids[u]
+            detection.id = int(track_ids[u])
             output.append(detection)
         return output
 

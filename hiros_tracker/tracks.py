@@ -152,6 +152,16 @@ class TrackTable:
             self._widen(name, 1, 2 * slots)
         self.record_start[:] = 0
 
+    def hit_fields(self) -> tuple[np.ndarray, ...]:
+        """The fields ``kernels.hit_frame`` reads and changes, in its order."""
+        return (
+            self.positions, self.orientations, self.velocities, self.velocity, self.time_ns,
+            self.last_hit_ns, self.epoch_ns, self.hits, self.n_cameras, self.body_ids,
+            self.seen, self.sums, self.record_ns, self.record_camera, self.record_terms,
+            self.record_start, self.record_count, self.facing, self.facing_ns,
+            self.flip_state, self.flip_ns, self.flip_known, self.confirmed, self.ids,
+        )  # fmt: skip
+
     def relabel(self, row: int, permutation: np.ndarray) -> None:
         """Reorder a track's joints (swap the sides of some parts); votes are the caller's."""
         kernels.relabel(
