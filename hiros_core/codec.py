@@ -40,7 +40,7 @@ from hiros_core.model import (
     Skeleton,
     SkeletonGroup,
     SkeletonRows,
-    _shared_stack,
+    shared_stack,
 )
 
 __all__ = [
@@ -472,7 +472,7 @@ def encode_group_into(group: SkeletonGroup, space: Callable[[int], tuple[np.ndar
     """
     skeletons = group.skeletons
     compiled = "numba" in sys.modules
-    stack = _shared_stack(skeletons) if compiled and skeletons else None
+    stack = shared_stack(skeletons) if compiled and skeletons else None
     if stack is not None:
         plan = _stack_plan(group, stack)
         if plan is not None:

@@ -21,7 +21,7 @@ import numpy as np
 from hiros_core.cdr import LEAD
 from hiros_core.codec import MarkerArrayData, encode_marker_array, marker_array_plan
 from hiros_core.layouts import Layout
-from hiros_core.model import SkeletonGroup, _shared_stack
+from hiros_core.model import SkeletonGroup, shared_stack
 
 __all__ = ["VisualizerParams", "encode_skeleton_markers", "id_color", "skeleton_markers"]
 
@@ -167,7 +167,7 @@ def encode_skeleton_markers(
         or any(s.layout is not layout for s in skeletons)
     ):
         return encode_marker_array(skeleton_markers(group, namespace, params))
-    stack = _shared_stack(skeletons)
+    stack = shared_stack(skeletons)
     if stack is not None and stack.markers.dtype == np.float64:
         rows, column, present = stack.markers, 1, stack.marker_present  # no copy
     else:
