@@ -27,10 +27,18 @@ Poses are camera -> world with ``p_world = R p_camera + t`` (DESIGN.md).
 What limits the accuracy is the data, not a bias of these steps: a body-tracking SDK's joint
 errors are mostly one shift of the whole body per frame, correlated over about 0.2 s, plus
 fixed per-person joint offsets (hiros_sim.noise models both after a real Azure Kinect take).
-On the simulator the same fits given the true left/right labels and exact timing do no better
-than this pipeline (about 0.4 deg and 2.5 cm for a minute of one to three people), removing
-the true fixed offsets only reaches about 0.3 deg and 1.4 cm, and view-dependent weights,
-leaving out hidden joints or torso-only fits do not help. More motion (time, people) does.
+On the simulator this pipeline reaches about 0.35 deg and 2.1 cm (median) for a minute of one
+to three people, and the same fits given the true left/right labels and exact timing did no
+better. Without
+the fixed offsets the rotation error stays the same (0.35 deg) and only the translation
+improves (1.5 cm): a body's mean offset in the camera frame cannot be told from the camera's
+position. Without offsets and SDK mistakes it is 0.30 deg, and there a free whole-body shift
+per frame (rotation from the bodies' shapes only) reaches 0.26 deg; with either the offsets
+or the mistakes, shapes mislead and such shifts, or generalised least squares with the shift
+variance estimated from the residuals, do worse than ignoring them. Offsets that turn with
+the limb's direction (what a body model posed on biased evidence does), view-dependent
+weights, leaving out hidden joints, torso-only fits and using every frame do not help either.
+More motion (time, people) does.
 """
 
 from __future__ import annotations
@@ -100,8 +108,10 @@ class ExtrinsicsParams:
     cameras' SDKs alternately with the poses (0: assume the SDKs agree on average)."""
     offset_shrinkage: float = 30.0
     """Samples' worth of pull towards 0 on each joint offset, so short tracks stay sane."""
-    max_correspondences: int = 6000
-    """Joint correspondences per camera pair kept for the refinements (evenly subsampled)."""
+    max_correspondences: int = 40000
+    """Joint correspondences per camera pair kept for the refinements (evenly subsampled);
+    the default keeps every joint of the ``max_frames`` frames: on the simulator, 6000 (a
+    fifth of them) gave about 6 % more rotation error."""
     frame_weights: bool = True
     """Weight each frame by the inverse of its residual variance (the SDKs' error changes
     with the view; on the simulator about 4 % less rotation error than equal weights)."""

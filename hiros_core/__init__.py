@@ -23,6 +23,7 @@ from hiros_core.model import (
     camera_from_frame,
     ns_to_sec,
     sec_to_ns,
+    shared_stack,
     stack_rows,
 )
 
@@ -49,5 +50,6 @@ __all__ = [
     "ns_to_sec",
     "save_calibration",
     "sec_to_ns",
+    "shared_stack",
     "stack_rows",
 ]

@@ -34,7 +34,14 @@ from hiros_core.cdr import (
 )
 from hiros_core.errors import CodecError, LayoutError
 from hiros_core.layouts import AZURE_KINECT, KINECT_V2, Layout
-from hiros_core.model import BOX_WIDTH, STATE_WIDTH, Skeleton, SkeletonGroup
+from hiros_core.model import (
+    BOX_WIDTH,
+    STATE_WIDTH,
+    Skeleton,
+    SkeletonGroup,
+    SkeletonRows,
+    shared_stack,
+)
 
 __all__ = [
     "MarkerArrayData",
@@ -61,6 +68,7 @@ _MAXES_STRUCT = struct.Struct("<II")
 _CONFIDENCE_STRUCT = struct.Struct("<d")
 _ITA = np.dtype([("id", "<i4"), ("type", "<i4"), ("action", "<i4")])
 _ROW_BYTES = STATE_WIDTH * 8
+_BOX, _MARKERS, _LINKS = 0, 1, 2  # sources of a plan's float runs (``fill.fill_runs``)
 _BOX_FLOATS = 1 + BOX_WIDTH  # skeleton confidence + bounding box
 _MIN_SKELETON_BYTES = 4 + 8 + 5 + 8 + 8 * _BOX_FLOATS + 8  # id, time, "", maxes, box, 2 counts
 
@@ -126,6 +134,7 @@ def clear_plan_caches() -> None:
     for cache in (_SKELETON_PLANS, _GROUP_HEADER, _MARKER_PLANS):
         cache.by_key.clear()
     _GROUP_PLANS.clear()
+    _STACK_PLANS.clear()
     _GROUP_READINGS.clear()
     _SKELETON_PLANS.by_phase.clear()
     _GROUP_HEADER.by_size.clear()
@@ -221,13 +230,13 @@ class _GroupPlan:
     packer: struct.Struct  # the group's integer fields and confidences, in ``field_runs`` order
     field_index: np.ndarray  # template byte of each packed byte (the numpy encoder's scatter)
     field_runs: np.ndarray  # (F, 3) message offset, packed offset, bytes (the compiled copy)
-    runs: np.ndarray  # (R, 3) message offset, float offset in the values, floats (present rows)
+    runs: np.ndarray  # (R, 4) message offset, source, float offset in the values, floats
+    stack_runs: np.ndarray | None  # ``runs`` with offsets in SkeletonRows fields (same sizes)
     layouts: tuple[Layout, ...] = ()  # kept alive: encode_group's cache keys hold their ids
+    message: np.ndarray = field(init=False)  # the template's message bytes (no lead, scratch)
 
-    @property
-    def message(self) -> np.ndarray:
-        """The template's message bytes alone (no lead, no scratch row)."""
-        return self.template[_LEAD : _LEAD + self.size]
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "message", self.template[_LEAD : _LEAD + self.size])
 
 
 @dataclass(frozen=True)
@@ -246,6 +255,22 @@ class _GroupReading:
     mask: np.ndarray
     scratch: int  # float64 position of the scratch row (filled with NaN when decoding)
     skeletons: tuple[tuple[Layout, str, np.ndarray, np.ndarray, int], ...]
+    stack: _StackReading | None = None  # when every skeleton has one layout
+
+
+class _StackReading(NamedTuple):
+    """How a group of one layout is decoded as one ``SkeletonRows``.
+
+    ``floats``: the plan's float indices reordered field by field (every box, then every
+    skeleton's marker rows, then every link rows), so one gather gives the three fields as
+    contiguous blocks; the presence masks and source frames of the skeletons.
+    """
+
+    layout: Layout
+    floats: np.ndarray
+    marker_present: np.ndarray  # (P, J)
+    link_present: np.ndarray  # (P, L)
+    frames: list[str]
 
 
 _GROUP_READINGS: dict[int, list[_GroupReading]] = {}  # by message size, most recent first
@@ -298,6 +323,25 @@ def _group_reading(group: SkeletonGroup, size: int) -> _GroupReading | None:
         mask.view("<u8"),
         (offset + (-offset) % 8) // 8,  # as _build_group_plan places it
         tuple(skeletons),
+        _stack_reading(group, plan),
+    )
+
+
+def _stack_reading(group: SkeletonGroup, plan: _GroupPlan) -> _StackReading | None:
+    """The stack decoding of messages shaped like ``group`` (None: mixed layouts, or none)."""
+    skeletons = group.skeletons
+    if not skeletons or any(s.layout is not skeletons[0].layout for s in skeletons):
+        return None
+    layout = skeletons[0].layout
+    marker_floats = layout.n_joints * STATE_WIDTH
+    per_person = plan.floats.reshape(len(skeletons), -1)
+    fields = np.split(per_person, [BOX_WIDTH, BOX_WIDTH + marker_floats], axis=1)
+    return _StackReading(
+        layout,
+        np.concatenate([field.ravel() for field in fields]),
+        np.array([s.marker_present for s in skeletons]),
+        np.array([s.link_present for s in skeletons]),
+        [s.src_frame for s in skeletons],
     )
 
 
@@ -327,7 +371,7 @@ def _build_group_plan(group: SkeletonGroup, keys: list[tuple]) -> _GroupPlan:
     templates.append(np.zeros(scratch - offset + _ROW_BYTES, dtype=np.uint8))
     dump = np.arange(STATE_WIDTH) + scratch // 8
     values_at = 0  # where the skeleton's box, marker and link rows start in the values
-    for start, phase, plan, skeleton in blocks:
+    for person, (start, phase, plan, skeleton) in enumerate(blocks):
         shape: _SkeletonShape = plan.meta  # type: ignore[assignment]
         at = start + HEADER_SIZE + _LEAD
         box_at = int(plan.slots["box"][0]) + at
@@ -341,9 +385,13 @@ def _build_group_plan(group: SkeletonGroup, keys: list[tuple]) -> _GroupPlan:
         links = np.tile(dump, (skeleton.layout.n_links, 1))
         links[shape.link_ids] = (link_index + shift).reshape(-1, STATE_WIDTH)
         indices += [box_index[1:] + shift, markers.ravel(), links.ravel()]
-        runs += _value_runs(box_index[1] + shift, markers[:, 0], links[:, 0], dump[0], values_at)
+        runs += _value_runs(
+            box_index[1] + shift, markers[:, 0], links[:, 0], dump[0], values_at, person
+        )
         values_at += BOX_WIDTH + (skeleton.layout.n_joints + skeleton.layout.n_links) * STATE_WIDTH
     floats = np.concatenate(indices) if indices else np.empty(0, dtype=np.intp)
+    all_runs = np.array(runs, dtype=np.int64).reshape(-1, 5)
+    stackable = len({(s.layout.n_joints, s.layout.n_links) for s in group.skeletons}) <= 1
     return _GroupPlan(
         np.concatenate(templates),
         size,
@@ -353,7 +401,8 @@ def _build_group_plan(group: SkeletonGroup, keys: list[tuple]) -> _GroupPlan:
         struct.Struct("<" + "".join(kind.format[1:] for _, kind in packed)),
         np.concatenate([np.arange(at, at + kind.size) for at, kind in packed]),
         _field_runs(packed),
-        np.array(runs, dtype=np.int64).reshape(-1, 3),
+        np.ascontiguousarray(all_runs[:, :4]),
+        np.ascontiguousarray(all_runs[:, [0, 1, 4, 3]]) if stackable else None,
         tuple(skeleton.layout for skeleton in group.skeletons),
     )
 
@@ -367,20 +416,29 @@ def _field_runs(packed: list[tuple[int, struct.Struct]]) -> np.ndarray:
     return np.array(runs, dtype=np.int64).reshape(-1, 3)
 
 
-def _value_runs(
-    box: int, markers: np.ndarray, links: np.ndarray, dump: int, values_at: int
-) -> list[tuple[int, int, int]]:
-    """One skeleton's float runs ``(message offset, values offset, floats)``, present rows only.
+def _value_runs(  # noqa: PLR0917 - one skeleton's positions, all needed
+    box: int, markers: np.ndarray, links: np.ndarray, dump: int, values_at: int, person: int
+) -> list[tuple[int, int, int, int, int]]:
+    """One skeleton's float runs (present rows only), as tuples of five.
 
-    ``box``/``markers``/``links`` are payload float positions of the box and of each row's
-    first float (``dump`` for rows the skeleton does not carry).
+    Each run: message offset, source, values offset, floats, stack offset. ``box``,
+    ``markers`` and ``links`` are payload float positions of the box and of each row's first
+    float (``dump`` for rows the skeleton does not carry). ``source`` says which of the
+    box, marker or link rows a run copies (``_BOX``, ``_MARKERS``, ``_LINKS``); the values
+    offset is where the run starts in the concatenated values of ``encode_group_into``, the
+    stack offset where it starts in that source's ``SkeletonRows`` field (``person`` being the
+    skeleton's row there).
     """
-    runs = [(HEADER_SIZE + 8 * int(box), values_at, BOX_WIDTH)]
+    runs = [(HEADER_SIZE + 8 * int(box), _BOX, values_at, BOX_WIDTH, person * BOX_WIDTH)]
     at = values_at + BOX_WIDTH
-    for rows in (markers, links):
+    for source, rows in ((_MARKERS, markers), (_LINKS, links)):
+        stack_at = person * rows.size * STATE_WIDTH
         for row, first in enumerate(rows.tolist()):
             if first != dump:
-                runs.append((HEADER_SIZE + 8 * first, at + row * STATE_WIDTH, STATE_WIDTH))
+                offset = row * STATE_WIDTH
+                runs.append(
+                    (HEADER_SIZE + 8 * first, source, at + offset, STATE_WIDTH, stack_at + offset)
+                )
         at += rows.size * STATE_WIDTH
     return runs
 
@@ -408,32 +466,91 @@ def encode_group_into(group: SkeletonGroup, space: Callable[[int], tuple[np.ndar
 
     For writers that keep messages in a buffer of their own (``RecordingWriter`` writes
     straight into its MCAP chunk): no ``bytes`` object is made. Nothing is written when the
-    group cannot be encoded (``CodecError`` before ``space`` is called).
+    group cannot be encoded (``CodecError`` before ``space`` is called). With numba loaded,
+    a group whose skeletons are the rows of one ``SkeletonRows`` stack (what the stages
+    make) is copied from that stack, keyed by it, with no per-skeleton array work.
     """
-    plan = _plan_of(group)
     skeletons = group.skeletons
+    compiled = "numba" in sys.modules
+    stack = shared_stack(skeletons) if compiled and skeletons else None
+    if stack is not None:
+        plan = _stack_plan(group, stack)
+        if plan is not None:
+            packed = _pack(plan, group)
+            out, at = space(plan.size)
+            _fill_compiled(out, at, plan, packed, stack)
+            return plan.size
+    plan = _plan_of(group)
+    packed = _pack(plan, group)
+    values = np.concatenate(
+        [a for s in skeletons for a in (s.bounding_box, s.markers, s.links)], axis=None
+    ) if skeletons else _NO_VALUES  # fmt: skip
+    out, at = space(plan.size)
+    if compiled and values.dtype == np.float64:
+        _fill_compiled(out, at, plan, packed, values)
+    else:
+        _fill_numpy(plan, packed, values, out, at)
+    return plan.size
+
+
+def _pack(plan: _GroupPlan, group: SkeletonGroup) -> bytes:
+    """The group's integer fields and confidences, packed in the plan's order."""
     ints: list = [*divmod(group.stamp_ns, _NS)]
-    for s in skeletons:
+    for s in group.skeletons:
         ints += (s.id, *divmod(s.src_time_ns, _NS), s.max_markers, s.max_links, s.confidence)
     try:
-        packed = plan.packer.pack(*ints)
+        return plan.packer.pack(*ints)
     except struct.error:
         msg = (
             "SkeletonGroup: a value is out of range of its message field: ids and seconds must "
             "fit int32, max_markers/max_links uint32"
         )
         raise CodecError(msg) from None
-    values = np.concatenate(
-        [a for s in skeletons for a in (s.bounding_box, s.markers, s.links)], axis=None
-    ) if skeletons else _NO_VALUES  # fmt: skip
-    out, at = space(plan.size)
-    if "numba" in sys.modules and values.dtype == np.float64:
-        from hiros_core.fill import fill_runs
 
-        fill_runs(out, at, plan.message, packed, plan.field_runs, values, plan.runs)
+
+def _fill_compiled(
+    out: np.ndarray, at: int, plan: _GroupPlan, packed: bytes, values: np.ndarray | SkeletonRows
+) -> None:
+    """``fill.fill_runs`` from concatenated values or from a group's ``SkeletonRows``."""
+    from hiros_core.fill import fill_runs
+
+    if isinstance(values, SkeletonRows):
+        sources = (values.bounding_boxes, values.markers, values.links)
+        boxes, markers, links = (np.ascontiguousarray(a).reshape(-1) for a in sources)
+        fill_runs(out, at, plan.message, packed, plan.field_runs, boxes, markers, links,
+                  plan.stack_runs)  # fmt: skip
     else:
-        _fill_numpy(plan, packed, values, out, at)
-    return plan.size
+        fill_runs(out, at, plan.message, packed, plan.field_runs, values, values, values,
+                  plan.runs)  # fmt: skip
+
+
+_STACK_PLANS: dict[tuple, tuple[Layout, _GroupPlan | None]] = {}  # (layout kept alive, plan)
+
+
+def _stack_plan(group: SkeletonGroup, stack: SkeletonRows) -> _GroupPlan | None:
+    """The plan of a group whose skeletons are ``stack``'s rows, keyed by the stack's masks.
+
+    None when the stack's rows are not float64 (the general path converts them).
+    """
+    layout = group.skeletons[0].layout
+    key = (
+        group.frame_id,
+        id(layout),
+        tuple([s.src_frame for s in group.skeletons]),
+        stack.marker_present.tobytes(),
+        stack.link_present.tobytes(),
+    )
+    found = _STACK_PLANS.get(key)
+    if found is not None and found[0] is layout:
+        return found[1]
+    if len(_STACK_PLANS) >= _GROUP_PLAN_CAPACITY:
+        _STACK_PLANS.clear()
+    usable = all(s.layout is layout for s in group.skeletons) and all(
+        a.dtype == np.float64 for a in (stack.markers, stack.links, stack.bounding_boxes)
+    )
+    plan = _plan_of(group) if usable else None
+    _STACK_PLANS[key] = (layout, plan)
+    return plan
 
 
 _NO_VALUES = np.empty(0)
@@ -518,6 +635,8 @@ def _group_from_reading(reading: _GroupReading, buffer: np.ndarray) -> SkeletonG
     plan = reading.plan
     floats = buffer[_LEAD + HEADER_SIZE :].view("<f8")
     floats[reading.scratch : reading.scratch + STATE_WIDTH] = np.nan
+    if reading.stack is not None:
+        return _stacked_group(reading, buffer, floats)
     values = floats[plan.floats]
     sec, nanosec = _STAMP_STRUCT.unpack_from(buffer, plan.stamp_at)
     skeletons = []
@@ -541,6 +660,36 @@ def _group_from_reading(reading: _GroupReading, buffer: np.ndarray) -> SkeletonG
             )
         )  # fmt: skip
     return SkeletonGroup(sec * _NS + nanosec, reading.frame_id, skeletons)
+
+
+def _stacked_group(reading: _GroupReading, buffer: np.ndarray, floats: np.ndarray) -> SkeletonGroup:
+    """A group of one layout, its skeletons the rows of one ``SkeletonRows`` (one gather)."""
+    plan, stack = reading.plan, reading.stack
+    assert stack is not None
+    values = plan.packer.unpack(buffer[plan.field_index].tobytes())
+    n_people = len(stack.frames)
+    rows = floats[stack.floats]
+    boxes_end = n_people * BOX_WIDTH
+    markers_end = boxes_end + stack.marker_present.size * STATE_WIDTH
+    skeletons = SkeletonRows(
+        rows[boxes_end:markers_end].reshape(n_people, -1, STATE_WIDTH),
+        stack.marker_present.copy(),
+        rows[markers_end:].reshape(n_people, -1, STATE_WIDTH),
+        stack.link_present.copy(),
+        rows[:boxes_end].reshape(n_people, BOX_WIDTH),
+    ).skeletons(
+        values[2::6],
+        [sec * _NS + nanosec for sec, nanosec in zip(values[3::6], values[4::6], strict=True)],
+        stack.frames[0],
+        stack.layout,
+        values[7::6],
+    )
+    for skeleton, frame, max_markers, max_links in zip(
+        skeletons, stack.frames, values[5::6], values[6::6], strict=True
+    ):
+        skeleton.src_frame = frame
+        skeleton.max_markers, skeleton.max_links = max_markers, max_links
+    return SkeletonGroup(values[0] * _NS + values[1], reading.frame_id, skeletons)
 
 
 def _decode_group_by_skeleton(data: bytes | bytearray | memoryview) -> SkeletonGroup:

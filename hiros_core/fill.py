@@ -2,11 +2,13 @@
 
 An encoder with a plan (``hiros_core.codec``) knows, per message shape, a byte template and
 where each value goes. For a SkeletonGroup those values are a few packed integer fields and
-runs of float64 rows (a box, a marker or link row: 22 or 20 floats each). Copying them run by
-run in numpy would be hundreds of calls; one scatter needs an 8-byte aligned target, which a
-message inside an MCAP chunk is not. This kernel copies the template and every run in one
-call, into any uint8 buffer at any offset. Like ``hiros_core.compiled``, it imports numba, so
-callers import it only when numba is loaded already (the pipeline's stages load it).
+runs of float64 rows (a box, a marker or link row: 22 or 20 floats each), read from the
+group's ``SkeletonRows`` stack when its skeletons are one, else from their concatenation.
+Copying them run by run in numpy would be hundreds of calls; one scatter needs an 8-byte
+aligned target, which a message inside an MCAP chunk is not. This kernel copies the template
+and every run in one call, into any uint8 buffer at any offset. Like ``hiros_core.compiled``,
+it imports numba, so callers import it only when numba is loaded already (the pipeline's
+stages load it).
 """
 
 from __future__ import annotations
@@ -24,21 +26,26 @@ def fill_runs(  # noqa: PLR0917 - numba kernels take positional arguments
     template: np.ndarray,
     packed: bytes,
     field_runs: np.ndarray,
-    values: np.ndarray,
+    boxes: np.ndarray,
+    markers: np.ndarray,
+    links: np.ndarray,
     runs: np.ndarray,
 ) -> None:
     """Write the message at ``out[at:]``: the template, then the fields, then the floats.
 
     ``field_runs`` rows: (message offset, offset in ``packed``, bytes); ``runs`` rows:
-    (message offset, offset in ``values``, floats). Bits are copied as they are (NaN
-    payloads included), exactly as a numpy scatter of the same values would.
+    (message offset, source, offset in the source, floats), the source being ``boxes``,
+    ``markers`` or ``links`` (0, 1, 2): flat float64 arrays, the three fields of a
+    ``SkeletonRows`` or one concatenation of every value passed three times. Bits are copied
+    as they are (NaN payloads included), exactly as a numpy scatter of the same values would.
     """
-    raw = values.view(np.uint8)
+    sources = (boxes.view(np.uint8), markers.view(np.uint8), links.view(np.uint8))
     _copy(out, at, template, 0, template.size)
     for k in range(field_runs.shape[0]):
         _copy(out, at + field_runs[k, 0], packed, field_runs[k, 1], field_runs[k, 2])
     for k in range(runs.shape[0]):
-        _copy(out, at + runs[k, 0], raw, 8 * runs[k, 1], 8 * runs[k, 2])
+        source = sources[runs[k, 1]]
+        _copy(out, at + runs[k, 0], source, 8 * runs[k, 2], 8 * runs[k, 3])
 
 
 @njit(cache=True, inline="always")

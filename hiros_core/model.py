@@ -35,6 +35,7 @@ __all__ = [
     "link_rows",
     "ns_to_sec",
     "sec_to_ns",
+    "shared_stack",
     "stack_rows",
 ]
 
@@ -441,7 +442,7 @@ def stack_rows(skeletons: Sequence[Skeleton]) -> SkeletonRows:
     skeletons usually come so. Otherwise each field is stacked into new arrays. So treat the
     result as read-only: writing to it may write to the skeletons.
     """
-    stacked = _shared_stack(skeletons)
+    stacked = shared_stack(skeletons)
     if stacked is not None:
         return stacked
     return SkeletonRows(
@@ -453,7 +454,7 @@ def stack_rows(skeletons: Sequence[Skeleton]) -> SkeletonRows:
     )
 
 
-def _shared_stack(skeletons: Sequence[Skeleton]) -> SkeletonRows | None:
+def shared_stack(skeletons: Sequence[Skeleton]) -> SkeletonRows | None:
     """The stack (or a slice of it) the skeletons are consecutive rows of, or None."""
     if not skeletons or skeletons[0]._rows is None:
         return None

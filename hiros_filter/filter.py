@@ -35,11 +35,11 @@ import numpy as np
 
 from hiros_core.errors import ConfigError
 from hiros_core.layouts import Layout
-from hiros_core.model import Skeleton, SkeletonGroup, link_rows
+from hiros_core.model import Skeleton, SkeletonGroup, SkeletonRows, link_rows
 from hiros_filter.estimators import ButterworthBank, KalmanBank, rotation_vectors, slerp
 from hiros_filter.lengths import LengthKeeper, held_links
 from hiros_optimizer.kinematics import KinematicTree
-from hiros_optimizer.stacking import LayoutRows, stack_frame, with_rows
+from hiros_optimizer.stacking import LayoutRows, output_skeletons, stack_frame
 
 __all__ = ["Filter", "FilterParams"]
 
@@ -329,10 +329,12 @@ class Filter:
 
         Every track of the frame in one batch: their rows of the frame's stack (already
         copies) are filtered in place, and the output skeletons are views of them (links
-        rebuilt for all of them at once). In Kalman mode, compiled, that is one kernel call.
+        rebuilt for all of them at once, boxes copied). In Kalman mode, compiled, that is one
+        kernel call.
         """
         skeletons = [step.skeleton for step in steps]
-        markers, present = stack.take([step.row for step in steps])
+        indices = [step.row for step in steps]
+        markers, present = stack.take(indices)
         rows = np.array([tracks.slots[s.id] for s in skeletons], dtype=np.int64)
         stamps = np.array([s.src_time_ns for s in skeletons], dtype=np.int64)
         if self.params.compiled and self.params.filter == "kalman":
@@ -340,11 +342,10 @@ class Filter:
         else:
             self._step_rows(tracks, rows, stamps, markers, present)
             links, link_present = link_rows(markers, present, tracks.layout)
-        return [
-            with_rows(s, s.id, markers=markers[n], links=links[n], present=present[n],
-                      link_present=link_present[n])
-            for n, s in enumerate(skeletons)
-        ]  # fmt: skip
+        return output_skeletons(
+            skeletons, [s.id for s in skeletons],
+            SkeletonRows(markers, present, links, link_present, stack.input_boxes(indices)),
+        )  # fmt: skip
 
     def _step_compiled(
         self,

@@ -16,6 +16,8 @@ import math
 import numpy as np
 from numba import njit
 
+from hiros_core.compiled import _link_rows
+
 __all__ = ["follow_directions", "fuse", "merge"]
 
 
@@ -847,7 +849,11 @@ def merge(  # noqa: PLR0917 - the stored detections, the cameras, the parameters
     directions: bool,
     direction_iterations: int,
     direction_eps: float,
+    link_parents: np.ndarray,
+    link_children: np.ndarray,
 ) -> tuple[
+    np.ndarray,
+    np.ndarray,
     np.ndarray,
     np.ndarray,
     np.ndarray,
@@ -867,7 +873,9 @@ def merge(  # noqa: PLR0917 - the stored detections, the cameras, the parameters
     Returns:
         ``track_ids`` ``(M,)`` sorted, ``table`` ``(M, C)`` each track's slots (-1 padding),
         ``final`` ``(M, C, J)`` weights, output ``rows`` ``(M, J, 20)``, ``present``
-        ``(M, J)`` and skeleton confidences ``(M,)`` (``_output_rows``), per camera index the
+        ``(M, J)``, their link rows and presence (``model.link_rows``' over the layout's
+        ``link_parents``/``link_children``) and skeleton confidences ``(M,)``
+        (``_output_rows``), per camera index the
         sum and count of its detections' mean joint distances to the fused skeletons, and
         whether any selected joint has an orientation (to average, outside).
 
@@ -882,6 +890,10 @@ def merge(  # noqa: PLR0917 - the stored detections, the cameras, the parameters
         directions, direction_iterations, direction_eps,
     )  # fmt: skip
     out_rows, out_present, skeleton = _output_rows(fused, confidence, velocity)
+    links, link_present = _link_rows(out_rows, out_present, link_parents, link_children)
     totals, counts = _camera_errors(disagreement, table, cameras, len(camera_factors))
     oriented = _any_orientation(rows, present, selected, len(groups))
-    return track_ids, table, final, out_rows, out_present, skeleton, totals, counts, oriented
+    return (
+        track_ids, table, final, out_rows, out_present, links, link_present, skeleton, totals,
+        counts, oriented,
+    )  # fmt: skip

@@ -40,26 +40,54 @@ class LatestDetections:
         self._stamps: list[int] = [0] * capacity  # ``stamps`` as Python ints, for selecting
         self._layouts: list[Layout | None] = [None] * capacity
         self._free = list(range(capacity - 1, -1, -1))
+        self._layout: Layout | None = None  # the last layout claimed
+        self._mixed = False  # whether layouts of different joint counts were ever claimed
 
     def put(self, track: int, camera: int, skeleton: Skeleton) -> bool:
         """Keep ``skeleton`` as the track's newest from ``camera``; False if it is older."""
+        slot = self.claim(track, camera, skeleton.src_time_ns, skeleton.layout)
+        if slot is None:
+            return False
+        self.write([slot], skeleton.markers[None], skeleton.marker_present[None])
+        return True
+
+    def claim(self, track: int, camera: int, stamp_ns: int, layout: Layout) -> int | None:
+        """The slot of the track's newest detection from ``camera``, now stamped ``stamp_ns``.
+
+        None (and nothing changed) when the slot holds a newer detection. The caller copies
+        the detection's rows in with :meth:`write`: a frame's detections are claimed one by
+        one, then copied in one go.
+        """
         per_camera = self.slots.setdefault(track, {})
         slot = per_camera.get(camera)
         if slot is None:
             slot = per_camera[camera] = self._allocate()
             self.tracks[slot] = track
             self.cameras[slot] = camera
-        elif self._stamps[slot] > skeleton.src_time_ns:
-            return False
-        markers = skeleton.markers
-        if len(markers) == self.rows.shape[1]:  # (one layout: the usual case)
-            self.rows[slot] = markers
-            self.present[slot] = skeleton.marker_present
-        else:
-            self._put_rows(slot, skeleton)
-        self.stamps[slot] = self._stamps[slot] = skeleton.src_time_ns
-        self._layouts[slot] = skeleton.layout
-        return True
+        elif self._stamps[slot] > stamp_ns:
+            return None
+        self.stamps[slot] = self._stamps[slot] = stamp_ns
+        self._layouts[slot] = layout
+        if layout is not self._layout:
+            if self._layout is not None and layout.n_joints != self._layout.n_joints:
+                self._mixed = True
+            self._layout = layout
+        return slot
+
+    def write(self, slots: list[int], markers: np.ndarray, present: np.ndarray) -> None:
+        """Copy ``markers`` ``(n, J, 20)`` and ``present`` ``(n, J)`` into ``slots`` (distinct).
+
+        Rows of a smaller layout fill a slot's first rows; a larger one widens every slot.
+        """
+        n_joints = markers.shape[1]
+        if n_joints == self.rows.shape[1]:  # (one layout: the usual case)
+            self.rows[slots] = markers
+            self.present[slots] = present
+            return
+        if n_joints > self.rows.shape[1]:
+            self._widen(n_joints)
+        self.rows[slots, :n_joints] = markers
+        self.present[slots, :n_joints] = present
 
     def select(
         self, out_ns: int, window_ns: int, timeout_ns: int
@@ -87,6 +115,8 @@ class LatestDetections:
             return selected, None
         layouts = self._layouts
         first = layouts[selected[0]]
+        if not self._mixed:
+            return selected, first
         return [s for s in selected if _same_size(layouts[s], first)], first
 
     def _allocate(self) -> int:
@@ -105,14 +135,6 @@ class LatestDetections:
         self._stamps += [0] * old
         self._layouts += [None] * old
         self._free = list(range(2 * old - 1, old - 1, -1))
-
-    def _put_rows(self, slot: int, skeleton: Skeleton) -> None:
-        """Copy rows of a layout with another joint count than ``rows``' width."""
-        n_joints = len(skeleton.markers)
-        if n_joints > self.rows.shape[1]:
-            self._widen(n_joints)
-        self.rows[slot, :n_joints] = skeleton.markers
-        self.present[slot, :n_joints] = skeleton.marker_present
 
     def _widen(self, n_joints: int) -> None:
         """Room for ``n_joints`` rows per slot (a layout with more joints than seen so far)."""

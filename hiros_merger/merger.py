@@ -46,7 +46,15 @@ import numpy as np
 
 from hiros_core.calibration import Calibration, CameraCalibration
 from hiros_core.layouts import AZURE_KINECT, Layout
-from hiros_core.model import Skeleton, SkeletonGroup, camera_from_frame
+from hiros_core.model import (
+    BOX_WIDTH,
+    Skeleton,
+    SkeletonGroup,
+    SkeletonRows,
+    camera_from_frame,
+    link_rows,
+    stack_rows,
+)
 from hiros_merger import kernels
 from hiros_merger.latest import LatestDetections
 
@@ -148,6 +156,8 @@ class _BodyAxes:
     parents: np.ndarray  # (J,) the layout's parents (-1 at the root)
     order: np.ndarray  # (J,) joints with every parent before its children
     limb_parents: np.ndarray  # (J,) parents, -1 for the torso's joints
+    link_parents: np.ndarray  # the layout's links' parent joints
+    link_children: np.ndarray  # and child joints (= link ids)
 
     @classmethod
     def of(cls, layout: Layout) -> _BodyAxes:
@@ -184,6 +194,8 @@ class _BodyAxes:
             parents,
             order,
             np.where(np.isin(np.arange(layout.n_joints), torso), -1, parents),
+            np.asarray(layout.link_parents, dtype=np.intp),
+            np.asarray(layout.link_children, dtype=np.intp),
         )
 
 
@@ -305,21 +317,55 @@ class Merger:
         """Take one tracker output; return the fused people (empty when no output is due)."""
         if group.frame_id:
             self._world_frame = group.frame_id
-        newest = None
-        for skeleton in group.skeletons:
-            if skeleton.id < 0:
-                self.drops["no track id"] += 1
-            elif not np.count_nonzero(skeleton.marker_present):
-                self.drops["no joint"] += 1
-            elif not self._latest.put(skeleton.id, self._camera_of(skeleton.src_frame), skeleton):
-                self.drops["older than the camera's last detection"] += 1
-            elif newest is None or skeleton.src_time_ns > newest:
-                newest = skeleton.src_time_ns
+        newest = self._store(group.skeletons) if group.skeletons else None
         out_ns = self._output_time(newest, group.stamp_ns)
         if out_ns is None:
             return SkeletonGroup(group.stamp_ns, self._world_frame, [])
         self._last_out_ns = out_ns
         return SkeletonGroup(out_ns, self._world_frame, self.merge(out_ns))
+
+    def _store(self, skeletons: list[Skeleton]) -> int | None:
+        """Keep each usable detection as its track's newest from its camera (else counted).
+
+        Returns the newest stamp kept (None: none). The detections' rows are copied into the
+        store in one go from the frame's stack (the tracker's output is one already, so
+        ``stack_rows`` copies nothing); a frame mixing joint counts is stored one by one.
+        """
+        size = len(skeletons[0].markers)
+        if any(len(skeleton.markers) != size for skeleton in skeletons):
+            stack = None
+            has_joints = [bool(skeleton.marker_present.any()) for skeleton in skeletons]
+        else:
+            stack = stack_rows(skeletons)
+            has_joints = stack.marker_present.any(axis=1).tolist()
+        latest = self._latest
+        taken: dict[int, int] = {}  # slot -> row of the stack (the last one of a slot wins)
+        newest = None
+        for row, skeleton in enumerate(skeletons):
+            if skeleton.id < 0:
+                self.drops["no track id"] += 1
+                continue
+            if not has_joints[row]:
+                self.drops["no joint"] += 1
+                continue
+            camera = self._camera_of(skeleton.src_frame)
+            stamp_ns = skeleton.src_time_ns
+            slot = latest.claim(skeleton.id, camera, stamp_ns, skeleton.layout)
+            if slot is None:
+                self.drops["older than the camera's last detection"] += 1
+                continue
+            if stack is None:
+                latest.write([slot], skeleton.markers[None], skeleton.marker_present[None])
+            else:
+                taken[slot] = row
+            if newest is None or stamp_ns > newest:
+                newest = stamp_ns
+        if len(taken) == len(skeletons):  # every row, in order: the stack as it is
+            latest.write(list(taken), stack.markers, stack.marker_present)
+        elif taken:
+            rows = list(taken.values())
+            latest.write(list(taken), stack.markers[rows], stack.marker_present[rows])
+        return newest
 
     def _output_time(self, newest_ns: int | None, stamp_ns: int) -> int | None:
         """When to output: the newest input stamp, a passed tick, or None (nothing new)."""
@@ -364,15 +410,16 @@ class Merger:
         latest = self._latest
         slots = np.array(selected, dtype=np.int64)
         parents = axes.parents if params.direction_torso else axes.limb_parents
-        track_ids, table, final, rows, present, confidences, totals, counts, oriented = (
-            kernels.merge(
-                latest.rows, latest.present, latest.stamps, latest.tracks, latest.cameras, slots,
-                out_ns, self._camera_positions, self._camera_factors, self._kernel_params(),
-                params.iterations, params.extrapolate, axes.root, axes.neck, axes.left,
-                axes.right, axes.torso, axes.pointers, axes.has_front, axes.groups,
-                params.limb_residuals, parents, axes.order, params.fuse_directions,
-                params.direction_iterations, params.direction_eps,
-            )
+        (
+            track_ids, table, final, rows, present, links, link_present, confidences, totals,
+            counts, oriented,
+        ) = kernels.merge(
+            latest.rows, latest.present, latest.stamps, latest.tracks, latest.cameras, slots,
+            out_ns, self._camera_positions, self._camera_factors, self._kernel_params(),
+            params.iterations, params.extrapolate, axes.root, axes.neck, axes.left, axes.right,
+            axes.torso, axes.pointers, axes.has_front, axes.groups, params.limb_residuals,
+            parents, axes.order, params.fuse_directions, params.direction_iterations,
+            params.direction_eps, axes.link_parents, axes.link_children,
         )  # fmt: skip
         self._update_agreement(totals, counts)
         if oriented:
@@ -380,17 +427,11 @@ class Merger:
             rows[..., 4:8] = np.where(
                 present[..., None], _quaternion_mean(quaternions, final), np.nan
             )
-        out = Skeleton.many_from_rows(
-            rows,
-            present,
-            layout,
-            skeleton_ids=track_ids.tolist(),
-            src_time_ns=out_ns,
-            src_frame=self._world_frame,
+            links, link_present = link_rows(rows, present, layout)
+        boxes = np.full((len(rows), BOX_WIDTH), np.nan)
+        return SkeletonRows(rows, present, links, link_present, boxes).skeletons(
+            track_ids.tolist(), out_ns, self._world_frame, layout, confidences.tolist()
         )
-        for skeleton, confidence in zip(out, confidences.tolist(), strict=True):
-            skeleton.confidence = confidence
-        return out
 
     def _kernel_params(self) -> np.ndarray:
         """The float parameters in the order ``kernels.fuse`` unpacks them."""

@@ -39,9 +39,9 @@ import numpy as np
 
 from hiros_core.errors import ConfigError
 from hiros_core.layouts import Layout, get_layout
-from hiros_core.model import Skeleton, SkeletonGroup, link_rows
+from hiros_core.model import Skeleton, SkeletonGroup, SkeletonRows, link_rows
 from hiros_optimizer.memory import FitSettings, Memory
-from hiros_optimizer.stacking import LayoutRows, stack_frame, with_rows
+from hiros_optimizer.stacking import LayoutRows, output_skeletons, stack_frame
 
 __all__ = ["Optimizer", "OptimizerParams", "PersonCalibration"]
 
@@ -365,17 +365,16 @@ class Optimizer:
         of the fitted people are rebuilt at once.
         """
         memory = self._memories[stack.layout.name]
-        markers, present = stack.take([item.row for item in items])
+        indices = [item.row for item in items]
+        markers, present = stack.take(indices)
         rows = np.array([item.track.row for item in items])
         stamps = np.array([item.skeleton.src_time_ns for item in items], dtype=np.int64)
         calibrations = [item.track.calibration for item in items]
         fitting = [calibration is not None for calibration in calibrations]
         everyone = all(fitting)
-        links = link_present = None
         if everyone:
             lengths = np.array([calibration.lengths for calibration in calibrations])
             memory.fit(rows, stamps, markers, present, lengths, settings=self._settings)
-            links, link_present = link_rows(markers, present, stack.layout)
         elif any(fitting):
             fit = np.flatnonzero(fitting)
             lengths = np.array([c.lengths for c in calibrations if c is not None])
@@ -384,23 +383,24 @@ class Optimizer:
                 rows[fit], stamps[fit], fit_markers, present[fit], lengths, settings=self._settings
             )
             markers[fit] = fit_markers
+        if everyone:
             links, link_present = link_rows(markers, present, stack.layout)
+        else:
+            links, link_present = stack.input_links(indices)  # the learning people's as they came
+            if any(fitting):
+                fitted_links, fitted_present = link_rows(markers, present, stack.layout)
+                links[fit], link_present[fit] = fitted_links[fit], fitted_present[fit]
         if not everyone:
             learn = np.flatnonzero(np.logical_not(fitting))
             memory.learn(
                 rows[learn], stamps[learn], markers[learn], present[learn], settings=self._settings
             )
             self._accept_full(memory, [items[i] for i in learn])
-        for n, item in enumerate(items):
-            skeleton = item.skeleton
-            if fitting[n]:
-                links_n, link_present_n = links[n], link_present[n]
-            else:
-                links_n, link_present_n = skeleton.links.copy(), skeleton.link_present.copy()
-            result = with_rows(
-                skeleton, item.track_id, markers=markers[n], links=links_n, present=present[n],
-                link_present=link_present_n,
-            )  # fmt: skip
+        made = output_skeletons(
+            [item.skeleton for item in items], [item.track_id for item in items],
+            SkeletonRows(markers, present, links, link_present, stack.input_boxes(indices)),
+        )  # fmt: skip
+        for item, result in zip(items, made, strict=True):
             results[item.index] = result
 
     def _accept_full(self, memory: Memory, items: list[_Item]) -> None:

@@ -2,7 +2,9 @@
 
 Both stages fit or filter all people of a frame in one kernel call, so they stack everyone's
 marker rows once (:func:`stack_frame`), check them on the stack instead of one skeleton at a
-time, and build each output skeleton around its row of the result (:func:`with_rows`).
+time, and build the output skeletons as rows of the result (:func:`output_skeletons`). A
+frame's skeletons usually come as one stack already (the previous stage made them so), which
+``stack_rows`` hands back without copying: the stage copies only the rows it writes.
 """
 
 from __future__ import annotations
@@ -14,9 +16,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from hiros_core.layouts import Layout
-from hiros_core.model import Skeleton
+from hiros_core.model import Skeleton, SkeletonRows, stack_rows
 
-__all__ = ["LayoutRows", "stack_frame", "with_rows"]
+__all__ = ["LayoutRows", "output_skeletons", "stack_frame", "with_rows"]
 
 
 @dataclass
@@ -26,19 +28,36 @@ class LayoutRows:
     Attributes:
         layout: their layout.
         markers: ``(n, J, 20)`` copies of their marker rows (a stage's output rows).
-        present: ``(n, J)`` their marker presence.
+        present: ``(n, J)`` copies of their marker presence.
+        source: their rows as they came (read-only: they are the input skeletons' own).
 
     """
 
     layout: Layout
     markers: np.ndarray
     present: np.ndarray
+    source: SkeletonRows
 
     def take(self, rows: list[int]) -> tuple[np.ndarray, np.ndarray]:
         """``markers`` and ``present`` of ``rows``: the arrays themselves when that is all."""
-        if len(rows) == len(self.present) and rows == list(range(len(rows))):
+        if self._all(rows):
             return self.markers, self.present
         return self.markers[rows], self.present[rows]
+
+    def input_links(self, rows: list[int]) -> tuple[np.ndarray, np.ndarray]:
+        """Copies of the input link rows and link presence of ``rows``."""
+        source = self.source
+        if self._all(rows):
+            return source.links.copy(), source.link_present.copy()
+        return source.links[rows], source.link_present[rows]
+
+    def input_boxes(self, rows: list[int]) -> np.ndarray:
+        """A copy of the input bounding boxes of ``rows``."""
+        boxes = self.source.bounding_boxes
+        return boxes.copy() if self._all(rows) else boxes[rows]
+
+    def _all(self, rows: list[int]) -> bool:
+        return len(rows) == len(self.present) and rows == list(range(len(rows)))
 
 
 def stack_frame(
@@ -57,10 +76,14 @@ def stack_frame(
             continue
         by_layout.setdefault(skeleton.layout.name, []).append(index)
     for indices in by_layout.values():
+        source = stack_rows(
+            skeletons if len(indices) == len(skeletons) else [skeletons[i] for i in indices]
+        )
         stack = LayoutRows(
             skeletons[indices[0]].layout,
-            np.array([skeletons[i].markers for i in indices]),
-            np.array([skeletons[i].marker_present for i in indices]),
+            source.markers.copy(),
+            source.marker_present.copy(),
+            source,
         )
         bad = _unusable_rows(stack.markers, stack.present)
         for row, index in enumerate(indices):
@@ -99,3 +122,31 @@ def with_rows(
         present, link_present, skeleton.confidence, skeleton.bounding_box.copy(),
         skeleton.max_markers, skeleton.max_links,
     )  # fmt: skip
+
+
+def output_skeletons(
+    skeletons: list[Skeleton], track_ids: list[int], rows: SkeletonRows
+) -> list[Skeleton]:
+    """New skeletons of ``skeletons``' people and stamps, skeleton ``n`` with row ``n`` of ``rows``.
+
+    ``rows`` become the skeletons' own (not copied). When the skeletons share their frame and
+    the default message sizes (a stage's usual input) they are built as views of ``rows``
+    (``SkeletonRows.skeletons``), so the next stage and the encoder get the stack for free.
+    """
+    first = skeletons[0]
+    layout, frame = first.layout, first.src_frame
+    n_joints, n_links = layout.n_joints, layout.n_links
+    if all(
+        s.src_frame == frame and s.max_markers == n_joints and s.max_links == n_links
+        for s in skeletons
+    ):
+        return rows.skeletons(
+            track_ids, [s.src_time_ns for s in skeletons], frame, layout,
+            [s.confidence for s in skeletons],
+        )  # fmt: skip
+    markers, present, links, link_present, _ = rows
+    return [
+        with_rows(s, track_ids[n], markers=markers[n], links=links[n], present=present[n],
+                  link_present=link_present[n])
+        for n, s in enumerate(skeletons)
+    ]  # fmt: skip

@@ -20,7 +20,8 @@ _LABEL_LIFT = 0.25  # metres above the highest visible joint, as markers._label_
 @njit(cache=True)
 def draw(  # noqa: PLR0917 - a compiled kernel takes plain positional values
     template: np.ndarray,
-    positions: np.ndarray,
+    rows: np.ndarray,
+    column: int,
     visible: np.ndarray,
     points: np.ndarray,
     sources: np.ndarray,
@@ -31,24 +32,27 @@ def draw(  # noqa: PLR0917 - a compiled kernel takes plain positional values
 ) -> np.ndarray:
     """A copy of ``template`` (8-byte words) with the frame's values (see ``markers._DrawPlan``).
 
-    ``positions`` ``(P, J, 3)``, ``visible`` ``(P, J)``; label ``p`` goes 25 cm above the
+    ``rows`` ``(P, J, W)`` hold the positions in columns ``column:column + 3`` (marker rows
+    of a ``SkeletonRows`` stack, or stacked positions), ``visible`` ``(P, J)``; ``sources``
+    index the positions as a flat ``(P, J, 3)`` array. Label ``p`` goes 25 cm above the
     first highest visible joint (``argmax``), or to the origin when none is visible.
     """
     out = template.copy()
     floats = out.view(np.float64)
-    flat = positions.reshape(-1)
-    for i in range(points.size):
-        floats[points[i]] = flat[sources[i]]
     n_people, n_joints = visible.shape
+    for i in range(points.size):
+        joint, k = divmod(sources[i], 3)
+        person, joint = divmod(joint, n_joints)
+        floats[points[i]] = rows[person, joint, column + k]
     for p in range(n_people):
         best, top = -np.inf, -1
         for j in range(n_joints):
-            if visible[p, j] and positions[p, j, 2] > best:
-                best, top = positions[p, j, 2], j
+            if visible[p, j] and rows[p, j, column + 2] > best:
+                best, top = rows[p, j, column + 2], j
         for k in range(3):
             value = 0.0  # adding 0.0 to x and y, as numpy does, turns -0.0 into 0.0
             if top >= 0:
-                value = positions[p, top, k] + (_LABEL_LIFT if k == 2 else 0.0)
+                value = rows[p, top, column + k] + (_LABEL_LIFT if k == 2 else 0.0)
             floats[tops[3 * p + k]] = value
     words = out.view(np.int32)
     for i in range(stamps.size):

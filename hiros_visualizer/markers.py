@@ -21,7 +21,7 @@ import numpy as np
 from hiros_core.cdr import LEAD
 from hiros_core.codec import MarkerArrayData, encode_marker_array, marker_array_plan
 from hiros_core.layouts import Layout
-from hiros_core.model import SkeletonGroup
+from hiros_core.model import SkeletonGroup, shared_stack
 
 __all__ = ["VisualizerParams", "encode_skeleton_markers", "id_color", "skeleton_markers"]
 
@@ -167,8 +167,13 @@ def encode_skeleton_markers(
         or any(s.layout is not layout for s in skeletons)
     ):
         return encode_marker_array(skeleton_markers(group, namespace, params))
-    positions = np.array([s.positions for s in skeletons])  # (P, J, 3)
-    present = np.array([s.marker_present for s in skeletons])
+    stack = shared_stack(skeletons)
+    if stack is not None and stack.markers.dtype == np.float64:
+        rows, column, present = stack.markers, 1, stack.marker_present  # no copy
+    else:
+        rows, column = np.array([s.positions for s in skeletons], dtype=float), 0
+        present = np.array([s.marker_present for s in skeletons])
+    positions = rows[..., column : column + 3]  # (P, J, 3)
     visible = present & np.isfinite(positions).all(axis=2)
     ids = tuple(s.id for s in skeletons)
     drawing = tuple(getattr(params, name) for name in _DRAWING_FIELDS)
@@ -182,7 +187,7 @@ def encode_skeleton_markers(
     if "numba" in sys.modules:
         from hiros_visualizer.compiled import draw
 
-        out = draw(plan.template, positions, visible, plan.points, plan.sources, plan.tops,
+        out = draw(plan.template, rows, column, visible, plan.points, plan.sources, plan.tops,
                    plan.stamps, sec, nanosec)  # fmt: skip
     else:
         out = plan.template.copy()

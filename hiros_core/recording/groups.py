@@ -114,7 +114,7 @@ def iter_logged_groups(
     batches = (
         (MessageBatch.of([message]) for message in reader.messages(wanted))
         if "messages" in vars(reader)
-        else reader.batches(wanted)
+        else reader.batches(wanted, transient=True)  # each batch is read before the next
     )
     try:
         for batch in batches:

@@ -20,6 +20,7 @@ from hiros_core.codec import (
     encode_group_into,
     encode_marker_array,
 )
+from hiros_core.model import stack_rows
 
 serialization = pytest.importorskip("rclpy.serialization")
 msgs = pytest.importorskip("hiros_skeleton_msgs.msg")
@@ -125,6 +126,12 @@ def test_group_bytes_match_rclpy_and_round_trip(group: SkeletonGroup) -> None:
             s.markers.shape == (s.layout.n_joints, 20) and s.links.shape == s.markers.shape
             for s in decoded.skeletons
         )
+    _, separate = restacked(group)
+    if len(separate.skeletons) == len(group.skeletons) and group.skeletons:
+        # one layout, a known shape: the skeletons are the rows of one stack (no copy)
+        skeletons = decode_group(ours).skeletons
+        assert np.shares_memory(stack_rows(skeletons).markers, skeletons[0].markers)
+        assert np.shares_memory(stack_rows(skeletons).links, skeletons[-1].links)
 
 
 @settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.too_slow])
@@ -149,6 +156,44 @@ def test_group_encoded_into_a_buffer_compiled_and_numpy_alike(
         assert size == len(reference)
         assert buffer[offset : offset + size].tobytes() == reference
         assert (np.delete(buffer, np.arange(offset, offset + size)) == 0xA5).all()
+
+
+def restacked(group: SkeletonGroup) -> tuple[SkeletonGroup, SkeletonGroup]:
+    """The group's skeletons of its first layout, as they are and as rows of one stack."""
+    if not group.skeletons:
+        return group, group
+    layout = group.skeletons[0].layout
+    alike = [s for s in group.skeletons if s.layout is layout]
+    made = stack_rows(alike).skeletons(
+        [s.id for s in alike], [s.src_time_ns for s in alike], "", layout,
+        [s.confidence for s in alike],
+    )  # fmt: skip
+    for skeleton, original in zip(made, alike, strict=True):
+        skeleton.src_frame = original.src_frame
+        skeleton.max_markers, skeleton.max_links = original.max_markers, original.max_links
+    return (
+        SkeletonGroup(group.stamp_ns, group.frame_id, alike),
+        SkeletonGroup(group.stamp_ns, group.frame_id, made),
+    )
+
+
+@settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(groups)
+def test_groups_of_one_stack_encode_as_separate_skeletons(group: SkeletonGroup) -> None:
+    """The compiled stack path (skeletons are rows of one SkeletonRows) gives the same bytes."""
+    import numba  # noqa: F401 - the stack path runs when numba is loaded
+
+    separate, stacked = restacked(group)
+    assert encode_group(stacked) == encode_group(separate)
+    for cut in (slice(1, None), slice(None, -1)):  # a slice of the stack is still one
+        part = SkeletonGroup(group.stamp_ns, group.frame_id, stacked.skeletons[cut])
+        assert encode_group(part) == encode_group(
+            SkeletonGroup(group.stamp_ns, group.frame_id, separate.skeletons[cut])
+        )
+    if stacked.skeletons:  # a skeleton whose rows were replaced leaves the stack
+        stacked.skeletons[0].markers = stacked.skeletons[0].markers + 1.0
+        separate.skeletons[0].markers = separate.skeletons[0].markers + 1.0
+        assert encode_group(stacked) == encode_group(separate)
 
 
 @st.composite
@@ -302,7 +347,8 @@ def test_embedded_nul_ends_a_string_as_in_rclpy() -> None:
 def test_fast_walk_of_new_shapes_reads_as_the_field_reader(data, media) -> None:
     """A new shape is walked by ``_walk_marker_array``: same columns as the field-by-field
     reader, whatever the padding bytes hold; media attachments and bad bytes go the reader's
-    way (same columns, same errors)."""
+    way (same columns, same errors).
+    """
     from hiros_core.codec import _parse_marker_array, _walk_marker_array
 
     if not media:

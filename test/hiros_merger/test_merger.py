@@ -380,3 +380,26 @@ def test_fused_directions_weighted_mean_without_iterations():
     by_position = Merger(MergerParams(flipped_weight=1.0, outlier_scale=1e6)).update(group)
     by_position = by_position.skeletons[0].positions
     assert _link_angle(by_position, expected, "AnkleLeft") > 0.1  # (the two differ)
+
+
+def test_a_frame_s_later_detection_of_a_track_and_camera_replaces_the_earlier_one():
+    pose = _person()
+    early = _detection(pose, "k01", t_ns=T0)
+    late = _detection(pose + 0.5, "k01", t_ns=T0 + 1_000_000)
+    both = Merger().update(_group([early, late], T0 + 1_000_000)).skeletons
+    alone = Merger().update(_group([late], T0 + 1_000_000)).skeletons
+    assert len(both) == 1
+    assert both[0].same_as(alone[0])
+
+
+def test_a_frame_mixing_joint_counts_fuses_the_first_layout_s_tracks():
+    from hiros_core.layouts import KINECT_V2
+
+    pose = _person()
+    other = Skeleton.from_positions(
+        np.full((KINECT_V2.n_joints, 3), 1.0), KINECT_V2, skeleton_id=7,
+        src_time_ns=T0, src_frame="k02_depth_camera_link",
+    )  # fmt: skip
+    out = Merger().update(_group([_detection(pose, "k01", track=3), other])).skeletons
+    assert [s.id for s in out] == [3]
+    np.testing.assert_allclose(out[0].positions, pose, atol=1e-9)

@@ -5,7 +5,7 @@ import pytest
 
 from hiros_core.codec import encode_marker_array
 from hiros_core.layouts import AZURE_KINECT, KINECT_V2
-from hiros_core.model import Skeleton, SkeletonGroup
+from hiros_core.model import Skeleton, SkeletonGroup, stack_rows
 from hiros_visualizer.markers import (
     LINE_LIST,
     SPHERE_LIST,
@@ -83,3 +83,17 @@ def test_encoded_markers_equal_the_general_encoding_frame_after_frame(compiled, 
         for namespace in ("merger", "filter"):
             expected = encode_marker_array(skeleton_markers(group, namespace, params))
             assert encode_skeleton_markers(group, namespace, params) == expected
+            # the same people as the rows of one stack (read from it, not copied)
+            assert encode_skeleton_markers(stacked(group), namespace, params) == expected
+
+
+def stacked(group):
+    """The group with its skeletons (of one layout) made rows of one ``SkeletonRows``."""
+    skeletons = group.skeletons
+    if not skeletons or any(s.layout is not skeletons[0].layout for s in skeletons):
+        return group
+    made = stack_rows(skeletons).skeletons(
+        [s.id for s in skeletons], [s.src_time_ns for s in skeletons], "", skeletons[0].layout
+    )
+    assert np.shares_memory(stack_rows(made).markers, made[-1].markers)
+    return SkeletonGroup(group.stamp_ns, group.frame_id, made)
