@@ -48,6 +48,7 @@ class CameraCorrection:
         self._cameras: dict[str, CameraCalibration] = {}
         self._by_frame: dict[str, str] = {}
         self._transforms: dict[str, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
+        self._names: dict[str, str | None] = {}  # frame id -> camera_name, until a change
         if calibration is not None:
             self.set_calibration(calibration)
 
@@ -62,6 +63,7 @@ class CameraCorrection:
         self._cameras = {}
         self._by_frame = {}
         self._transforms = {}
+        self._names = {}
         for name, camera in calibration.cameras.items():
             self.set_camera(name, camera)
 
@@ -71,14 +73,22 @@ class CameraCorrection:
         self._transforms[name] = _row_transform(camera.extrinsics)
         if camera.frame_id:
             self._by_frame[camera.frame_id] = name
+        self._names = {}
         self.uncalibrated.discard(name)
 
     def camera_name(self, group: SkeletonGroup) -> str | None:
-        """The calibration's name for the camera a group came from, None when uncalibrated."""
+        """The calibration's name for the camera a group came from, None when uncalibrated.
+
+        Kept per frame id until the calibration changes: every frame asks.
+        """
+        frame_id = group.frame_id
+        if frame_id in self._names:
+            return self._names[frame_id]
         name = group.camera
-        if name in self._cameras:
-            return name
-        return self._by_frame.get(group.frame_id)
+        if name not in self._cameras:
+            name = self._by_frame.get(frame_id)
+        self._names[frame_id] = name
+        return name
 
     def apply(self, group: SkeletonGroup) -> SkeletonGroup | None:
         """The group in the world frame with reference-clock stamps, or None (counted) if unknown.

@@ -3,7 +3,7 @@ from scipy.spatial.transform import Rotation
 
 from hiros_core.calibration import Calibration, CameraCalibration
 from hiros_core.layouts import AZURE_KINECT
-from hiros_core.model import Skeleton, SkeletonGroup
+from hiros_core.model import Skeleton, SkeletonGroup, stack_rows
 from hiros_tracker.correction import UNCALIBRATED, CameraCorrection
 
 
@@ -101,3 +101,20 @@ def test_same_result_as_apply_to_skeleton():
         np.testing.assert_allclose(moved.markers, expected.markers, atol=1e-12)
         np.testing.assert_allclose(moved.links, expected.links, atol=1e-12)
         np.testing.assert_allclose(moved.bounding_box, expected.bounding_box, atol=1e-12)
+
+
+def test_moved_skeletons_are_one_new_stack_and_the_input_is_left_alone():
+    frame = "k02_depth_camera_link"
+    positions = np.tile(np.linspace(0.0, 1.0, AZURE_KINECT.n_joints)[:, None], (3, 1, 3))
+    shared = SkeletonGroup(
+        7, frame, Skeleton.many_from_positions(positions, skeleton_ids=(1, 2, 3), src_frame=frame)
+    )
+    apart = SkeletonGroup(7, frame, [s.copy() for s in shared.skeletons])
+    for group in (shared, apart):  # rows of one stack (as a bridge makes them), or not
+        before = [s.copy() for s in group.skeletons]
+        moved = CameraCorrection(_calibration()).move(group)
+        assert moved is not None
+        assert stack_rows(moved.group.skeletons) is moved.stack  # handed on without a copy
+        assert [s.id for s in moved.group.skeletons] == [1, 2, 3]
+        assert all(a.same_as(b) for a, b in zip(before, group.skeletons, strict=True))
+        assert not np.shares_memory(moved.stack.markers, group.skeletons[0].markers)
