@@ -463,7 +463,7 @@ def fuse(  # noqa: PLR0912, PLR0915, PLR0917 - one output's whole fusion
     ``rows`` ``(S, J', 20)`` and ``present`` ``(S, J')`` (``J' >= J``, the layout's
     ``len(groups)``); ``ages`` ``(M, C)`` seconds to the output time, ``cameras`` ``(M, C, 3)``
     camera positions (NaN unknown), ``agreement`` ``(M, C)`` each camera's agreement factor;
-    ``params`` the float parameters in the order of ``Merger._kernel_params``; the layout's
+    ``params`` the float parameters in the order of ``Merger._kernel_constants``; the layout's
     ``root``, ``neck``, ``left``/``right`` (hip, shoulder), ``torso`` and forward ``pointers``
     joints; with ``directions`` the fused skeletons follow the cameras' robust link
     directions (``follow_directions``, over the layout's ``parents`` in ``order``).

@@ -252,7 +252,8 @@ class Merger:
     """Fuses each track's camera detections into one skeleton (see the module docstring).
 
     Attributes:
-        params: the parameters it was built with.
+        params: the parameters it was built with (the fusion's are read once, at a layout's
+            first fusion).
         drops: reason -> count of input left out.
         agreement: camera name -> running mean distance (m) of its detections to the fused
             skeletons.
@@ -275,6 +276,7 @@ class Merger:
         self._next_tick_ns: int | None = None
         self._last_out_ns: int | None = None
         self._world_frame = "world"
+        self._constants: dict[str, tuple] = {}  # layout name -> ``_kernel_constants``
         if calibration is not None:
             self.set_calibration(calibration)
 
@@ -405,21 +407,14 @@ class Merger:
         formulas) reading the ``selected`` slots of the stored detections; the orientations'
         eigen-decomposition stays with numpy.
         """
-        params = self.params
-        axes = _axes(layout)
         latest = self._latest
-        slots = np.array(selected, dtype=np.int64)
-        parents = axes.parents if params.direction_torso else axes.limb_parents
         (
             track_ids, table, final, rows, present, links, link_present, confidences, totals,
             counts, oriented,
         ) = kernels.merge(
-            latest.rows, latest.present, latest.stamps, latest.tracks, latest.cameras, slots,
-            out_ns, self._camera_positions, self._camera_factors, self._kernel_params(),
-            params.iterations, params.extrapolate, axes.root, axes.neck, axes.left, axes.right,
-            axes.torso, axes.pointers, axes.has_front, axes.groups, params.limb_residuals,
-            parents, axes.order, params.fuse_directions, params.direction_iterations,
-            params.direction_eps, axes.link_parents, axes.link_children,
+            latest.rows, latest.present, latest.stamps, latest.tracks, latest.cameras,
+            np.array(selected, dtype=np.int64), out_ns, self._camera_positions,
+            self._camera_factors, *self._kernel_constants(layout),
         )  # fmt: skip
         self._update_agreement(totals, counts)
         if oriented:
@@ -433,28 +428,36 @@ class Merger:
             track_ids.tolist(), out_ns, self._world_frame, layout, confidences.tolist()
         )
 
-    def _kernel_params(self) -> np.ndarray:
-        """The float parameters in the order ``kernels.fuse`` unpacks them."""
-        params = self.params
-        return np.array(
-            [
-                params.max_extrapolation,
-                params.confidence_floor,
-                params.confidence_power,
-                params.staleness_scale,
-                params.depth_gain,
-                params.flipped_weight,
-                params.view_weight_min,
-                params.view_power,
-                params.occlusion_radius,
-                params.occlusion_weight,
-                params.outlier_scale,
-                params.outlier_cutoff,
-                params.limb_cutoff,
-                params.oblique_gain,
-            ],
-            dtype=float,
-        )
+    def _kernel_constants(self, layout: Layout) -> tuple:
+        """The trailing arguments of ``kernels.merge`` for ``layout``, built once per layout.
+
+        The parameters are read on a layout's first fusion (as the optimizer and the filter
+        read theirs once): packing these 19 values cost more than a third of the kernel call.
+        """
+        constants = self._constants.get(layout.name)
+        if constants is None:
+            params = self.params
+            axes = _axes(layout)
+            # The float parameters in the order ``kernels.fuse`` unpacks them.
+            floats = np.array(
+                [
+                    params.max_extrapolation, params.confidence_floor, params.confidence_power,
+                    params.staleness_scale, params.depth_gain, params.flipped_weight,
+                    params.view_weight_min, params.view_power, params.occlusion_radius,
+                    params.occlusion_weight, params.outlier_scale, params.outlier_cutoff,
+                    params.limb_cutoff, params.oblique_gain,
+                ],
+                dtype=float,
+            )  # fmt: skip
+            constants = self._constants[layout.name] = (
+                floats, params.iterations, params.extrapolate, axes.root, axes.neck, axes.left,
+                axes.right, axes.torso, axes.pointers, axes.has_front, axes.groups,
+                params.limb_residuals,
+                axes.parents if params.direction_torso else axes.limb_parents,
+                axes.order, params.fuse_directions, params.direction_iterations,
+                params.direction_eps, axes.link_parents, axes.link_children,
+            )  # fmt: skip
+        return constants
 
     def _stored_orientations(self, table: np.ndarray, n_joints: int) -> np.ndarray:
         """``(M, C, J, 4)`` the detections' orientations by ``table`` slot, NaN where absent."""

@@ -32,7 +32,9 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-__all__ = ["fit_frame", "fit_people", "learn_frame", "unusable_rows"]
+from hiros_core.compiled import _link_rows
+
+__all__ = ["fit_frame", "fit_frame_links", "fit_people", "learn_frame", "unusable_rows"]
 
 _EPS = 1e-12
 _MIN_VELOCITY_DT = 1e-3  # s; as ``hiros_optimizer.memory``
@@ -498,6 +500,21 @@ def fit_frame(
                     markers[i, j, 1 + k] = moved[j, k]
                 measured[j, k] = moved[j, k] if present[i, j] else np.nan
         _remember(s, stamps[i], measured, fitted, time_ns, timed, positions, velocities, vectors)
+
+
+@njit(cache=True, error_model="numpy")
+def fit_frame_links(
+    parents, order, level_starts, markers, present, lengths, rows, stamps, time_ns, timed,
+    positions, velocities, vectors, floor, threshold, distance, prior_weight, timeout,
+    sweeps, refinements, link_parents, link_children,
+):  # fmt: skip
+    """:func:`fit_frame`, then the fitted rows' links (``model.link_rows``): one call a frame."""
+    fit_frame(
+        parents, order, level_starts, markers, present, lengths, rows, stamps, time_ns, timed,
+        positions, velocities, vectors, floor, threshold, distance, prior_weight, timeout,
+        sweeps, refinements,
+    )  # fmt: skip
+    return _link_rows(markers, present, link_parents, link_children)
 
 
 @njit(cache=True, error_model="numpy")

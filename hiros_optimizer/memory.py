@@ -20,6 +20,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from hiros_core.layouts import Layout
+from hiros_core.model import link_rows
 from hiros_optimizer.kinematics import KinematicTree, fit_fixed_lengths, link_lengths
 
 __all__ = ["FitSettings", "Memory"]
@@ -69,6 +70,10 @@ class Memory:
     def __init__(self, layout: Layout, window: int) -> None:
         self.layout = layout
         self.tree = KinematicTree.from_layout(layout)
+        self._link_ends = (
+            np.asarray(layout.link_parents, dtype=np.intp),
+            np.asarray(layout.link_children, dtype=np.intp),
+        )
         self._free: list[int] = []
         n = layout.n_joints
         self.window = np.full((0, n, window), np.nan)
@@ -191,23 +196,24 @@ class Memory:
         lengths: np.ndarray,
         *,
         settings: FitSettings,
-    ) -> None:
+    ) -> tuple[np.ndarray, np.ndarray]:
         """Fit the people of ``markers`` to their ``lengths`` ``(P, J)``; positions in place.
 
         Each person's prior is their last output moved by their velocity; their weights are
         the confidences (at least the floor), down-weighted for outliers
-        (:meth:`_outlier_factors`). Present joints take the fitted positions.
+        (:meth:`_outlier_factors`). Present joints take the fitted positions. Returns the
+        fitted people's link rows and link presence (``model.link_rows``; the compiled fit
+        builds them in the same call).
         """
         tree = self.tree
         if settings.compiled:
-            from hiros_optimizer.compiled import fit_frame
+            from hiros_optimizer.compiled import fit_frame_links
 
-            fit_frame(
+            return fit_frame_links(
                 tree.parents, tree.order, tree.level_starts, markers, present, lengths, rows,
                 stamps, self.time_ns, self.timed, self.positions, self.velocities, self.vectors,
-                *settings.kernel_values,
+                *settings.kernel_values, *self._link_ends,
             )  # fmt: skip
-            return
         self.forget_stale(rows, stamps, settings.track_timeout)
         dt = np.maximum(np.where(self.timed[rows], (stamps - self.time_ns[rows]) * 1e-9, 0.0), 0.0)
         prior = self.positions[rows] + self.velocities[rows] * dt[:, None, None]
@@ -223,6 +229,7 @@ class Memory:
         self.remember(
             rows, stamps, np.where(present[..., None], markers[..., 1:4], np.nan), vectors
         )
+        return link_rows(markers, present, self.layout)
 
 
 def _weights(markers: np.ndarray, present: np.ndarray, floor: float) -> np.ndarray:

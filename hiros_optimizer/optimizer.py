@@ -39,7 +39,7 @@ import numpy as np
 
 from hiros_core.errors import ConfigError
 from hiros_core.layouts import Layout, get_layout
-from hiros_core.model import Skeleton, SkeletonGroup, SkeletonRows, link_rows
+from hiros_core.model import Skeleton, SkeletonGroup, SkeletonRows
 from hiros_optimizer.memory import FitSettings, Memory
 from hiros_optimizer.stacking import LayoutRows, output_skeletons, stack_frame
 
@@ -374,22 +374,19 @@ class Optimizer:
         everyone = all(fitting)
         if everyone:
             lengths = np.array([calibration.lengths for calibration in calibrations])
-            memory.fit(rows, stamps, markers, present, lengths, settings=self._settings)
-        elif any(fitting):
+            links, link_present = memory.fit(
+                rows, stamps, markers, present, lengths, settings=self._settings
+            )
+        else:
+            links, link_present = stack.input_links(indices)  # the learning people's as they came
+        if any(fitting) and not everyone:
             fit = np.flatnonzero(fitting)
             lengths = np.array([c.lengths for c in calibrations if c is not None])
             fit_markers = markers[fit]
-            memory.fit(
+            links[fit], link_present[fit] = memory.fit(
                 rows[fit], stamps[fit], fit_markers, present[fit], lengths, settings=self._settings
             )
             markers[fit] = fit_markers
-        if everyone:
-            links, link_present = link_rows(markers, present, stack.layout)
-        else:
-            links, link_present = stack.input_links(indices)  # the learning people's as they came
-            if any(fitting):
-                fitted_links, fitted_present = link_rows(markers, present, stack.layout)
-                links[fit], link_present[fit] = fitted_links[fit], fitted_present[fit]
         if not everyone:
             learn = np.flatnonzero(np.logical_not(fitting))
             memory.learn(
