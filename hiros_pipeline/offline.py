@@ -27,6 +27,7 @@ from hiros_core.errors import RecordingError
 from hiros_core.model import SkeletonGroup
 from hiros_core.recording import MARKER_ARRAY, SKELETON_GROUP, RecordingWriter, iter_groups
 from hiros_pipeline.pipeline import STAGES, Pipeline, PipelineParams, StageOutputs
+from hiros_tracker import Tracker
 from hiros_visualizer.markers import encode_skeleton_markers
 
 __all__ = ["RunSummary", "default_processes", "message_count", "run_recording"]
@@ -56,10 +57,9 @@ class RunSummary:
     last_ns: int | None = None
     wall_time: float = 0.0
     seconds: dict[str, float] = field(default_factory=dict)
-    """Wall seconds by part: ``read`` (reading, decoding, bridging), ``tracker+merger`` and
-    ``encode front`` (encoding and drawing their outputs) (these three in the child process
-    when there are two), ``stages`` (optimizer, filter), ``write`` (encoding and drawing
-    their outputs, writing everything; compression runs in a helper thread and shows here only when
+    """Wall seconds by part: ``read`` (reading, decoding, bridging) and ``tracker`` (in the
+    child process when there are two), ``stages`` (merger, optimizer, filter), ``write``
+    (encoding, drawing, writing; compression runs in a helper thread and shows here only when
     it holds the run up), ``finish`` (the last chunks and the index), and with two processes
     ``waiting`` (this process idle, waiting for the child's frames)."""
     outputs: dict[str, list] | None = None
@@ -121,9 +121,8 @@ def run_recording(
     """Run the pipeline over ``recording``; write ``out`` (MCAP); return the summary.
 
     ``keep_outputs`` also keeps every stage's groups in ``summary.outputs`` (what the demo
-    evaluates, without reading the MCAP back). ``processes`` 2 reads, tracks, merges and
-    encodes those outputs in a child process while this one optimises, filters and writes
-    (about half the work each; the stages are sequential
+    evaluates, without reading the MCAP back). ``processes`` 2 reads and tracks in a child
+    process while this one merges, optimises, filters and writes (the stages are sequential
     per frame, so the pipeline splits across cores like an assembly line); 1 runs all here.
     Both give the same bytes. Default: :func:`default_processes`.
     """
@@ -134,101 +133,72 @@ def run_recording(
     processes = default_processes() if processes is None else processes
     clock, parts = time.perf_counter, {"stages": 0.0, "write": 0.0}
     with (
-        _front(recording, pipeline, processes) as fronted,
+        _tracking(recording, pipeline.tracker, processes) as tracked,
         RecordingWriter(out) as writer,
     ):
         writer.write("/hiros/calibration", "std_msgs/msg/String",
                      _calibration_message(calibration), 0)  # fmt: skip
-        for item in fronted:
-            if isinstance(item, _FrontEnd):
+        for item in tracked:
+            if isinstance(item, _TrackingEnd):
                 break
-            summary.frames_in[item.source] += 1
+            source, group, encoded = item
+            summary.frames_in[source] += 1
             computed = clock()
-            outputs = StageOutputs(item.tracked, item.merged, *pipeline.body(item.merged))
+            outputs = pipeline.downstream(group)
             written = clock()
-            _write(writer, outputs, summary, item.encoded)
+            _write(writer, outputs, summary, encoded)
             if progress is not None:
                 progress(1)
             parts["stages"] += written - computed
             parts["write"] += clock() - written
         finishing = clock()
-        last = item.flushed
-        outputs = StageOutputs(last.tracked, last.merged, *pipeline.body(last.merged))
-        _write(writer, outputs, summary, last.encoded)
+        _write(writer, pipeline.downstream(item.flushed), summary)
     summary.seconds = {**item.seconds, **parts, "finish": clock() - finishing}
     summary.dropped.update({f"reader: {k}": v for k, v in item.reader_drops.items()})
-    summary.dropped.update(item.front_drops)
-    summary.dropped.update(pipeline.drops_of(STAGES[len(FRONT_STAGES) :]))
+    summary.dropped.update({f"tracker: {k}": v for k, v in item.tracker_drops.items()})
+    summary.dropped.update(pipeline.downstream_drops)
     summary.wall_time = time.perf_counter() - started
     return summary
 
 
-FRONT_STAGES = STAGES[:2]
-"""The stages run beside the reading (in the reading process with ``--processes 2``)."""
-
-
-_Encoded = dict[str, tuple[bytes, bytes | None]]
-"""stage -> its output's CDR bytes and, for a drawn stage, its marker bytes."""
-
-
 @dataclass
-class _Fronted:
-    """A camera frame after the front stages: their outputs and those already encoded.
+class _TrackingEnd:
+    """Last item of a tracked stream: what the tracker still held, and the accounting."""
 
-    ``encoded`` holds, per front stage with a non-empty output, its CDR bytes and (for a drawn
-    stage) its marker bytes: encoding where the stage ran moves that work with it.
-    """
-
-    source: str
-    tracked: SkeletonGroup
-    merged: SkeletonGroup
-    encoded: _Encoded
-
-
-@dataclass
-class _FrontEnd:
-    """Last item of a fronted stream: what the stages still held, and the accounting."""
-
-    flushed: _Fronted
+    flushed: SkeletonGroup
     reader_drops: Counter[str]
-    front_drops: Counter[str]
+    tracker_drops: Counter[str]
     seconds: dict[str, float]
 
 
-def _encoded(
-    tracked: SkeletonGroup, merged: SkeletonGroup
-) -> dict[str, tuple[bytes, bytes | None]]:
-    """The front stages' non-empty outputs as CDR bytes (and marker bytes where drawn)."""
-    encoded: _Encoded = {}
-    for stage, group in (("tracker", tracked), ("merger", merged)):
-        if group.skeletons:
-            markers = encode_skeleton_markers(group, stage) if stage in DRAWN_STAGES else None
-            encoded[stage] = (encode_group(group), markers)
-    return encoded
+_Tracked = tuple[str, SkeletonGroup, bytes | None]
+"""A camera frame's tracker output: camera, group, and the group's CDR bytes (None if empty)."""
 
 
-def _front_frames(recording: str | Path, pipeline: Pipeline) -> Iterator[_Fronted | _FrontEnd]:
-    """Each camera frame read, through the tracker and the merger; then a ``_FrontEnd``."""
+def _tracked_frames(recording: str | Path, tracker: Tracker) -> Iterator[_Tracked | _TrackingEnd]:
+    """``(camera, tracker output, its CDR bytes)`` per camera frame read, then a ``_TrackingEnd``.
+
+    The tracker's output is encoded here, beside the tracking, not where it is written: with
+    two processes that puts the largest topic's encoding (about half of all the output bytes)
+    on the reading process, which has less to do than the one running the other stages.
+    """
     reader_drops: Counter[str] = Counter()
-    clock, seconds = time.perf_counter, {"read": 0.0, "tracker+merger": 0.0, "encode front": 0.0}
-    tracker, merger = pipeline.tracker, pipeline.merger
+    clock, read, tracking, encoding = time.perf_counter, 0.0, 0.0, 0.0
     mark = clock()
     for source, group in iter_groups(recording, drops=reader_drops):
         tracked_at = clock()
         tracked = tracker.update(group)
-        merged = merger.update(tracked)
         encoded_at = clock()
-        item = _Fronted(source, tracked, merged, _encoded(tracked, merged))
+        encoded = encode_group(tracked) if tracked.skeletons else None
         done = clock()
-        seconds["read"] += tracked_at - mark
-        seconds["tracker+merger"] += encoded_at - tracked_at
-        seconds["encode front"] += done - encoded_at
-        yield item
+        read += tracked_at - mark
+        tracking += encoded_at - tracked_at
+        encoding += done - encoded_at
+        yield source, tracked, encoded
         mark = clock()
-    tracked = tracker.flush()
-    merged = merger.update(tracked)
-    flushed = _Fronted("", tracked, merged, _encoded(tracked, merged))
-    yield _FrontEnd(flushed, reader_drops, pipeline.drops_of(FRONT_STAGES), seconds)
+    flushed = tracker.flush()
+    seconds = {"read": read, "tracker": tracking, "encode tracker": encoding}
+    yield _TrackingEnd(flushed, reader_drops, tracker.drops, seconds)
 
 
 _BATCH = 32
@@ -236,22 +206,22 @@ _BATCH = 32
 
 
 @contextmanager
-def _front(
-    recording: str | Path, pipeline: Pipeline, processes: int
-) -> Iterator[Iterator[_Fronted | _FrontEnd]]:
-    """The fronted stream: ``_front_frames`` here, or in a forked child process.
+def _tracking(
+    recording: str | Path, tracker: Tracker, processes: int
+) -> Iterator[Iterator[_Tracked | _TrackingEnd]]:
+    """The tracked stream: ``_tracked_frames`` here, or in a forked child process.
 
-    With ``processes`` 2 the child owns the front stages from the fork on (this process's
-    copies stay unused) and passes its items back in batches; groups cross the pipe as stacked
+    With ``processes`` 2 the child owns the tracker from the fork on (this process's copy
+    stays unused) and passes its items back in batches; groups cross the pipe as stacked
     arrays (``SkeletonGroup.__reduce__``). The child starts on entry, before the caller
     starts any thread, and is stopped on an early exit.
     """
     if processes < 2:
-        yield _front_frames(recording, pipeline)
+        yield _tracked_frames(recording, tracker)
         return
     context = mp.get_context("fork")
     receiver, sender = context.Pipe(duplex=False)
-    child = context.Process(target=_front_and_send, args=(recording, pipeline, sender))
+    child = context.Process(target=_track_and_send, args=(recording, tracker, sender))
     child.daemon = True
     child.start()
     sender.close()
@@ -267,7 +237,7 @@ def _front(
 
 def _received(
     receiver: Connection, child: mp.process.BaseProcess
-) -> Iterator[_Fronted | _FrontEnd]:
+) -> Iterator[_Tracked | _TrackingEnd]:
     """The child's items; its exception raised here, its unexpected end reported."""
     waiting, clock = 0.0, time.perf_counter
     while True:
@@ -282,20 +252,20 @@ def _received(
         waiting += clock() - asked
         if isinstance(batch, BaseException):
             raise batch
-        if isinstance(batch[-1], _FrontEnd):
+        if isinstance(batch[-1], _TrackingEnd):
             batch[-1].seconds["waiting"] = waiting
             yield from batch
             return
         yield from batch
 
 
-def _front_and_send(recording: str | Path, pipeline: Pipeline, sender: Connection) -> None:
-    """Child process: read ``recording`` through the front stages, send the items in batches."""
+def _track_and_send(recording: str | Path, tracker: Tracker, sender: Connection) -> None:
+    """Child process: read and track ``recording``, send the items in batches."""
     batch: list = []
     try:
-        for item in _front_frames(recording, pipeline):
+        for item in _tracked_frames(recording, tracker):
             batch.append(item)
-            if len(batch) >= _BATCH or isinstance(item, _FrontEnd):
+            if len(batch) >= _BATCH or isinstance(item, _TrackingEnd):
                 sender.send(batch)
                 batch = []
     except (BrokenPipeError, EOFError):
@@ -310,17 +280,16 @@ def _write(
     writer: RecordingWriter,
     outputs: StageOutputs,
     summary: RunSummary,
-    encoded: _Encoded,
+    tracker_bytes: bytes | None = None,
 ) -> None:
-    """Write a frame's non-empty stage outputs (and markers), using ``encoded`` where given."""
+    """Write a frame's non-empty stage outputs (the tracker's already encoded if given)."""
     for stage, group in zip(STAGES, outputs, strict=True):
         if not group.skeletons:
             continue
-        data, markers = encoded.get(stage, (None, None))
-        if data is None:
-            writer.write_group(f"/hiros/{stage}", group)
+        if stage == "tracker" and tracker_bytes is not None:
+            writer.write("/hiros/tracker", SKELETON_GROUP, tracker_bytes, group.stamp_ns)
         else:
-            writer.write(f"/hiros/{stage}", SKELETON_GROUP, data, group.stamp_ns)
+            writer.write_group(f"/hiros/{stage}", group)
         summary.published[stage] += 1
         if summary.outputs is not None:
             summary.outputs[stage].append(group)
@@ -329,6 +298,9 @@ def _write(
             summary.first_ns = group.stamp_ns if summary.first_ns is None else summary.first_ns
             summary.last_ns = group.stamp_ns
         if stage in DRAWN_STAGES:
-            if markers is None:
-                markers = encode_skeleton_markers(group, stage)
-            writer.write(f"/hiros/{stage}/markers", MARKER_ARRAY, markers, group.stamp_ns)
+            writer.write(
+                f"/hiros/{stage}/markers",
+                MARKER_ARRAY,
+                encode_skeleton_markers(group, stage),
+                group.stamp_ns,
+            )

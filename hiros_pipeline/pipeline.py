@@ -78,23 +78,20 @@ class Pipeline:
         The tracker may have run elsewhere, e.g. in the offline runner's reading process.
         """
         merged = self.merger.update(tracked)
-        return StageOutputs(tracked, merged, *self.body(merged))
-
-    def body(self, merged: SkeletonGroup) -> tuple[SkeletonGroup, SkeletonGroup]:
-        """The merger's output through optimizer and filter: ``(optimized, filtered)``.
-
-        The stages before may have run elsewhere, e.g. in the offline runner's reading process.
-        """
         optimized = self.optimizer.update(merged)
-        return optimized, self.filter.update(optimized)
+        return StageOutputs(tracked, merged, optimized, self.filter.update(optimized))
 
     @property
     def drops(self) -> Counter[str]:
         """Every stage's drop reasons, prefixed with the stage name."""
-        return self.drops_of(STAGES)
+        return self._drops(STAGES)
 
-    def drops_of(self, stages: tuple[str, ...]) -> Counter[str]:
-        """The drop reasons of the named stages, prefixed with the stage name."""
+    @property
+    def downstream_drops(self) -> Counter[str]:
+        """The drop reasons of the stages after the tracker (see :meth:`downstream`)."""
+        return self._drops(STAGES[1:])
+
+    def _drops(self, stages: tuple[str, ...]) -> Counter[str]:
         total: Counter[str] = Counter()
         for name in stages:
             for reason, count in getattr(getattr(self, name), "drops", Counter()).items():
