@@ -22,10 +22,9 @@ import yaml
 
 from hiros_azure_bridge.driver_format import warm_up
 from hiros_core.calibration import Calibration
-from hiros_core.codec import encode_group
 from hiros_core.errors import RecordingError
 from hiros_core.model import SkeletonGroup
-from hiros_core.recording import MARKER_ARRAY, SKELETON_GROUP, RecordingWriter, iter_groups
+from hiros_core.recording import MARKER_ARRAY, RecordingWriter, iter_groups
 from hiros_pipeline.pipeline import STAGES, Pipeline, PipelineParams, StageOutputs
 from hiros_tracker import Tracker
 from hiros_visualizer.markers import encode_skeleton_markers
@@ -141,12 +140,12 @@ def run_recording(
         for item in tracked:
             if isinstance(item, _TrackingEnd):
                 break
-            source, group, encoded = item
+            source, group = item
             summary.frames_in[source] += 1
             computed = clock()
             outputs = pipeline.downstream(group)
             written = clock()
-            _write(writer, outputs, summary, encoded)
+            _write(writer, outputs, summary)
             if progress is not None:
                 progress(1)
             parts["stages"] += written - computed
@@ -171,34 +170,23 @@ class _TrackingEnd:
     seconds: dict[str, float]
 
 
-_Tracked = tuple[str, SkeletonGroup, bytes | None]
-"""A camera frame's tracker output: camera, group, and the group's CDR bytes (None if empty)."""
-
-
-def _tracked_frames(recording: str | Path, tracker: Tracker) -> Iterator[_Tracked | _TrackingEnd]:
-    """``(camera, tracker output, its CDR bytes)`` per camera frame read, then a ``_TrackingEnd``.
-
-    The tracker's output is encoded here, beside the tracking, not where it is written: with
-    two processes that puts the largest topic's encoding (about half of all the output bytes)
-    on the reading process, which has less to do than the one running the other stages.
-    """
+def _tracked_frames(
+    recording: str | Path, tracker: Tracker
+) -> Iterator[tuple[str, SkeletonGroup] | _TrackingEnd]:
+    """``(camera, tracker output)`` per camera frame read, then a ``_TrackingEnd``."""
     reader_drops: Counter[str] = Counter()
-    clock, read, tracking, encoding = time.perf_counter, 0.0, 0.0, 0.0
+    clock, read, tracking = time.perf_counter, 0.0, 0.0
     mark = clock()
     for source, group in iter_groups(recording, drops=reader_drops):
         tracked_at = clock()
         tracked = tracker.update(group)
-        encoded_at = clock()
-        encoded = encode_group(tracked) if tracked.skeletons else None
         done = clock()
         read += tracked_at - mark
-        tracking += encoded_at - tracked_at
-        encoding += done - encoded_at
-        yield source, tracked, encoded
+        tracking += done - tracked_at
+        yield source, tracked
         mark = clock()
     flushed = tracker.flush()
-    seconds = {"read": read, "tracker": tracking, "encode tracker": encoding}
-    yield _TrackingEnd(flushed, reader_drops, tracker.drops, seconds)
+    yield _TrackingEnd(flushed, reader_drops, tracker.drops, {"read": read, "tracker": tracking})
 
 
 _BATCH = 32
@@ -208,7 +196,7 @@ _BATCH = 32
 @contextmanager
 def _tracking(
     recording: str | Path, tracker: Tracker, processes: int
-) -> Iterator[Iterator[_Tracked | _TrackingEnd]]:
+) -> Iterator[Iterator[tuple[str, SkeletonGroup] | _TrackingEnd]]:
     """The tracked stream: ``_tracked_frames`` here, or in a forked child process.
 
     With ``processes`` 2 the child owns the tracker from the fork on (this process's copy
@@ -237,7 +225,7 @@ def _tracking(
 
 def _received(
     receiver: Connection, child: mp.process.BaseProcess
-) -> Iterator[_Tracked | _TrackingEnd]:
+) -> Iterator[tuple[str, SkeletonGroup] | _TrackingEnd]:
     """The child's items; its exception raised here, its unexpected end reported."""
     waiting, clock = 0.0, time.perf_counter
     while True:
@@ -276,20 +264,11 @@ def _track_and_send(recording: str | Path, tracker: Tracker, sender: Connection)
         sender.close()
 
 
-def _write(
-    writer: RecordingWriter,
-    outputs: StageOutputs,
-    summary: RunSummary,
-    tracker_bytes: bytes | None = None,
-) -> None:
-    """Write a frame's non-empty stage outputs (the tracker's already encoded if given)."""
+def _write(writer: RecordingWriter, outputs: StageOutputs, summary: RunSummary) -> None:
     for stage, group in zip(STAGES, outputs, strict=True):
         if not group.skeletons:
             continue
-        if stage == "tracker" and tracker_bytes is not None:
-            writer.write("/hiros/tracker", SKELETON_GROUP, tracker_bytes, group.stamp_ns)
-        else:
-            writer.write_group(f"/hiros/{stage}", group)
+        writer.write_group(f"/hiros/{stage}", group)
         summary.published[stage] += 1
         if summary.outputs is not None:
             summary.outputs[stage].append(group)
