@@ -680,15 +680,11 @@ def _stacked_group(reading: _GroupReading, buffer: np.ndarray, floats: np.ndarra
     ).skeletons(
         values[2::6],
         [sec * _NS + nanosec for sec, nanosec in zip(values[3::6], values[4::6], strict=True)],
-        stack.frames[0],
+        stack.frames,
         stack.layout,
         values[7::6],
+        max_sizes=list(zip(values[5::6], values[6::6], strict=True)),
     )
-    for skeleton, frame, max_markers, max_links in zip(
-        skeletons, stack.frames, values[5::6], values[6::6], strict=True
-    ):
-        skeleton.src_frame = frame
-        skeleton.max_markers, skeleton.max_links = max_markers, max_links
     return SkeletonGroup(values[0] * _NS + values[1], reading.frame_id, skeletons)
 
 

@@ -409,25 +409,30 @@ class SkeletonRows(NamedTuple):
         self,
         skeleton_ids: Sequence[int],
         src_time_ns: int | Sequence[int],
-        src_frame: str,
+        src_frame: str | Sequence[str],
         layout: Layout,
         confidences: Sequence[float] | None = None,
+        *,
+        max_sizes: Sequence[tuple[int, int]] | None = None,
     ) -> list[Skeleton]:
         """One skeleton per row, its fields views of the row (taken, not copied).
 
-        ``src_time_ns`` is one stamp for all or one per row. The skeletons remember the stack,
-        so ``stack_rows`` of them, in this order, returns it as it is.
+        ``src_time_ns`` and ``src_frame`` are one value for all or one per row; ``max_sizes``
+        the ``(max_markers, max_links)`` of each row, by default the layout's. The skeletons
+        remember the stack, so ``stack_rows`` of them, in this order, returns it as it is.
         """
         markers, present, links, link_present, boxes = self
-        n_joints, n_links = layout.n_joints, layout.n_links
-        stamps = [src_time_ns] * len(markers) if isinstance(src_time_ns, int) else src_time_ns
-        scores = [math.nan] * len(markers) if confidences is None else confidences
+        count = len(markers)
+        stamps = [src_time_ns] * count if isinstance(src_time_ns, int) else src_time_ns
+        frames = [src_frame] * count if isinstance(src_frame, str) else src_frame
+        scores = [math.nan] * count if confidences is None else confidences
+        sizes = [(layout.n_joints, layout.n_links)] * count if max_sizes is None else max_sizes
         made = []
         # Positional arguments in field order: this runs for every person of every frame.
         for p, skeleton_id in enumerate(skeleton_ids):
             skeleton = Skeleton(
-                int(skeleton_id), stamps[p], src_frame, layout, markers[p], links[p],
-                present[p], link_present[p], scores[p], boxes[p], n_joints, n_links,
+                int(skeleton_id), stamps[p], frames[p], layout, markers[p], links[p],
+                present[p], link_present[p], scores[p], boxes[p], *sizes[p],
             )  # fmt: skip
             skeleton._rows = (self, p)
             made.append(skeleton)

@@ -172,16 +172,14 @@ def _moved(
     if np.may_share_memory(stack.markers, skeletons[0].markers):  # the input's own stack
         stack = SkeletonRows(*(field.copy() for field in stack))
     kernels.move_frame(stack.markers, stack.links, stack.bounding_boxes, *transform)
-    frame = skeletons[0].src_frame or frame_id
-    ids = [skeleton.id for skeleton in skeletons]
-    scores = [skeleton.confidence for skeleton in skeletons]
-    moved = stack.skeletons(ids, times_ns, frame, layout, scores)
-    sizes = (moved[0].max_markers, moved[0].max_links)  # the layout's
-    for old, new in zip(skeletons, moved, strict=True):
-        if (old.src_frame, old.max_markers, old.max_links) != (frame, *sizes):
-            # a group of mixed sources, or message sizes other than the layout's: as it came
-            new.src_frame = old.src_frame or frame_id
-            new.max_markers, new.max_links = old.max_markers, old.max_links
+    moved = stack.skeletons(
+        [skeleton.id for skeleton in skeletons],
+        times_ns,
+        [skeleton.src_frame or frame_id for skeleton in skeletons],
+        layout,
+        [skeleton.confidence for skeleton in skeletons],
+        max_sizes=[(skeleton.max_markers, skeleton.max_links) for skeleton in skeletons],
+    )
     return moved, stack
 
 
