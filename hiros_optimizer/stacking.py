@@ -18,7 +18,7 @@ import numpy as np
 from hiros_core.layouts import Layout
 from hiros_core.model import Skeleton, SkeletonRows, stack_rows
 
-__all__ = ["LayoutRows", "output_skeletons", "stack_frame", "with_rows"]
+__all__ = ["LayoutRows", "output_skeletons", "stack_frame"]
 
 
 @dataclass
@@ -107,46 +107,19 @@ def _unusable_rows(markers: np.ndarray, present: np.ndarray) -> np.ndarray:
     return (present & ~np.isfinite(markers[..., 1:4]).all(axis=-1)).any(axis=-1)
 
 
-def with_rows(
-    skeleton: Skeleton,
-    track_id: int,
-    *,
-    markers: np.ndarray,
-    links: np.ndarray,
-    present: np.ndarray,
-    link_present: np.ndarray,
-) -> Skeleton:
-    """A new skeleton of ``skeleton``'s person and stamp with these rows (views are fine)."""
-    return Skeleton(
-        track_id, skeleton.src_time_ns, skeleton.src_frame, skeleton.layout, markers, links,
-        present, link_present, skeleton.confidence, skeleton.bounding_box.copy(),
-        skeleton.max_markers, skeleton.max_links,
-    )  # fmt: skip
-
-
 def output_skeletons(
     skeletons: list[Skeleton], track_ids: list[int], rows: SkeletonRows
 ) -> list[Skeleton]:
     """New skeletons of ``skeletons``' people and stamps, skeleton ``n`` with row ``n`` of ``rows``.
 
-    ``rows`` become the skeletons' own (not copied). When the skeletons share their frame and
-    the default message sizes (a stage's usual input) they are built as views of ``rows``
+    ``rows`` become the skeletons' own (not copied): the new skeletons are its views
     (``SkeletonRows.skeletons``), so the next stage and the encoder get the stack for free.
     """
-    first = skeletons[0]
-    layout, frame = first.layout, first.src_frame
-    n_joints, n_links = layout.n_joints, layout.n_links
-    if all(
-        s.src_frame == frame and s.max_markers == n_joints and s.max_links == n_links
-        for s in skeletons
-    ):
-        return rows.skeletons(
-            track_ids, [s.src_time_ns for s in skeletons], frame, layout,
-            [s.confidence for s in skeletons],
-        )  # fmt: skip
-    markers, present, links, link_present, _ = rows
-    return [
-        with_rows(s, track_ids[n], markers=markers[n], links=links[n], present=present[n],
-                  link_present=link_present[n])
-        for n, s in enumerate(skeletons)
-    ]  # fmt: skip
+    return rows.skeletons(
+        track_ids,
+        [s.src_time_ns for s in skeletons],
+        [s.src_frame for s in skeletons],
+        skeletons[0].layout,
+        [s.confidence for s in skeletons],
+        max_sizes=[(s.max_markers, s.max_links) for s in skeletons],
+    )
