@@ -10,11 +10,16 @@ compile on first call and are cached on disk (``cache=True``).
 from __future__ import annotations
 
 import math
+import os
+import sys
+from collections.abc import Mapping
+from types import ModuleType
+from typing import Any
 
 import numpy as np
 from numba import njit
 
-__all__ = ["link_rows"]
+__all__ = ["link_rows", "refresh_stale_caches"]
 
 
 @njit(cache=True)
@@ -62,3 +67,29 @@ def link_rows(
         np.asarray(children, dtype=np.intp),
     )
     return links.reshape(*shape, width), present.reshape(shape)
+
+
+def refresh_stale_caches(namespace: Mapping[str, Any], *dependencies: ModuleType) -> int:
+    """Empty the disk caches of ``namespace``'s kernels written before a dependency changed.
+
+    numba keys a cached kernel on its own source file only. A kernel that calls a kernel of
+    another module (``_link_rows`` from here, say) would go on loading the machine code of
+    the old callee after an edit or a ``git pull`` that changed only the callee's file. A
+    module whose kernels call into ``dependencies`` calls this at its end: every kernel whose
+    cache index is older than the newest dependency source is flushed, so it compiles again
+    (once) on its next call. Returns how many caches were flushed. Without a dependency, this
+    module is the one compared with.
+    """
+    sources = dependencies or (sys.modules[__name__],)
+    changed = max(os.stat(module.__file__).st_mtime for module in sources)
+    flushed = 0
+    for kernel in namespace.values():
+        cache = getattr(kernel, "_cache", None)
+        index = getattr(getattr(cache, "_cache_file", None), "_index_path", None)
+        try:
+            if index is not None and os.stat(index).st_mtime < changed:
+                cache.flush()
+                flushed += 1
+        except OSError:  # no index yet, or a read-only cache: nothing stale to load
+            continue
+    return flushed

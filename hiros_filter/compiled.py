@@ -23,7 +23,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from hiros_core.compiled import _link_rows
+from hiros_core.compiled import _link_rows, refresh_stale_caches
 
 __all__ = ["filter_step", "kalman_step", "keep_lengths", "smooth_orientations"]
 
@@ -328,3 +328,6 @@ def filter_step(kalman, model, tracks, frame, lengths, orientations, link_ends):
                     markers[i, j, 8 + axis] = states[1, i, j, axis]
                     markers[i, j, 14 + axis] = states[2, i, j, axis]
     return _link_rows(markers, present, link_ends[0], link_ends[1])
+
+
+refresh_stale_caches(globals())  # the kernels above call hiros_core.compiled's _link_rows

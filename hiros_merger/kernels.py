@@ -16,7 +16,7 @@ import math
 import numpy as np
 from numba import njit
 
-from hiros_core.compiled import _link_rows
+from hiros_core.compiled import _link_rows, refresh_stale_caches
 
 __all__ = ["follow_directions", "fuse", "merge"]
 
@@ -897,3 +897,6 @@ def merge(  # noqa: PLR0917 - the stored detections, the cameras, the parameters
         track_ids, table, final, out_rows, out_present, links, link_present, skeleton, totals,
         counts, oriented,
     )  # fmt: skip
+
+
+refresh_stale_caches(globals())  # the kernels above call hiros_core.compiled's _link_rows

@@ -32,7 +32,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from hiros_core.compiled import _link_rows
+from hiros_core.compiled import _link_rows, refresh_stale_caches
 
 __all__ = ["fit_frame", "fit_frame_links", "fit_people", "learn_frame", "unusable_rows"]
 
@@ -591,3 +591,6 @@ def fit_people(
         np.ascontiguousarray(lengths, float), prior, float(prior_weight), fallback,
         int(sweeps), int(refinements),
     )  # fmt: skip
+
+
+refresh_stale_caches(globals())  # the kernels above call hiros_core.compiled's _link_rows
