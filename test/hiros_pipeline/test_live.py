@@ -54,19 +54,23 @@ def _read_recorded(path: Path) -> list:
 
 
 def _start_recorder(
-    out: Path, idle: float, timeout: float, env: dict[str, str]
+    out: Path, idle: float, timeout: float, env: dict[str, str], nodes: list[str]
 ) -> subprocess.Popen:
-    """The filter output recorder (recorder.py), once it is subscribed, plus 3 s of discovery."""
-    recorder = subprocess.Popen(
-        [sys.executable, str(HERE / "recorder.py"), str(out), str(idle), str(timeout)],
-        env=env,
-        stdout=subprocess.PIPE,
-        text=True,
-    )
+    """The filter output recorder (recorder.py), once it and every one of ``nodes`` is up."""
+    command = [sys.executable, str(HERE / "recorder.py"), str(out), str(idle), str(timeout)]
+    recorder = subprocess.Popen([*command, ",".join(nodes)], env=env, stdout=subprocess.PIPE,
+                                text=True)  # fmt: skip
     assert recorder.stdout is not None
-    assert "ready" in recorder.stdout.readline()
-    time.sleep(3.0)  # discovery
+    assert "recorder ready" in recorder.stdout.readline()
+    started = recorder.stdout.readline()
+    assert "nodes ready" in started, started
+    time.sleep(1.0)  # the nodes' own discovery of each other
     return recorder
+
+
+def _node_names(commands: list[list[str]]) -> list[str]:
+    """The ROS node name of each command (each executable's default name is its own)."""
+    return [Path(command[0]).name for command in commands]
 
 
 def _play_command(scene: Path, rate: float) -> list[str]:
@@ -90,7 +94,7 @@ def _live_run(scene: Path, commands: list[list[str]], env: dict[str, str], out: 
         for c in commands
     ]
     try:
-        recorder = _start_recorder(out, 3.0, 90.0, env)
+        recorder = _start_recorder(out, 3.0, 90.0, env, _node_names(commands))
         play = subprocess.run(
             # half speed: five node processes share two cores with the player
             _play_command(scene, 0.5),
@@ -169,7 +173,7 @@ def test_a_killed_node_restarts_and_the_pipeline_resumes(
     nodes = [subprocess.Popen(c, env=ros_env, stdout=subprocess.DEVNULL) for c in commands]
     out = tmp_path / "live.bin"
     try:
-        recorder = _start_recorder(out, 12.0, 120.0, ros_env)
+        recorder = _start_recorder(out, 12.0, 120.0, ros_env, _node_names(commands))
         play = subprocess.Popen(_play_command(scene, 0.4), env=ros_env, stdout=subprocess.DEVNULL)
         assert recorder.stdout is not None
         assert "first output" in recorder.stdout.readline()
