@@ -10,6 +10,10 @@ Suites:
   pipeline   offline throughput and end-to-end DDS latency (separate nodes and composed)
 Without a suite, all of them run in turn. Timings are best-of-N batches; the machine is shared,
 so read ratios, not absolute times.
+
+The calib suite also takes simulator settings and a recording length, to see what limits the
+accuracy, e.g. ``hiros bench calib --sim oblique_gain=0 --duration 180`` (SimParams names,
+as in ``hiros simulate``).
 """
 
 from __future__ import annotations
@@ -30,6 +34,45 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "suites", nargs="*", metavar="SUITE", help=f"any of {', '.join(SUITES)}; default: all"
     )
     parser.add_argument("--quick", action="store_true", help="fewer seeds and repeats")
+    parser.add_argument(
+        "--sim",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help="calib: a simulator setting on top of every setup (SimParams name; repeatable)",
+    )
+    parser.add_argument(
+        "--duration", type=float, help="calib: seconds per simulated recording (default 60)"
+    )
+
+
+def _sim_overrides(pairs: list[str]) -> dict[str, object]:
+    """``KEY=VALUE`` strings as SimParams values of each field's own type."""
+    import dataclasses
+
+    from hiros_core.errors import ConfigError
+    from hiros_sim import SimParams
+
+    fields = {f.name: f for f in dataclasses.fields(SimParams)}
+    out: dict[str, object] = {}
+    for pair in pairs:
+        key, _, text = pair.partition("=")
+        if key not in fields or not text:
+            msg = f"--sim {pair!r}: expected KEY=VALUE with KEY one of SimParams' settings"
+            raise ConfigError(msg)
+        default = getattr(SimParams(), key)
+        if isinstance(default, bool):
+            out[key] = text.lower() in ("1", "true", "yes", "on")
+        elif isinstance(default, (int, float)):
+            try:
+                out[key] = type(default)(float(text)) if isinstance(default, float) else int(text)
+            except ValueError:
+                msg = f"--sim {pair!r}: {key} takes a number"
+                raise ConfigError(msg) from None
+        else:
+            msg = f"--sim {pair!r}: only number and on/off settings can be set here"
+            raise ConfigError(msg)
+    return out
 
 
 def run(args: argparse.Namespace) -> int:
@@ -39,6 +82,7 @@ def run(args: argparse.Namespace) -> int:
     if unknown:
         console.print(f"hiros bench: unknown suite(s) {unknown}; choose from {list(SUITES)}")
         return 2
+    sim = _sim_overrides(args.sim)  # a mistyped setting fails before anything runs
     failed = []
     for suite in args.suites or SUITES:
         try:
@@ -48,6 +92,9 @@ def run(args: argparse.Namespace) -> int:
             failed.append(suite)
             continue
         console.rule(f"hiros bench {suite}")
-        takes_quick = "quick" in inspect.signature(module.run).parameters
-        module.run(console, quick=args.quick) if takes_quick else module.run(console)
+        options = {"quick": args.quick}
+        if suite == "calib":
+            options.update(sim=sim, duration=args.duration)
+        accepted = inspect.signature(module.run).parameters
+        module.run(console, **{k: v for k, v in options.items() if k in accepted})
     return 1 if failed else 0

@@ -1,0 +1,21 @@
+"""``hiros bench``'s simulator settings for the calib suite."""
+
+from __future__ import annotations
+
+import pytest
+
+from hiros_cli.commands.bench import _sim_overrides
+from hiros_core.errors import ConfigError
+
+
+def test_settings_take_their_fields_types() -> None:
+    got = _sim_overrides(["oblique_gain=0", "n_people=2", "enter_leave=off", "drift_ppm=1e2"])
+    assert got == {"oblique_gain": 0.0, "n_people": 2, "enter_leave": False, "drift_ppm": 100.0}
+    assert isinstance(got["oblique_gain"], float)
+    assert isinstance(got["n_people"], int)
+
+
+@pytest.mark.parametrize("pair", ["nonsense=1", "oblique_gain", "oblique_gain=x", "setup=ring"])
+def test_bad_settings_are_refused_with_the_reason(pair: str) -> None:
+    with pytest.raises(ConfigError, match="--sim"):
+        _sim_overrides([pair])
