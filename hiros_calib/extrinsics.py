@@ -38,7 +38,16 @@ or the mistakes, shapes mislead and such shifts, or generalised least squares wi
 variance estimated from the residuals, do worse than ignoring them. Offsets that turn with
 the limb's direction (what a body model posed on biased evidence does), view-dependent
 weights, leaving out hidden joints, torso-only fits and using every frame do not help either.
-More motion (time, people) does.
+
+Most of what remains does not average out with time: three minutes instead of one give 0.34
+deg and 1.9 cm (``hiros bench calib --duration 180``). It comes from the SDK's larger error on
+bodies seen from the side (``--sim oblique_gain=0``: 0.23 deg, 1.6 cm; 0.20 deg and 1.5 cm over
+three minutes): a body model posed on noisier evidence sits, on average, drawn in towards its
+root (head and neck some 5 cm low, hands high, seen from the side; half that from the front),
+so each camera's skeletons are biased by how it sees the person. Per-frame body scale, offsets
+per side seen (front, left, back, right) in the body's frame, and leaving out the most drawn-in
+joints (spine, clavicles, face, hands) did not reduce it (0.36-0.51 deg); fewer joints cost
+more than the bias they remove.
 """
 
 from __future__ import annotations
