@@ -10,11 +10,9 @@ processes run in a loopback-only network namespace.
 
 from __future__ import annotations
 
-import resource
 import subprocess
 import sys
 import tempfile
-import time
 from pathlib import Path
 
 from hiros_core.calibration import load_calibration
@@ -29,10 +27,8 @@ def offline_throughput(
     """``run_recording`` on 3 cameras x 30 Hz x 4 people, simulated, per process count.
 
     Returns, for each entry of ``processes``: recording seconds, wall seconds, the real-time
-    factor and the wall seconds by part (``RunSummary.seconds``) followed by CPU seconds:
-    ``cpu main`` (this thread), ``cpu writer`` (the rest of this process: the MCAP writer's
-    compression thread) and ``cpu child`` (the reading process). CPU time holds still on a
-    shared machine where wall time does not.
+    factor and the wall seconds by part (``RunSummary.seconds``) followed by the CPU
+    seconds of ``RunSummary.cpu`` as ``cpu main``, ``cpu writer`` and ``cpu child``.
     """
     from hiros_cli.commands.run import OFFLINE_MERGE_RATE, load_pipeline_params
     from hiros_pipeline import run_recording
@@ -49,25 +45,15 @@ def offline_throughput(
         calibration = load_calibration(sim / "calibration.yaml")
         for count in processes:
             out = Path(folder) / f"out{count}.mcap"
-            own, main, child = time.process_time(), time.thread_time(), _children_cpu()
             summary = run_recording(
                 sim / "recording.mcap", calibration, out, params, processes=count
             )
-            main = time.thread_time() - main
-            cpu = {"cpu main": main, "cpu writer": time.process_time() - own - main}
-            if count > 1:
-                cpu["cpu child"] = _children_cpu() - child
+            cpu = {f"cpu {part}": seconds for part, seconds in summary.cpu.items()}
             results[count] = (
                 summary.duration, summary.wall_time, summary.real_time_factor,
                 {**summary.seconds, **cpu},
             )  # fmt: skip
     return results
-
-
-def _children_cpu() -> float:
-    """CPU seconds of this process's ended (waited-for) children so far."""
-    usage = resource.getrusage(resource.RUSAGE_CHILDREN)
-    return usage.ru_utime + usage.ru_stime
 
 
 def latency(mode: str, seconds: float) -> str:

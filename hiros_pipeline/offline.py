@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import multiprocessing as mp
 import os
+import resource
 import time
 from collections import Counter
 from collections.abc import Callable, Iterator
@@ -63,6 +64,11 @@ class RunSummary:
     ``waiting`` (this process idle, waiting for the child's frames)."""
     outputs: dict[str, list] | None = None
     """stage -> its output groups, when ``run_recording(keep_outputs=True)``."""
+    cpu: dict[str, float] = field(default_factory=dict)
+    """CPU seconds over the same span as ``wall_time``: ``main`` (the calling thread),
+    ``writer`` (this process's other threads: the MCAP writer's compression) and, with two
+    processes, ``child`` (reading and tracking). Unlike wall time, CPU time holds still on a
+    shared machine."""
 
     @property
     def duration(self) -> float:
@@ -129,6 +135,7 @@ def run_recording(
     pipeline = Pipeline(params, calibration)
     warm_up()  # like the stages' kernels, loaded before the clock starts (~20 ms)
     started = time.perf_counter()
+    cpu_started = time.thread_time(), time.process_time(), _children_cpu()
     processes = default_processes() if processes is None else processes
     clock, parts = time.perf_counter, {"stages": 0.0, "write": 0.0}
     with (
@@ -157,7 +164,17 @@ def run_recording(
     summary.dropped.update({f"tracker: {k}": v for k, v in item.tracker_drops.items()})
     summary.dropped.update(pipeline.downstream_drops)
     summary.wall_time = time.perf_counter() - started
+    main = time.thread_time() - cpu_started[0]
+    summary.cpu = {"main": main, "writer": time.process_time() - cpu_started[1] - main}
+    if processes > 1:
+        summary.cpu["child"] = _children_cpu() - cpu_started[2]
     return summary
+
+
+def _children_cpu() -> float:
+    """CPU seconds of this process's ended (waited-for) children so far."""
+    usage = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return usage.ru_utime + usage.ru_stime
 
 
 @dataclass

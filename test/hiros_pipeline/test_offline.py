@@ -58,6 +58,11 @@ def test_runs_are_deterministic_in_one_process_or_two(
     assert runs["one"].frames_in == runs["two"].frames_in
     assert runs["one"].published == runs["two"].published
     assert "waiting" in runs["two"].seconds
+    # CPU over the run's own span: the calling thread cannot use more than the wall time
+    assert set(runs["one"].cpu) == {"main", "writer"}
+    assert set(runs["two"].cpu) == {"main", "writer", "child"}
+    assert 0 < runs["one"].cpu["main"] <= runs["one"].wall_time * 1.05 + 0.01
+    assert runs["two"].cpu["child"] > 0
 
 
 def test_an_unreadable_recording_raises_from_the_reading_process(tmp_path: Path) -> None:
