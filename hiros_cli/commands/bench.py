@@ -77,7 +77,7 @@ def _sim_overrides(pairs: list[str]) -> dict[str, object]:
 
 def run(args: argparse.Namespace) -> int:
     """Run each suite's ``run(console, quick=...)`` and print its table."""
-    console = Console()
+    console = Console(soft_wrap=True)  # table rows stay whole lines when piped to a file
     unknown = sorted(set(args.suites) - set(SUITES))
     if unknown:
         console.print(f"hiros bench: unknown suite(s) {unknown}; choose from {list(SUITES)}")
