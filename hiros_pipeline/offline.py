@@ -67,8 +67,9 @@ class RunSummary:
     cpu: dict[str, float] = field(default_factory=dict)
     """CPU seconds over the same span as ``wall_time``: ``main`` (the calling thread),
     ``writer`` (this process's other threads: the MCAP writer's compression) and, with two
-    processes, ``child`` (reading and tracking). Unlike wall time, CPU time holds still on a
-    shared machine."""
+    processes, ``child`` (reading and tracking). Unlike wall time, CPU time leaves out the
+    waits for a busy core, so it stays readable on a shared machine (it still follows the
+    host's speed)."""
 
     @property
     def duration(self) -> float:
