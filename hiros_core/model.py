@@ -410,28 +410,31 @@ class SkeletonRows(NamedTuple):
         skeleton_ids: Sequence[int],
         src_time_ns: int | Sequence[int],
         src_frame: str | Sequence[str],
-        layout: Layout,
+        layout: Layout | Sequence[Layout],
         confidences: Sequence[float] | None = None,
         *,
         max_sizes: Sequence[tuple[int, int]] | None = None,
     ) -> list[Skeleton]:
         """One skeleton per row, its fields views of the row (taken, not copied).
 
-        ``src_time_ns`` and ``src_frame`` are one value for all or one per row; ``max_sizes``
-        the ``(max_markers, max_links)`` of each row, by default the layout's. The skeletons
-        remember the stack, so ``stack_rows`` of them, in this order, returns it as it is.
+        ``src_time_ns``, ``src_frame`` and ``layout`` are one value for all or one per row
+        (layouts of one size: a pickled group may carry equal layouts as distinct objects);
+        ``max_sizes`` the ``(max_markers, max_links)`` of each row, by default its layout's.
+        The skeletons remember the stack, so ``stack_rows`` of them, in this order, returns it
+        as it is.
         """
         markers, present, links, link_present, boxes = self
         count = len(markers)
         stamps = [src_time_ns] * count if isinstance(src_time_ns, int) else src_time_ns
         frames = [src_frame] * count if isinstance(src_frame, str) else src_frame
+        layouts = [layout] * count if isinstance(layout, Layout) else layout
         scores = [math.nan] * count if confidences is None else confidences
-        sizes = [(layout.n_joints, layout.n_links)] * count if max_sizes is None else max_sizes
+        sizes = [(lay.n_joints, lay.n_links) for lay in layouts] if max_sizes is None else max_sizes
         made = []
         # Positional arguments in field order: this runs for every person of every frame.
         for p, skeleton_id in enumerate(skeleton_ids):
             skeleton = Skeleton(
-                int(skeleton_id), stamps[p], frames[p], layout, markers[p], links[p],
+                int(skeleton_id), stamps[p], frames[p], layouts[p], markers[p], links[p],
                 present[p], link_present[p], scores[p], boxes[p], *sizes[p],
             )  # fmt: skip
             skeleton._rows = (self, p)
@@ -576,17 +579,11 @@ def _unpickle_group(stamp_ns: int, frame_id: str, stacked: tuple | list[Skeleton
     """Rebuild a group pickled by ``SkeletonGroup.__reduce__`` (skeletons view distinct rows)."""
     if isinstance(stacked, list):
         return SkeletonGroup(stamp_ns, frame_id, stacked)
-    rows = SkeletonRows(*stacked[1:])
-    markers, marker_present, links, link_present, boxes = rows
-    skeletons = []
-    for p, (sid, src_ns, src_frame, layout, confidence, max_markers, max_links) in enumerate(
-        stacked[0]
-    ):
-        skeleton = Skeleton(
-            sid, src_ns, src_frame, get_layout(layout) if isinstance(layout, str) else layout,
-            markers[p], links[p], marker_present[p], link_present[p], confidence, boxes[p],
-            max_markers, max_links,
-        )  # fmt: skip
-        skeleton._rows = (rows, p)
-        skeletons.append(skeleton)
+    columns = zip(*stacked[0], strict=True)  # one tuple per scalar field of ``_stack``
+    ids, stamps, frames, layouts, confidences, max_markers, max_links = columns
+    skeletons = SkeletonRows(*stacked[1:]).skeletons(
+        ids, stamps, frames,
+        [get_layout(layout) if isinstance(layout, str) else layout for layout in layouts],
+        confidences, max_sizes=list(zip(max_markers, max_links, strict=True)),
+    )  # fmt: skip
     return SkeletonGroup(stamp_ns, frame_id, skeletons)
