@@ -75,15 +75,17 @@ def refresh_stale_caches(namespace: Mapping[str, Any], *dependencies: ModuleType
     numba keys a cached kernel on its own source file only. A kernel that calls a kernel of
     another module (``_link_rows`` from here, say) would go on loading the machine code of
     the old callee after an edit or a ``git pull`` that changed only the callee's file. A
-    module whose kernels call into ``dependencies`` calls this at its end: every kernel whose
-    cache index is older than the newest dependency source is flushed, so it compiles again
-    (once) on its next call. Returns how many caches were flushed. Without a dependency, this
-    module is the one compared with.
+    module whose kernels call into ``dependencies`` calls this at its end: every kernel it
+    defines whose cache index is older than the newest dependency source is flushed, so it
+    compiles again (once) on its next call. Returns how many caches were flushed. Without a
+    dependency, this module is the one compared with.
     """
     sources = dependencies or (sys.modules[__name__],)
     changed = max(os.stat(module.__file__).st_mtime for module in sources)
     flushed = 0
     for kernel in namespace.values():
+        if getattr(getattr(kernel, "py_func", None), "__module__", None) != namespace["__name__"]:
+            continue  # not a kernel, or one imported from elsewhere (its own module's to mind)
         cache = getattr(kernel, "_cache", None)
         index = getattr(getattr(cache, "_cache_file", None), "_index_path", None)
         try:
