@@ -53,14 +53,15 @@ def _sim_overrides(pairs: list[str]) -> dict[str, object]:
     from hiros_core.errors import ConfigError
     from hiros_sim import SimParams
 
-    fields = {f.name: f for f in dataclasses.fields(SimParams)}
+    names = {f.name for f in dataclasses.fields(SimParams)}
+    defaults = SimParams()
     out: dict[str, object] = {}
     for pair in pairs:
         key, _, text = pair.partition("=")
-        if key not in fields or not text:
+        if key not in names or not text:
             msg = f"--sim {pair!r}: expected KEY=VALUE with KEY one of SimParams' settings"
             raise ConfigError(msg)
-        default = getattr(SimParams(), key)
+        default = getattr(defaults, key)
         if isinstance(default, bool):
             out[key] = text.lower() in ("1", "true", "yes", "on")
         elif isinstance(default, (int, float)):
