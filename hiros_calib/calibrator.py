@@ -206,6 +206,7 @@ class Calibrator:
                 pose = estimate_pair_pose(joined, params, camera_a=a, camera_b=b)
                 pose.quality["bodies_associated"] = len(matches)
                 pose.body_pairs = [(i, j) for i, j, _ in matches]
+                pose.reported = joined
                 pairs.append(pose)
         return pairs
 

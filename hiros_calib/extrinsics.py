@@ -71,6 +71,7 @@ __all__ = [
     "ExtrinsicsParams",
     "PairPose",
     "associate",
+    "baseline_pair_pose",
     "estimate_pair_pose",
     "kabsch",
     "pair_correspondences",
@@ -368,6 +369,8 @@ class PairPose:
         correspondences: the joint pairs, with the chosen per-frame mirror applied to b.
         quality: inlier ratio, residual (m), mirrored fraction, correspondences used.
         body_pairs: ``(track_a, track_b)`` indices of the associated same-person tracks.
+        reported: the joint pairs as the SDKs reported them (no mirror chosen, weights from
+            the confidences only), for baselines and diagnostics.
 
     """
 
@@ -379,6 +382,7 @@ class PairPose:
     correspondences: Correspondences | None = None
     quality: dict[str, Any] = field(default_factory=dict)
     body_pairs: list[tuple[int, int]] = field(default_factory=list)
+    reported: Correspondences | None = None
 
     @property
     def ok(self) -> bool:
@@ -441,6 +445,27 @@ def _ransac(
             break
         pose = kabsch(points_a[inliers], points_b[inliers], weights[inliers])
     return pose, inliers
+
+
+def baseline_pair_pose(
+    correspondences: Correspondences, params: ExtrinsicsParams | None = None
+) -> RigidTransform | None:
+    """Camera b's pose in a's frame by Eichler et al. (2022) alone, as a baseline.
+
+    Kabsch inside RANSAC, minimal samples across body parts, on every joint pair as the
+    SDKs reported it, then Kabsch on the inliers. None of what :func:`estimate_pair_pose`
+    adds: no mirror-proof start or per-frame left/right choice, no frame or joint weights
+    from the residuals, no robust refinement, no joint offsets (and, used pair by pair, no
+    joint solve over all cameras). None when too few pairs agree.
+    """
+    params = params or ExtrinsicsParams()
+    c = correspondences
+    points_a, points_b, weights, joint, _ = _flatten(c.points_a, c.points_b, c.weights)
+    if len(points_a) < params.min_correspondences:
+        return None
+    rng = np.random.default_rng(params.seed)
+    pose, inliers = _ransac(points_a, points_b, weights, c.groups[joint], params=params, rng=rng)
+    return pose if inliers.sum() >= params.min_correspondences else None
 
 
 def _choose_view(

@@ -5,6 +5,7 @@ from scipy.spatial.transform import Rotation
 from hiros_calib.extrinsics import (
     ExtrinsicsParams,
     associate,
+    baseline_pair_pose,
     estimate_pair_pose,
     kabsch,
     pair_correspondences,
@@ -85,6 +86,39 @@ def test_swap_choice_matters(facing_cameras):
     )
     assert np.median(chosen) < 0.02
     assert np.percentile(straight, 75) > 5 * np.percentile(chosen, 75)
+
+
+def _truth(scene, a, b):
+    return scene.truth.cameras[a].extrinsics.inverse() @ scene.truth.cameras[b].extrinsics
+
+
+def test_baseline_recovers_a_pose_the_skeletons_agree_on(make_scene):
+    scene = make_scene(angles_deg=(0.0, 90.0), duration=10.0, noise=0.005, seed=3)
+    tracks = {c: extract_tracks(g, c) for c, g in scene.camera_groups.items()}
+    params = ExtrinsicsParams()
+    c = pair_correspondences(
+        tracks["cam0"][0], tracks["cam1"][0], *_clocks(scene, "cam0", "cam1"), params
+    )
+    angle, distance = relative_error(baseline_pair_pose(c, params), _truth(scene, "cam0", "cam1"))
+    assert angle < 0.2
+    assert distance < 0.01
+    assert baseline_pair_pose(c.take(np.arange(1)), params) is None  # too few joint pairs
+
+
+def test_baseline_is_misled_by_mirrored_skeletons(facing_cameras):
+    """Eichler's method alone takes the swapped left/right joints of the camera behind as
+    they are: its pose is far worse than ``estimate_pair_pose``'s on the same pairs."""
+    scene = facing_cameras
+    tracks = {c: extract_tracks(g, c) for c, g in scene.camera_groups.items()}
+    params = ExtrinsicsParams()
+    c = pair_correspondences(
+        tracks["cam0"][0], tracks["cam1"][0], *_clocks(scene, "cam0", "cam1"), params
+    )
+    truth = _truth(scene, "cam0", "cam1")
+    ours, _ = relative_error(estimate_pair_pose(c, params).transform, truth)
+    baseline = baseline_pair_pose(c, params)
+    assert baseline is not None
+    assert relative_error(baseline, truth)[0] > 5 * max(ours, 0.05)
 
 
 def test_two_people_are_associated_by_signature(make_scene):
