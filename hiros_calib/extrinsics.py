@@ -39,15 +39,19 @@ variance estimated from the residuals, do worse than ignoring them. Offsets that
 the limb's direction (what a body model posed on biased evidence does), view-dependent
 weights, leaving out hidden joints, torso-only fits and using every frame do not help either.
 
-Most of what remains does not average out with time: three minutes instead of one give 0.34
-deg and 1.9 cm (``hiros bench calib --duration 180``). It comes from the SDK's larger error on
-bodies seen from the side (``--sim oblique_gain=0``: 0.23 deg, 1.6 cm; 0.20 deg and 1.5 cm over
-three minutes): a body model posed on noisier evidence sits, on average, drawn in towards its
-root (head and neck some 5 cm low, hands high, seen from the side; half that from the front),
-so each camera's skeletons are biased by how it sees the person. Per-frame body scale, offsets
-per side seen (front, left, back, right) in the body's frame, and leaving out the most drawn-in
-joints (spine, clavicles, face, hands) did not reduce it (0.36-0.51 deg); fewer joints cost
-more than the bias they remove.
+Most of what remains does not average out with time: three minutes instead of one give 0.30
+deg and 1.65 cm (``hiros bench calib --duration 180``; 0.34 deg and 1.9 cm while the frames
+kept were capped at 1000 whatever the length). It comes from the SDK's larger error on
+bodies seen from the side (``--sim oblique_gain=0``: 0.23 deg, 1.6 cm; 0.17 deg and 1.5 cm over
+three minutes). Part of it is a bias: a body model posed on noisier evidence sits, on average,
+drawn in towards its root (head and neck some 5 cm low, hands high, seen from the side; half
+that from the front), so each camera's skeletons are biased by how it sees the person. Most of
+it is the larger noise itself: with the other SDK errors off, side views cost 0.18 -> 0.34 deg,
+and still 0.18 -> 0.28 deg when the simulator poses no body model on the evidence (unbiased).
+Per-frame body scale, offsets per side seen (front, left, back, right) in the body's frame,
+leaving out the most drawn-in joints (spine, clavicles, face, hands), weighting frames by how
+alike the two cameras see the body, and a per-frame shrink along the kinematic chains did not
+reduce it (0.32-0.51 deg); fewer joints cost more than the bias they remove.
 """
 
 from __future__ import annotations
@@ -118,17 +122,21 @@ class ExtrinsicsParams:
     cameras' SDKs alternately with the poses (0: assume the SDKs agree on average)."""
     offset_shrinkage: float = 30.0
     """Samples' worth of pull towards 0 on each joint offset, so short tracks stay sane."""
-    max_correspondences: int = 40000
+    max_correspondences: int = 200000
     """Joint correspondences per camera pair kept for the refinements (evenly subsampled);
-    the default keeps every joint of the ``max_frames`` frames: on the simulator, 6000 (a
-    fifth of them) gave about 6 % more rotation error."""
+    the default keeps every joint of the frames kept: on the simulator, keeping a fifth of
+    them gave about 6 % more rotation error."""
     frame_weights: bool = True
     """Weight each frame by the inverse of its residual variance (the SDKs' error changes
     with the view; on the simulator about 4 % less rotation error than equal weights)."""
-    max_frames: int = 1000
-    """Frames (body pairs at one instant) per camera pair kept for the pose, evenly
-    subsampled: the SDK's errors are correlated over several frames (about 0.2 s), so at 30 Hz
-    neighbouring frames add little information and a minute of three people is plenty."""
+    frames_per_minute: float = 1000.0
+    """Frames (body pairs at one instant) per camera pair and minute of recording kept for
+    the pose, evenly subsampled. The SDK's errors are correlated over about 0.2 s, so at 30 Hz
+    neighbouring frames add little information; but a count that does not grow with the
+    recording wastes a long one (on the simulator, 3 minutes: 0.34 deg with 1000 frames in
+    all, 0.28-0.30 deg with 1000 a minute; 1 minute: no better with 3000)."""
+    max_frames: int = 10000
+    """At most this many frames per camera pair, whatever the length (bounds the cost)."""
     min_correspondences: int = 30
     """Fewer usable correspondences than this and the pair gives no pose."""
     seed: int = 0
@@ -529,6 +537,14 @@ def _flatten(
     return points_a[valid], points_b[valid], weights[valid], joint[valid], frame[valid]
 
 
+def _frame_budget(c: Correspondences, params: ExtrinsicsParams) -> int:
+    """Frames kept for a pair: ``frames_per_minute`` over its time span, at most ``max_frames``."""
+    minutes = float(np.ptp(c.times)) / 60.0 if c.n_frames else 0.0
+    return int(
+        min(params.max_frames, max(params.frames_per_minute, params.frames_per_minute * minutes))
+    )
+
+
 def _subsample(count: int, limit: int) -> np.ndarray:
     if count <= limit:
         return np.arange(count)
@@ -670,7 +686,9 @@ def estimate_pair_pose(
             camera_b,
             reason="the two cameras never see the same person at the same time",
         )
-    c = correspondences.take(_subsample(correspondences.n_frames, params.max_frames))
+    c = correspondences.take(
+        _subsample(correspondences.n_frames, _frame_budget(correspondences, params))
+    )
     rng = np.random.default_rng(params.seed)
     inv_a, inv_b, inv_w, inv_groups, _ = _invariant_points(c)
     if len(inv_a) < params.min_correspondences:

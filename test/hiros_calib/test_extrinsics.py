@@ -134,3 +134,19 @@ def test_no_common_view_refuses():
     pose = estimate_pair_pose(None, ExtrinsicsParams())
     assert not pose.ok
     assert "never see the same person" in pose.reason
+
+
+def test_frames_kept_grow_with_the_recording():
+    """A long recording keeps frames in proportion to its length, up to ``max_frames``."""
+    from hiros_calib.extrinsics import Correspondences, _frame_budget
+
+    def pairs(seconds, rate=30.0):
+        times = np.arange(0.0, seconds, 1.0 / rate)
+        zeros = np.zeros((len(times), 2, 3))
+        return Correspondences(zeros, zeros, np.ones((len(times), 2)), np.array([1, 0]),
+                               ("a", "b"), np.zeros(2, dtype=np.int64), times)  # fmt: skip
+
+    params = ExtrinsicsParams(frames_per_minute=1000.0, max_frames=5000)
+    assert _frame_budget(pairs(30.0), params) == 1000  # short: no fewer than a minute's worth
+    assert _frame_budget(pairs(180.0), params) == pytest.approx(3000, abs=1)
+    assert _frame_budget(pairs(600.0), params) == 5000
