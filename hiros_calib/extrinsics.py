@@ -51,7 +51,7 @@ and still 0.18 -> 0.28 deg when the simulator poses no body model on the evidenc
 Per-frame body scale, offsets per side seen (front, left, back, right) in the body's frame,
 leaving out the most drawn-in joints (spine, clavicles, face, hands), weighting frames by how
 alike the two cameras see the body, and a per-frame shrink along the kinematic chains did not
-reduce it (0.32-0.51 deg); fewer joints cost more than the bias they remove.
+reduce it (0.36-0.51 deg); fewer joints cost more than the bias they remove.
 """
 
 from __future__ import annotations
