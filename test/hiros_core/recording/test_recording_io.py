@@ -323,3 +323,62 @@ def test_chunks_hold_messages_larger_than_their_buffer_and_reserved_space_commit
     stream.seek(0)
     read = [bytes(m.data) for _, _, m in make_reader(stream).iter_messages()]
     assert read == payloads
+
+
+def _chunk_offsets(path):
+    """(start, length) of each chunk record, from the file's summary."""
+    with path.open("rb") as stream:
+        summary = make_reader(stream).get_summary()
+    return [(c.chunk_start_offset, c.chunk_length) for c in summary.chunk_indexes]
+
+
+def _damaged_copy(path, out, offset):
+    data = bytearray(path.read_bytes())
+    data[offset] ^= 0xFF
+    out.write_bytes(bytes(data))
+    return out
+
+
+@pytest.mark.parametrize("transient", [False, True])
+def test_a_damaged_chunk_is_skipped_and_counted(tmp_path, driver_frames, transient):
+    path = tmp_path / "take.mcap"
+    _write(path, driver_frames, chunk_size=20_000)
+    (start, length), *rest = _chunk_offsets(path)[1:]
+    assert rest
+    damaged = _damaged_copy(path, tmp_path / "damaged.mcap", start + length // 2)
+    with RecordingReader(path) as reader:
+        whole = [b.data(i) for b in reader.batches() for i in range(len(b))]
+    with RecordingReader(damaged) as reader:
+        read = [b.data(i) for b in reader.batches(transient=transient) for i in range(len(b))]
+        lost = reader.drops["damaged_chunk"]
+        assert "chunk at byte" in reader.problems[0]
+    assert 0 < lost < 200
+    assert len(read) + lost == len(whole) == 200
+    assert set(read) <= set(whole)
+
+
+def test_a_damaged_chunk_of_a_file_without_summary_is_skipped(tmp_path, driver_frames):
+    path = tmp_path / "take.mcap"
+    _write(path, driver_frames, chunk_size=20_000)
+    chunks = _chunk_offsets(path)
+    cut = chunks[-1][0] + chunks[-1][1]  # the last chunk ends there: no index, no summary
+    start, length = chunks[1]
+    damaged = _damaged_copy(path, tmp_path / "damaged.mcap", start + length // 2)
+    damaged.write_bytes(damaged.read_bytes()[:cut])
+    with RecordingReader(damaged) as reader:
+        read = list(reader.messages())
+        assert reader.drops["damaged_chunk"] == 1
+        assert "damaged" in reader.problems[0]
+    assert 0 < len(read) < 200
+    last = driver_frames[-1][1].stamp_ns
+    assert read[-1].log_time_ns == last  # the chunks after the damaged one are read
+
+
+def test_a_damaged_summary_is_not_trusted(tmp_path, driver_frames):
+    path = tmp_path / "take.mcap"
+    _write(path, driver_frames, chunk_size=20_000)
+    damaged = _damaged_copy(path, tmp_path / "damaged.mcap", len(path.read_bytes()) - 60)
+    with RecordingReader(damaged) as reader:
+        assert len(list(reader.messages())) == 200
+        assert "summary" in reader.problems[0]
+        assert not reader.drops
