@@ -203,6 +203,13 @@ class _McapSource(_Source):
             self._data_end = False
             for _ in self._scan(None, collect_only=True):
                 pass
+            if not self.topics and not self._data_end:
+                self.stream.close()
+                msg = (
+                    f"{path} ends early or is damaged at byte {self._stopped_at}, before any "
+                    "topic is defined in it: nothing in it can be read"
+                )
+                raise RecordingError(msg)
             if damage and self._data_end:  # else the file ends early, which _scan reports
                 self.problems.append(
                     f"{path}: its summary (the index at its end) is damaged ({damage}); "
@@ -253,6 +260,7 @@ class _McapSource(_Source):
                     self._data_end = True
                     return
         except (McapError, ValueError, struct.error, EOFError, OSError) as exc:
+            self._stopped_at = self.stream.tell()
             if not collect_only:
                 self.drops["truncated"] += 1
                 self.problems.append(

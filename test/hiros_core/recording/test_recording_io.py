@@ -382,3 +382,11 @@ def test_a_damaged_summary_is_not_trusted(tmp_path, driver_frames):
         assert len(list(reader.messages())) == 200
         assert "summary" in reader.problems[0]
         assert not reader.drops
+
+
+def test_a_file_cut_before_any_topic_is_refused(tmp_path, driver_frames):
+    path = tmp_path / "take.mcap"
+    _write(path, driver_frames)
+    path.write_bytes(path.read_bytes()[:100])
+    with pytest.raises(RecordingError, match="before any topic is defined"):
+        RecordingReader(path)
