@@ -123,6 +123,8 @@ def print_summary(console: Console, summary, out: Path) -> None:  # noqa: ANN001
     if not summary.dropped:
         table.add_row("dropped", "0")
     console.print(table)
+    for problem in summary.problems:
+        console.print(f"warning: {problem}", markup=False, highlight=False)
     console.print(
         f"{summary.duration:.1f} s of recording in {summary.wall_time:.2f} s "
         f"({summary.real_time_factor:.0f}x real time)"

@@ -68,6 +68,7 @@ def iter_groups(
     topics: Iterable[str] | None = None,
     bridge_params: DriverBridgeParams | None = None,
     drops: Counter[str] | None = None,
+    problems: list[str] | None = None,
 ) -> Iterator[tuple[str, SkeletonGroup]]:
     """``(source, group)`` for every skeleton message, in log-time order.
 
@@ -78,13 +79,17 @@ def iter_groups(
         bridge_params: ``DriverBridgeParams`` for MarkerArray topics (default: Azure driver).
         drops: counter that receives, when the iteration ends, the reader's and bridges'
             drop reasons plus ``undecodable`` (bytes the codec rejects).
+        problems: list that receives, when the iteration ends, the reader's sentences on
+            what it met (a truncated file, a damaged chunk), for the user.
 
     Yields:
         ``source`` is the camera name for ``/<cam>/body_tracking_data`` and
         ``/<cam>/skeletons``, else the topic; ``group`` is in the message's frame and clock.
 
     """
-    logged = iter_logged_groups(recording, topics=topics, bridge_params=bridge_params, drops=drops)
+    logged = iter_logged_groups(
+        recording, topics=topics, bridge_params=bridge_params, drops=drops, problems=problems
+    )
     with contextlib.closing(logged):
         for source, group, _ in logged:
             yield source, group
@@ -96,6 +101,7 @@ def iter_logged_groups(
     topics: Iterable[str] | None = None,
     bridge_params: DriverBridgeParams | None = None,
     drops: Counter[str] | None = None,
+    problems: list[str] | None = None,
 ) -> Iterator[tuple[str, SkeletonGroup, int]]:
     """``iter_groups`` with each group's log time (when the recorder received it), in ns.
 
@@ -127,6 +133,8 @@ def iter_logged_groups(
     finally:
         for counter in (reader.drops, *(b.drops for b in bridges.values())):
             drops.update({reason: n for reason, n in counter.items() if n})
+        if problems is not None:
+            problems.extend(reader.problems)
         if reader is not recording:
             reader.close()
 

@@ -390,3 +390,13 @@ def test_a_file_cut_before_any_topic_is_refused(tmp_path, driver_frames):
     path.write_bytes(path.read_bytes()[:100])
     with pytest.raises(RecordingError, match="before any topic is defined"):
         RecordingReader(path)
+
+
+def test_iter_groups_hands_the_readers_problems_on(tmp_path, driver_frames):
+    path = tmp_path / "cut.mcap"
+    _write(path, driver_frames, chunk_size=20_000)
+    path.write_bytes(path.read_bytes()[: int(path.stat().st_size * 0.6)])
+    problems: list[str] = []
+    assert list(iter_groups(path, problems=problems))
+    assert len(problems) == 1
+    assert "ends early" in problems[0]

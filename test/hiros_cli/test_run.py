@@ -1,0 +1,37 @@
+"""``hiros run`` on damaged input: warnings say what was lost."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+from mcap.reader import make_reader
+
+from hiros_cli.main import main
+from hiros_sim import SimParams, simulate, write_recording
+
+
+@pytest.fixture(scope="module")
+def sim(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    folder = tmp_path_factory.mktemp("sim")
+    write_recording(simulate(SimParams(n_cameras=2, n_people=1, duration=8.0, seed=1)), folder)
+    return folder
+
+
+def _run(sim: Path, recording: Path, out: Path, *extra: str) -> int:
+    calibration = str(sim / "calibration.yaml")
+    return main(["run", str(recording), "--calibration", calibration, "--out", str(out), *extra])
+
+
+def test_what_the_reader_lost_is_printed(
+    sim: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    cut = tmp_path / "cut.mcap"
+    with (sim / "recording.mcap").open("rb") as stream:
+        (chunk, *_) = make_reader(stream).get_summary().chunk_indexes
+    end = chunk.chunk_start_offset + chunk.chunk_length
+    cut.write_bytes((sim / "recording.mcap").read_bytes()[: end + 5])  # a recorder killed there
+    assert _run(sim, cut, tmp_path / "out.mcap", "--processes", "1") == 0
+    printed = " ".join(capsys.readouterr().out.split())
+    assert "warning: " in printed
+    assert "ends early or is damaged" in printed
