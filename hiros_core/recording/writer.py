@@ -11,6 +11,7 @@ A path ending in ``.mcap`` gives a single file; any other path gives a rosbag2 f
 
 from __future__ import annotations
 
+import contextlib
 from collections import Counter
 from pathlib import Path
 from types import TracebackType
@@ -219,6 +220,20 @@ class RecordingWriter:
             self._stream.close()
         if self.folder is not None:
             (self.folder / "metadata.yaml").write_text(self._metadata())
+
+    def discard(self) -> None:
+        """Close and delete the recording: the output of a failed run must not pass for one.
+
+        Only what this writer created goes (its MCAP file, and for a folder its
+        ``metadata.yaml`` and the folder once empty).
+        """
+        with contextlib.suppress(Exception):  # the file goes anyway
+            self.close()
+        self.file_path.unlink(missing_ok=True)
+        if self.folder is not None:
+            (self.folder / "metadata.yaml").unlink(missing_ok=True)
+            with contextlib.suppress(OSError):  # not empty: something else was put there
+                self.folder.rmdir()
 
     def _metadata(self) -> str:
         """rosbag2 ``metadata.yaml`` (version 9) describing the folder's one MCAP file."""

@@ -87,3 +87,13 @@ def test_a_damaged_chunk_is_accounted_for_and_described(
     assert summary.dropped["reader: damaged_chunk"] > 0
     assert sum(summary.frames_in.values()) + reader_dropped == camera_messages
     assert "damaged" in summary.problems[0]
+
+
+@pytest.mark.parametrize("processes", [1, 2])
+def test_a_failed_run_leaves_no_output_behind(tmp_path: Path, processes: int) -> None:
+    broken = tmp_path / "broken.mcap"
+    broken.write_bytes(b"not a recording at all")
+    for out in (tmp_path / "out.mcap", tmp_path / "folder"):
+        with pytest.raises(RecordingError):
+            run_recording(broken, Calibration("k01"), out, processes=processes)
+        assert not out.exists()  # a second try is not told the output "exists already"

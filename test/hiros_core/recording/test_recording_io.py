@@ -400,3 +400,15 @@ def test_iter_groups_hands_the_readers_problems_on(tmp_path, driver_frames):
     assert list(iter_groups(path, problems=problems))
     assert len(problems) == 1
     assert "ends early" in problems[0]
+
+
+@pytest.mark.parametrize("name", ["take.mcap", "take"])
+def test_discard_removes_what_the_writer_made(tmp_path, driver_frames, name):
+    writer = _write(tmp_path / name, driver_frames[:4])
+    writer.discard()
+    assert not (tmp_path / name).exists()
+    folder = tmp_path / "kept"
+    writer = RecordingWriter(folder)
+    (folder / "notes.txt").write_text("mine")
+    writer.discard()
+    assert [p.name for p in folder.iterdir()] == ["notes.txt"]
