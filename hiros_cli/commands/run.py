@@ -20,7 +20,7 @@ from rich.table import Table
 
 from hiros_cli.progress import progress_bar
 from hiros_core.calibration import Calibration, load_calibration, save_calibration
-from hiros_core.errors import ConfigError
+from hiros_core.errors import ConfigError, RecordingError
 
 HELP = "offline pipeline over a recording -> one MCAP with every stage's output"
 OFFLINE_MERGE_RATE = 30.0
@@ -90,6 +90,25 @@ def resolve_calibration(spec: str, recording: Path, out: Path, console: Console)
     return calibration
 
 
+def require_camera_topics(recording: Path) -> None:
+    """Refuse, before any work or output, a recording that holds no camera skeleton topic.
+
+    Raises:
+        RecordingError: naming the topics the recording does hold.
+
+    """
+    from hiros_core.recording import RecordingReader, group_topics
+
+    with RecordingReader(recording) as reader:
+        topics = reader.topics
+    if not group_topics(topics):
+        msg = (
+            f"{recording} holds no camera skeletons (SkeletonGroup topics or Azure-driver "
+            f"MarkerArray topics /<camera>/body_tracking_data); its topics: {sorted(topics)}"
+        )
+        raise RecordingError(msg)
+
+
 def run(args: argparse.Namespace) -> int:
     """Run, then print the accounting table."""
     from hiros_pipeline import run_recording
@@ -98,6 +117,7 @@ def run(args: argparse.Namespace) -> int:
     console = Console()
     if args.out.exists() and args.force:
         args.out.unlink()
+    require_camera_topics(args.recording)
     params = load_pipeline_params(args.params)
     params.merger.output_rate = args.merge_rate
     calibration = resolve_calibration(args.calibration, args.recording, args.out, console)

@@ -1,4 +1,4 @@
-"""``hiros run`` on damaged input: warnings say what was lost."""
+"""``hiros run`` on bad input: one clear line and no output, or warnings on what was lost."""
 
 from __future__ import annotations
 
@@ -8,6 +8,7 @@ import pytest
 from mcap.reader import make_reader
 
 from hiros_cli.main import main
+from hiros_core.recording import RecordingWriter
 from hiros_sim import SimParams, simulate, write_recording
 
 
@@ -21,6 +22,20 @@ def sim(tmp_path_factory: pytest.TempPathFactory) -> Path:
 def _run(sim: Path, recording: Path, out: Path, *extra: str) -> int:
     calibration = str(sim / "calibration.yaml")
     return main(["run", str(recording), "--calibration", calibration, "--out", str(out), *extra])
+
+
+def test_a_recording_without_camera_topics_is_refused_before_any_output(
+    sim: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    chatter = tmp_path / "chatter.mcap"
+    with RecordingWriter(chatter) as writer:
+        writer.write("/chatter", "std_msgs/msg/String", b"\x00\x01\x00\x00\x02\x00\x00\x00a\x00", 1)
+    out = tmp_path / "out.mcap"
+    assert _run(sim, chatter, out) == 1
+    err = capsys.readouterr().err
+    assert "holds no camera skeletons" in err
+    assert "['/chatter']" in err
+    assert not out.exists()
 
 
 def test_what_the_reader_lost_is_printed(
