@@ -109,18 +109,38 @@ def require_camera_topics(recording: Path) -> None:
         raise RecordingError(msg)
 
 
+def remove_previous_output(out: Path) -> None:
+    """``--force``: remove an earlier output, a ``.mcap`` file or a rosbag2 folder of one.
+
+    Raises:
+        RecordingError: ``out`` is a folder holding anything else (it is left alone).
+
+    """
+    if not out.is_dir():
+        out.unlink(missing_ok=True)
+        return
+    ours = {f"{out.name}_0.mcap", "metadata.yaml"}
+    others = sorted(p.name for p in out.iterdir() if p.name not in ours)
+    if others:
+        msg = f"--force: {out} is a folder holding more than a recording ({others}); not removed"
+        raise RecordingError(msg)
+    for name in ours:
+        (out / name).unlink(missing_ok=True)
+    out.rmdir()
+
+
 def run(args: argparse.Namespace) -> int:
     """Run, then print the accounting table."""
     from hiros_pipeline import run_recording
     from hiros_pipeline.offline import message_count
 
     console = Console()
-    if args.out.exists() and args.force:
-        args.out.unlink()
     require_camera_topics(args.recording)
     params = load_pipeline_params(args.params)
     params.merger.output_rate = args.merge_rate
     calibration = resolve_calibration(args.calibration, args.recording, args.out, console)
+    if args.force:
+        remove_previous_output(args.out)
     with progress_bar(f"hiros run {args.recording.name}", message_count(args.recording)) as advance:
         summary = run_recording(
             args.recording, calibration, args.out, params, advance, processes=args.processes

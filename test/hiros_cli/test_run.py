@@ -50,3 +50,18 @@ def test_what_the_reader_lost_is_printed(
     printed = " ".join(capsys.readouterr().out.split())
     assert "warning: " in printed
     assert "ends early or is damaged" in printed
+
+
+def test_force_replaces_a_folder_output_but_not_a_folder_of_other_files(
+    sim: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    out = tmp_path / "out"
+    recording = sim / "recording.mcap"
+    assert _run(sim, recording, out, "--processes", "1") == 0
+    assert _run(sim, recording, out, "--processes", "1", "--force") == 0
+    assert sorted(p.name for p in out.iterdir()) == ["metadata.yaml", "out_0.mcap"]
+    (out / "notes.txt").write_text("mine")
+    capsys.readouterr()
+    assert _run(sim, recording, out, "--processes", "1", "--force") == 1
+    assert "holding more than a recording" in capsys.readouterr().err
+    assert (out / "out_0.mcap").exists()
