@@ -412,3 +412,17 @@ def test_discard_removes_what_the_writer_made(tmp_path, driver_frames, name):
     (folder / "notes.txt").write_text("mine")
     writer.discard()
     assert [p.name for p in folder.iterdir()] == ["notes.txt"]
+
+
+def test_a_time_mcap_cannot_hold_is_refused_and_the_file_still_closes(tmp_path, samples):
+    path = tmp_path / "take.mcap"
+    group = samples.make_group(0)
+    with RecordingWriter(path) as writer:
+        writer.write("/note", "std_msgs/msg/String", b"\x00\x01\x00\x00\x01\x00\x00\x00\x00", 5)
+        for bad in (-1, 1 << 64):
+            with pytest.raises(RecordingError, match="cannot be recorded"):
+                writer.write("/note", "std_msgs/msg/String", b"\x00\x01\x00\x00", bad)
+            with pytest.raises(RecordingError, match="cannot be recorded"):
+                writer.write_group("/k01/skeletons", group, bad)
+    with RecordingReader(path) as reader:
+        assert [m.log_time_ns for m in reader.messages()] == [5]
