@@ -118,6 +118,7 @@ def convert(
     from hiros_azure_bridge import group_to_driver_markers
     from hiros_core.recording import RecordingWriter
 
+    drops = drops if drops is not None else Counter()
     streams = read_streams(in_path, fmt, camera=camera, layout=layout, drops=drops)
     order = sorted(
         (int(stream.receive_ns[i]), name, i)
@@ -125,7 +126,10 @@ def convert(
         for i in range(len(stream.groups))
     )
     if not order:
-        msg = f"{in_path} holds no skeletons to convert"
+        dropped = ", ".join(f"{reason} {n}" for reason, n in sorted(drops.items()) if n)
+        msg = f"{in_path} holds no skeletons to convert" + (
+            f" (dropped: {dropped})" if dropped else ""
+        )
         raise RecordingError(msg)
     counts: Counter[str] = Counter()
     with RecordingWriter(out_path) as writer:
