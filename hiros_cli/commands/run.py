@@ -13,6 +13,7 @@ Parameters are the nodes' own: `--params config/pipeline.yaml` (ROS parameter-fi
 from __future__ import annotations
 
 import argparse
+import math
 from pathlib import Path
 
 from rich.console import Console
@@ -41,7 +42,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--force", action="store_true", help="overwrite --out if it exists")
     parser.add_argument(
         "--merge-rate",
-        type=float,
+        type=_rate,
         default=OFFLINE_MERGE_RATE,
         help="merger output rate in Hz offline (default 30; 0: on every camera frame, as live)",
     )
@@ -52,6 +53,18 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="2: read and track in a second process beside the other stages (default where "
         "a second core exists); 1: everything in this process. Same output either way",
     )
+
+
+def _rate(text: str) -> float:
+    """``--merge-rate``: Hz, finite and 0 or more (NaN or a negative rate has no period)."""
+    try:
+        value = float(text)
+    except ValueError:
+        value = math.nan
+    if not (math.isfinite(value) and value >= 0):
+        msg = f"{text!r} is not a rate in Hz (a number, 0 or more)"
+        raise argparse.ArgumentTypeError(msg)
+    return value
 
 
 def load_pipeline_params(path: Path | None):  # noqa: ANN201 - PipelineParams, imported lazily

@@ -65,3 +65,13 @@ def test_force_replaces_a_folder_output_but_not_a_folder_of_other_files(
     assert _run(sim, recording, out, "--processes", "1", "--force") == 1
     assert "holding more than a recording" in capsys.readouterr().err
     assert (out / "out_0.mcap").exists()
+
+
+@pytest.mark.parametrize("rate", ["nan", "-5", "inf", "fast"])
+def test_a_merge_rate_without_a_period_is_a_usage_error(
+    sim: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str], rate: str
+) -> None:
+    with pytest.raises(SystemExit) as exit_:
+        _run(sim, sim / "recording.mcap", tmp_path / "out.mcap", "--merge-rate", rate)
+    assert exit_.value.code == 2
+    assert "is not a rate in Hz" in capsys.readouterr().err
