@@ -37,7 +37,8 @@ def detect_format(path: str | Path) -> str:
     """
     path = Path(path)
     if not path.is_file():
-        msg = f"input file {path} does not exist"
+        problem = "is a folder, not a file" if path.is_dir() else "does not exist"
+        msg = f"input file {path} {problem}"
         raise RecordingError(msg)
     if path.suffix.lower() == ".json":
         return "k4abt-json"
@@ -132,16 +133,21 @@ def convert(
         )
         raise RecordingError(msg)
     counts: Counter[str] = Counter()
-    with RecordingWriter(out_path) as writer:
-        for done, (receive_ns, name, i) in enumerate(order, start=1):
-            group = streams[name].groups[i]
-            if skeleton_groups:
-                topic = f"/{name}/skeletons"
-                writer.write_group(topic, group, receive_ns)
-            else:
-                topic = f"/{name}/body_tracking_data"
-                writer.write_marker_array(topic, group_to_driver_markers(group), receive_ns)
-            counts[topic] += 1
-            if progress is not None:
-                progress(done, len(order))
+    writer = RecordingWriter(out_path)
+    try:
+        with writer:
+            for done, (receive_ns, name, i) in enumerate(order, start=1):
+                group = streams[name].groups[i]
+                if skeleton_groups:
+                    topic = f"/{name}/skeletons"
+                    writer.write_group(topic, group, receive_ns)
+                else:
+                    topic = f"/{name}/body_tracking_data"
+                    writer.write_marker_array(topic, group_to_driver_markers(group), receive_ns)
+                counts[topic] += 1
+                if progress is not None:
+                    progress(done, len(order))
+    except Exception:  # a message that cannot be encoded: no half-written recording is left
+        writer.discard()
+        raise
     return counts
