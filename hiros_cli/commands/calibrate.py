@@ -85,9 +85,12 @@ def run(args: argparse.Namespace) -> int:
 
 
 def read_camera_groups(
-    recording: Path, drops: Counter[str] | None = None
+    recording: Path, drops: Counter[str] | None = None, problems: list[str] | None = None
 ) -> tuple[dict[str, list[SkeletonGroup]], dict[str, list[int]]]:
-    """Per camera its SkeletonGroups and the log (arrival) time of each, in log order."""
+    """Per camera its SkeletonGroups and the log (arrival) time of each, in log order.
+
+    ``drops`` and ``problems`` receive the reader's (see ``iter_groups``).
+    """
     from hiros_core.recording import RecordingReader, iter_groups
 
     reader = RecordingReader(recording)
@@ -105,7 +108,7 @@ def read_camera_groups(
     groups: dict[str, list[SkeletonGroup]] = defaultdict(list)
     arrivals: dict[str, list[int]] = defaultdict(list)
     try:
-        for source, group in iter_groups(reader, drops=drops):
+        for source, group in iter_groups(reader, drops=drops, problems=problems):
             groups[source].append(group)
             arrivals[source].append(last_log_time[0])
     finally:
@@ -142,7 +145,10 @@ def calibrate_recording(
         transient=True,
     ) as bar:
         task = bar.add_task("reading the recording", total=100)
-        groups, arrivals = read_camera_groups(recording)
+        problems: list[str] = []
+        groups, arrivals = read_camera_groups(recording, problems=problems)
+        for problem in problems:  # a truncated or damaged recording: said before its result
+            bar.console.print(f"warning: {problem}", markup=False, highlight=False)
         if len(groups) < 2:
             msg = (
                 f"{recording}: calibration needs skeletons of two or more cameras, "
