@@ -38,6 +38,8 @@ __all__ = [
 DRIVER_TOPIC_SUFFIX = "body_tracking_data"
 """Last name of the Azure Kinect driver's skeleton topic (``/<cam>/body_tracking_data``)."""
 _CAMERA_TOPICS = (DRIVER_TOPIC_SUFFIX, "skeletons")
+PIPELINE_OUTPUTS = frozenset(f"/hiros/{s}" for s in ("tracker", "merger", "optimizer", "filter"))
+"""The pipeline's own SkeletonGroup outputs: people already fused, not any camera's frames."""
 
 
 def source_name(topic: str) -> str:
@@ -51,13 +53,15 @@ def source_name(topic: str) -> str:
 def group_topics(topics: dict[str, str]) -> dict[str, str]:
     """The topics ``iter_groups`` reads by default: ``{topic: msgtype}``.
 
-    Every SkeletonGroup topic, and MarkerArray topics named ``.../body_tracking_data`` (other
-    MarkerArrays, such as the visualiser's, are drawings, not detections).
+    Every SkeletonGroup topic but the pipeline's outputs (``PIPELINE_OUTPUTS``, found in a
+    recording of a live session or a ``hiros run`` output), and MarkerArray topics named
+    ``.../body_tracking_data`` (other MarkerArrays, such as the visualiser's, are drawings,
+    not detections).
     """
     return {
         topic: msgtype
         for topic, msgtype in topics.items()
-        if msgtype == SKELETON_GROUP
+        if (msgtype == SKELETON_GROUP and topic not in PIPELINE_OUTPUTS)
         or (msgtype == MARKER_ARRAY and topic.rstrip("/").endswith(DRIVER_TOPIC_SUFFIX))
     }
 

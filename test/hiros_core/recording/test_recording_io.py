@@ -426,3 +426,14 @@ def test_a_time_mcap_cannot_hold_is_refused_and_the_file_still_closes(tmp_path, 
                 writer.write_group("/k01/skeletons", group, bad)
     with RecordingReader(path) as reader:
         assert [m.log_time_ns for m in reader.messages()] == [5]
+
+
+def test_the_pipelines_outputs_are_not_camera_topics(tmp_path, samples):
+    path = tmp_path / "session.mcap"
+    with RecordingWriter(path) as writer:  # a live session recorded with every topic
+        for index in range(3):
+            group = samples.make_group(index)
+            writer.write_group("/k01/skeletons", group)
+            for stage in ("tracker", "merger", "optimizer", "filter"):
+                writer.write_group(f"/hiros/{stage}", group)
+    assert {source for source, _ in iter_groups(path)} == {"k01"}
