@@ -60,9 +60,11 @@ def run(args: argparse.Namespace) -> int:
     from rich.console import Console
 
     from hiros_calib.calibrator import CalibratorParams
+    from hiros_cli.commands.run import require_camera_topics
     from hiros_core.calibration import save_calibration
 
     console = Console()
+    require_camera_topics(args.recording)
     params = CalibratorParams(reference=args.reference or "")
     if args.prior_window is not None:
         params.prior_window = args.prior_window

@@ -66,3 +66,11 @@ def test_what_the_reader_lost_is_printed(recording, tmp_path, capsys):
     printed = " ".join(capsys.readouterr().out.split())
     assert "warning: " in printed
     assert "is damaged (its CRC does not match)" in printed
+
+
+def test_a_recording_without_camera_topics_names_its_topics(tmp_path, capsys):
+    path = tmp_path / "chatter.mcap"
+    with RecordingWriter(path) as writer:
+        writer.write("/chatter", "std_msgs/msg/String", b"\x00\x01\x00\x00\x01\x00\x00\x00\x00", 1)
+    assert main(["calibrate", str(path), "--out", str(tmp_path / "calib.yaml")]) == 1
+    assert "holds no camera skeletons" in capsys.readouterr().err
