@@ -72,9 +72,19 @@ def main(argv: list[str] | None = None) -> int:
     except HirosError as exc:
         print(f"hiros {args.command}: error: {exc}", file=sys.stderr)
         return 1
+    except OSError as exc:  # an output path that cannot be written: a folder there, no room
+        print(f"hiros {args.command}: error: {_os_problem(exc)}", file=sys.stderr)
+        return 1
     except KeyboardInterrupt:
         print(f"hiros {args.command}: interrupted", file=sys.stderr)
         return 130
+
+
+def _os_problem(exc: OSError) -> str:
+    """``PATH: reason`` for the user, without Python's ``[Errno N]`` decoration."""
+    if exc.filename is None or not exc.strerror:
+        return str(exc)
+    return f"{exc.filename}: {exc.strerror}"
 
 
 if __name__ == "__main__":

@@ -74,6 +74,21 @@ class Table:
             raise RecordingError(msg) from None
         return out
 
+    def readable(self, column: int, *, integer: bool = False) -> np.ndarray:
+        """``(N,)`` bool: which cells of ``column`` ``numbers`` (or ``integers``) can read.
+
+        For formats where one bad row should cost that row, not the file: the caller drops
+        the others with ``keep``.
+        """
+        unique, inverse = np.unique(np.char.strip(self.rows[:, column]), return_inverse=True)
+        check = _is_integer if integer else _is_number
+        return np.array([check(cell) for cell in unique.tolist()], dtype=bool)[inverse.ravel()]
+
+    def keep(self, rows: np.ndarray, drops: Counter[str]) -> None:
+        """Keep the rows where ``rows`` is True; the others are counted ``bad_row``."""
+        drops["bad_row"] += int((~rows).sum())
+        self.rows = self.rows[rows]
+
     def integers(self, column: int) -> np.ndarray:
         """``(N,)`` int64 of one column, exact for large stamps; raises RecordingError if bad."""
         try:
@@ -81,6 +96,23 @@ class Table:
         except ValueError as exc:
             msg = f"{self.path}: column {self.header[column]!r} must hold integers ({exc})"
             raise RecordingError(msg) from None
+
+
+def _is_integer(cell: str) -> bool:
+    try:
+        return -(1 << 63) <= int(cell) < 1 << 63
+    except ValueError:
+        return False
+
+
+def _is_number(cell: str) -> bool:
+    if cell.lower() in _MISSING:
+        return True
+    try:
+        float(cell)
+    except ValueError:
+        return False
+    return True
 
 
 def read_table(path: str | Path, drops: Counter[str] | None = None) -> Table:

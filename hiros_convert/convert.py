@@ -37,7 +37,8 @@ def detect_format(path: str | Path) -> str:
     """
     path = Path(path)
     if not path.is_file():
-        msg = f"input file {path} does not exist"
+        problem = "is a folder, not a file" if path.is_dir() else "does not exist"
+        msg = f"input file {path} {problem}"
         raise RecordingError(msg)
     if path.suffix.lower() == ".json":
         return "k4abt-json"
@@ -118,6 +119,7 @@ def convert(
     from hiros_azure_bridge import group_to_driver_markers
     from hiros_core.recording import RecordingWriter
 
+    drops = drops if drops is not None else Counter()
     streams = read_streams(in_path, fmt, camera=camera, layout=layout, drops=drops)
     order = sorted(
         (int(stream.receive_ns[i]), name, i)
@@ -125,19 +127,27 @@ def convert(
         for i in range(len(stream.groups))
     )
     if not order:
-        msg = f"{in_path} holds no skeletons to convert"
+        dropped = ", ".join(f"{reason} {n}" for reason, n in sorted(drops.items()) if n)
+        msg = f"{in_path} holds no skeletons to convert" + (
+            f" (dropped: {dropped})" if dropped else ""
+        )
         raise RecordingError(msg)
     counts: Counter[str] = Counter()
-    with RecordingWriter(out_path) as writer:
-        for done, (receive_ns, name, i) in enumerate(order, start=1):
-            group = streams[name].groups[i]
-            if skeleton_groups:
-                topic = f"/{name}/skeletons"
-                writer.write_group(topic, group, receive_ns)
-            else:
-                topic = f"/{name}/body_tracking_data"
-                writer.write_marker_array(topic, group_to_driver_markers(group), receive_ns)
-            counts[topic] += 1
-            if progress is not None:
-                progress(done, len(order))
+    writer = RecordingWriter(out_path)
+    try:
+        with writer:
+            for done, (receive_ns, name, i) in enumerate(order, start=1):
+                group = streams[name].groups[i]
+                if skeleton_groups:
+                    topic = f"/{name}/skeletons"
+                    writer.write_group(topic, group, receive_ns)
+                else:
+                    topic = f"/{name}/body_tracking_data"
+                    writer.write_marker_array(topic, group_to_driver_markers(group), receive_ns)
+                counts[topic] += 1
+                if progress is not None:
+                    progress(done, len(order))
+    except Exception:  # a message that cannot be encoded: no half-written recording is left
+        writer.discard()
+        raise
     return counts

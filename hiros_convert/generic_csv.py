@@ -26,8 +26,7 @@ from pathlib import Path
 import numpy as np
 
 from hiros_convert._frames import CameraStream, build_stream, topic_name
-from hiros_convert._table import read_table
-from hiros_core.errors import RecordingError
+from hiros_convert._table import Table, read_table
 from hiros_core.layouts import AZURE_KINECT, Layout
 from hiros_core.model import SkeletonGroup
 
@@ -48,6 +47,44 @@ def _joint_indices(names: np.ndarray, layout: Layout) -> np.ndarray:
     return indices[inverse] if len(unique) else np.empty(0, np.int64)
 
 
+_MAX_SECONDS = 9.2e9
+"""Stamps in seconds must be below this: int64 nanoseconds end at 9.22e18."""
+
+
+def _drop_unreadable_rows(
+    table: Table, integer_cols: list[int], number_cols: list[int], drops: Counter[str]
+) -> None:
+    """Drop (counted ``bad_row``) the rows whose integer or number cells do not parse.
+
+    One garbled row in a long take costs that row, not the whole conversion.
+    """
+    good = np.ones(len(table.rows), dtype=bool)
+    for column in integer_cols:
+        good &= table.readable(column, integer=True)
+    for column in number_cols:
+        good &= table.readable(column)
+    table.keep(good, drops)
+
+
+def _stamps_ns(
+    table: Table, stamp_col: int | None, seconds_col: int | None, drops: Counter[str]
+) -> np.ndarray:
+    """Each row's stamp in ns (from ``stamp_ns``, else seconds); rows with none usable go.
+
+    Negative, non-finite or too large stamps are counted ``bad_row``: a recording's times
+    are 0 to 2^63 ns.
+    """
+    if stamp_col is not None:
+        stamps_ns = table.integers(stamp_col)
+    else:
+        seconds = table.numbers([seconds_col])[:, 0]
+        good = np.isfinite(seconds) & (seconds >= 0) & (seconds < _MAX_SECONDS)
+        table.keep(good, drops)
+        stamps_ns = np.rint(seconds[good] * 1e9).astype(np.int64)
+    table.keep(stamps_ns >= 0, drops)
+    return stamps_ns[stamps_ns >= 0]
+
+
 def read_generic_streams(
     path: str | Path, *, layout: Layout = AZURE_KINECT, drops: Counter[str] | None = None
 ) -> dict[str, CameraStream]:
@@ -58,14 +95,15 @@ def read_generic_streams(
     joint_col = table.require("joint", "joint", "joint_name")
     xyz = [table.require(axis, axis) for axis in "xyz"]
     stamp_col = table.find("stamp_ns")
-    if stamp_col is not None:
-        stamps_ns = table.integers(stamp_col)
-    else:
-        seconds = table.numbers([table.require("stamp (stamp_ns or stamp)", "stamp", "time")])
-        if not np.isfinite(seconds).all():
-            msg = f"{table.path}: every row needs a stamp"
-            raise RecordingError(msg)
-        stamps_ns = np.rint(seconds[:, 0] * 1e9).astype(np.int64)
+    seconds_col = (
+        table.require("stamp (stamp_ns or stamp)", "stamp", "time") if stamp_col is None else None
+    )
+    quaternion = [table.find(q) for q in ("qx", "qy", "qz", "qw")]
+    value_cols = [*xyz, *quaternion, table.find("confidence")]
+    integer_cols = [c for c in (stamp_col, body_col) if c is not None]
+    number_cols = [c for c in (seconds_col, *value_cols) if c is not None]
+    _drop_unreadable_rows(table, integer_cols, number_cols, drops)
+    stamps_ns = _stamps_ns(table, stamp_col, seconds_col, drops)
     camera_col = table.find("camera", "camera_id")
     cameras = (
         np.char.strip(table.rows[:, camera_col])
@@ -76,9 +114,7 @@ def read_generic_streams(
     joints = _joint_indices(table.rows[:, joint_col], layout)
     known = joints >= 0
     drops["unknown_joint"] += int((~known).sum())
-    values = table.numbers(
-        [*xyz, *(table.find(q) for q in ("qx", "qy", "qz", "qw")), table.find("confidence")]
-    )
+    values = table.numbers(value_cols)
     out: dict[str, CameraStream] = {}
     for raw in dict.fromkeys(cameras.tolist()):
         rows = np.flatnonzero((cameras == raw) & known)

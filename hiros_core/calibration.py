@@ -30,6 +30,12 @@ from hiros_core.geometry import RigidTransform
 
 __all__ = ["Calibration", "CameraCalibration", "load_calibration", "save_calibration"]
 
+_MAX_CLOCK_SECONDS = 4e9
+"""Largest |time_offset| and |drift_epoch| accepted, s (year 2096): beyond it, stamps in int64
+nanoseconds overflow once the offset is applied."""
+_MAX_DRIFT = 0.1
+"""Largest |drift| accepted (a clock 10 % fast or slow; real ones are within 1e-4)."""
+
 
 @dataclass
 class CameraCalibration:
@@ -128,13 +134,31 @@ def _camera_from_dict(entry: Any, where: str) -> CameraCalibration:
     if not math.isfinite(norm) or abs(norm - 1.0) > 1e-3:
         msg = f"{where}: rotation {rotation.tolist()} is not a unit quaternion"
         raise CalibrationError(msg)
+    _check_ranges(translation, scalars, where)
+    quality = entry.get("quality") or {}
+    if not isinstance(quality, dict):
+        msg = f"{where}: quality must be a mapping, not {quality!r}"
+        raise CalibrationError(msg)
     return CameraCalibration(
         frame_id=str(entry.get("frame_id", "")),
         translation=translation,
         rotation=rotation / norm,
-        quality=dict(entry.get("quality") or {}),
+        quality=dict(quality),
         **scalars,
     )
+
+
+def _check_ranges(translation: np.ndarray, scalars: dict[str, float], where: str) -> None:
+    """Reject values every stage would turn into NaN poses or overflowing stamps."""
+    if not np.isfinite(translation).all():
+        msg = f"{where}: translation {translation.tolist()} is not finite"
+        raise CalibrationError(msg)
+    limits = {"time_offset": _MAX_CLOCK_SECONDS, "drift_epoch": _MAX_CLOCK_SECONDS}
+    for key, value in scalars.items():
+        limit = limits.get(key, _MAX_DRIFT)
+        if not abs(value) < limit:  # also NaN
+            msg = f"{where}: {key} {value} is out of range (|{key}| < {limit:g})"
+            raise CalibrationError(msg)
 
 
 def _plain(value: Any) -> Any:
@@ -153,14 +177,24 @@ def load_calibration(path: str | Path) -> Calibration:
     path = Path(path)
     try:
         data = yaml.safe_load(path.read_text())
-    except (OSError, yaml.YAMLError) as exc:
+    except (OSError, UnicodeDecodeError, yaml.YAMLError) as exc:  # Unicode: a binary file
         msg = f"cannot read calibration file {path}: {exc}"
         raise CalibrationError(msg) from exc
     return Calibration.from_dict(data, str(path))
 
 
 def save_calibration(calibration: Calibration, path: str | Path) -> None:
-    """Write a calibration file (parent folders are created)."""
+    """Write a calibration file (parent folders are created).
+
+    Raises:
+        CalibrationError: the file cannot be written (a folder there, no permission).
+
+    """
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(yaml.safe_dump(calibration.to_dict(), sort_keys=False))
+    text = yaml.safe_dump(calibration.to_dict(), sort_keys=False)
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_text(text)
+    except OSError as exc:
+        msg = f"cannot write calibration file {path}: {exc}"
+        raise CalibrationError(msg) from exc

@@ -47,19 +47,37 @@ def config_path(node_name: str) -> Path | None:
 
 
 def load_config_defaults(node_name: str, path: Path | None = None) -> dict[str, Any]:
-    """Flat ``{dotted.name: value}`` of a node's parameter file (empty when there is none)."""
+    """Flat ``{dotted.name: value}`` of a node's parameter file (empty when there is none).
+
+    Raises:
+        ConfigError: the file cannot be read; or ``path`` was given and holds no section
+            for the node (another kind of YAML file, passed by mistake, would else be
+            silently ignored).
+
+    """
+    given = path is not None
     path = path or config_path(node_name)
     if path is None:
         return {}
     try:
         document = yaml.safe_load(path.read_text()) or {}
-    except (OSError, yaml.YAMLError) as exc:
+    except (OSError, UnicodeDecodeError, yaml.YAMLError) as exc:  # Unicode: a binary file
         msg = f"cannot read parameter file {path}: {exc}"
         raise ConfigError(msg) from exc
+    keys = ("/**", node_name, f"/{node_name}")
+    sections = [document.get(k) for k in keys] if isinstance(document, dict) else []
+    if given and not any(isinstance(s, dict) and "ros__parameters" in s for s in sections):
+        msg = (
+            f"{path} is no ROS 2 parameter file for {node_name}: no '{node_name}: ros__parameters:'"
+        )
+        raise ConfigError(msg)
     values: dict[str, Any] = {}
-    for key in ("/**", node_name, f"/{node_name}"):
-        section = document.get(key, {}) if isinstance(document, dict) else {}
-        values.update(_flatten((section or {}).get("ros__parameters", {}) or {}))
+    for section in sections:
+        parameters = section.get("ros__parameters") if isinstance(section, dict) else None
+        if parameters is not None and not isinstance(parameters, dict):
+            msg = f"{path}: ros__parameters of {node_name} must be a mapping, not {parameters!r}"
+            raise ConfigError(msg)
+        values.update(_flatten(parameters or {}))
     return values
 
 

@@ -105,8 +105,13 @@ class RunEvaluation:
         }
 
 
-def read_run(path: str | Path) -> tuple[dict[str, list[SkeletonGroup]], Calibration]:
-    """Each stage's groups and the calibration used, from a ``hiros run`` MCAP."""
+def read_run(
+    path: str | Path, problems: list[str] | None = None
+) -> tuple[dict[str, list[SkeletonGroup]], Calibration]:
+    """Each stage's groups and the calibration used, from a ``hiros run`` MCAP.
+
+    ``problems`` receives the reader's sentences on what it could not read (a damaged chunk).
+    """
     outputs: dict[str, list[SkeletonGroup]] = {stage: [] for stage in STAGES}
     calibration = None
     wanted = {f"/hiros/{stage}" for stage in STAGES} | {"/hiros/calibration"}
@@ -119,6 +124,8 @@ def read_run(path: str | Path) -> tuple[dict[str, list[SkeletonGroup]], Calibrat
                 )
             else:
                 outputs[message.topic.rsplit("/", 1)[1]].append(decode_group(message.data))
+        if problems is not None:
+            problems.extend(reader.problems)
     if calibration is None:
         msg = f"{path} has no /hiros/calibration topic: is it the output of `hiros run`?"
         raise RecordingError(msg)

@@ -42,6 +42,7 @@ class RunSummary:
     Attributes:
         frames_in: camera frames read, per camera.
         dropped: reason -> frames (or detections) left out, reader and stages together.
+        problems: the reader's sentences on what it met (a truncated file, a damaged chunk).
         published: stage -> output groups written.
         people: stage -> distinct skeleton ids seen.
         duration: seconds of recording (reference clock) covered by the tracker output.
@@ -51,6 +52,7 @@ class RunSummary:
 
     frames_in: Counter[str] = field(default_factory=Counter)
     dropped: Counter[str] = field(default_factory=Counter)
+    problems: list[str] = field(default_factory=list)
     published: Counter[str] = field(default_factory=Counter)
     people: dict[str, set[int]] = field(default_factory=lambda: {s: set() for s in STAGES})
     first_ns: int | None = None
@@ -139,29 +141,36 @@ def run_recording(
     cpu_started = time.thread_time(), time.process_time(), _children_cpu()
     processes = default_processes() if processes is None else processes
     clock, parts = time.perf_counter, {"stages": 0.0, "write": 0.0}
-    with (
-        _tracking(recording, pipeline.tracker, processes) as tracked,
-        RecordingWriter(out) as writer,
-    ):
-        writer.write("/hiros/calibration", "std_msgs/msg/String",
-                     _calibration_message(calibration), 0)  # fmt: skip
-        for item in tracked:
-            if isinstance(item, _TrackingEnd):
-                break
-            source, group = item
-            summary.frames_in[source] += 1
-            computed = clock()
-            outputs = pipeline.downstream(group)
-            written = clock()
-            _write(writer, outputs, summary)
-            if progress is not None:
-                progress(1)
-            parts["stages"] += written - computed
-            parts["write"] += clock() - written
-        finishing = clock()
-        _write(writer, pipeline.downstream(item.flushed), summary)
+    writer: RecordingWriter | None = None
+    try:
+        with (
+            _tracking(recording, pipeline.tracker, processes) as tracked,
+            RecordingWriter(out) as writer,
+        ):
+            writer.write("/hiros/calibration", "std_msgs/msg/String",
+                         _calibration_message(calibration), 0)  # fmt: skip
+            for item in tracked:
+                if isinstance(item, _TrackingEnd):
+                    break
+                source, group = item
+                summary.frames_in[source] += 1
+                computed = clock()
+                outputs = pipeline.downstream(group)
+                written = clock()
+                _write(writer, outputs, summary)
+                if progress is not None:
+                    progress(1)
+                parts["stages"] += written - computed
+                parts["write"] += clock() - written
+            finishing = clock()
+            _write(writer, pipeline.downstream(item.flushed), summary)
+    except Exception:  # an unreadable recording, say: no half-written output is left behind
+        if writer is not None:
+            writer.discard()
+        raise
     summary.seconds = {**item.seconds, **parts, "finish": clock() - finishing}
     summary.dropped.update({f"reader: {k}": v for k, v in item.reader_drops.items()})
+    summary.problems.extend(item.reader_problems)
     summary.dropped.update({f"tracker: {k}": v for k, v in item.tracker_drops.items()})
     summary.dropped.update(pipeline.downstream_drops)
     summary.wall_time = time.perf_counter() - started
@@ -184,6 +193,7 @@ class _TrackingEnd:
 
     flushed: SkeletonGroup
     reader_drops: Counter[str]
+    reader_problems: list[str]
     tracker_drops: Counter[str]
     seconds: dict[str, float]
 
@@ -193,9 +203,10 @@ def _tracked_frames(
 ) -> Iterator[tuple[str, SkeletonGroup] | _TrackingEnd]:
     """``(camera, tracker output)`` per camera frame read, then a ``_TrackingEnd``."""
     reader_drops: Counter[str] = Counter()
+    reader_problems: list[str] = []
     clock, read, tracking = time.perf_counter, 0.0, 0.0
     mark = clock()
-    for source, group in iter_groups(recording, drops=reader_drops):
+    for source, group in iter_groups(recording, drops=reader_drops, problems=reader_problems):
         tracked_at = clock()
         tracked = tracker.update(group)
         done = clock()
@@ -204,7 +215,8 @@ def _tracked_frames(
         yield source, tracked
         mark = clock()
     flushed = tracker.flush()
-    yield _TrackingEnd(flushed, reader_drops, tracker.drops, {"read": read, "tracker": tracking})
+    seconds = {"read": read, "tracker": tracking}
+    yield _TrackingEnd(flushed, reader_drops, reader_problems, tracker.drops, seconds)
 
 
 _BATCH = 32

@@ -19,6 +19,7 @@ file                  what
 from __future__ import annotations
 
 import json
+import zipfile
 from dataclasses import asdict
 from pathlib import Path
 
@@ -106,13 +107,17 @@ def load_truth(sim_dir: str | Path) -> Truth:
     if path.is_dir():
         path = path / TRUTH_FILE
     try:
-        with np.load(path) as data:
+        with path.open("rb") as stream:  # closed here also when numpy gives up on it
+            data = np.load(stream)
+            if not isinstance(data, np.lib.npyio.NpzFile):  # a plain .npy array
+                msg = "not an .npz archive"
+                raise ValueError(msg)
             return Truth(
                 times=data["times"].astype(float),
                 positions=data["positions"].astype(float),
                 person_ids=data["person_ids"].astype(np.int64),
                 clip_names=tuple(str(n) for n in data["clip_names"]),
             )
-    except (OSError, KeyError, ValueError) as exc:
-        msg = f"cannot read simulation truth {path}: {exc}"
+    except (OSError, KeyError, ValueError, EOFError, zipfile.BadZipFile) as exc:  # cut, damaged
+        msg = f"cannot read simulation truth {path} (is it hiros simulate's?): {exc}"
         raise RecordingError(msg) from exc

@@ -21,6 +21,7 @@ confidence levels, so a camera's stream is exactly the truth moved into it.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field, replace
 from functools import lru_cache
 
@@ -176,10 +177,13 @@ class SimParams:
             problems.append(f"n_people must be 1..{_MAX_PEOPLE}, not {self.n_people}")
         if self.n_cameras < 1:
             problems.append(f"n_cameras must be at least 1, not {self.n_cameras}")
-        if self.duration <= 2.0 * self.start_spread + 1.0:
-            problems.append(f"duration must exceed {2 * self.start_spread + 1.0:g} s")
-        if self.rate <= 0:
-            problems.append(f"rate must be positive, not {self.rate}")
+        if not 2.0 * self.start_spread + 1.0 < self.duration < math.inf:  # NaN fails too
+            problems.append(
+                f"duration must be finite and exceed {2 * self.start_spread + 1.0:g} s, "
+                f"not {self.duration}"
+            )
+        if not 0 < self.rate < math.inf:
+            problems.append(f"rate must be positive and finite, not {self.rate}")
         if not 0.0 <= self.noise_body_share <= 1.0:
             problems.append(f"noise_body_share must be in 0..1, not {self.noise_body_share}")
         if problems:

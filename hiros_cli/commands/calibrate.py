@@ -60,9 +60,11 @@ def run(args: argparse.Namespace) -> int:
     from rich.console import Console
 
     from hiros_calib.calibrator import CalibratorParams
+    from hiros_cli.commands.run import require_camera_topics
     from hiros_core.calibration import save_calibration
 
     console = Console()
+    require_camera_topics(args.recording)
     params = CalibratorParams(reference=args.reference or "")
     if args.prior_window is not None:
         params.prior_window = args.prior_window
@@ -85,9 +87,12 @@ def run(args: argparse.Namespace) -> int:
 
 
 def read_camera_groups(
-    recording: Path, drops: Counter[str] | None = None
+    recording: Path, drops: Counter[str] | None = None, problems: list[str] | None = None
 ) -> tuple[dict[str, list[SkeletonGroup]], dict[str, list[int]]]:
-    """Per camera its SkeletonGroups and the log (arrival) time of each, in log order."""
+    """Per camera its SkeletonGroups and the log (arrival) time of each, in log order.
+
+    ``drops`` and ``problems`` receive the reader's (see ``iter_groups``).
+    """
     from hiros_core.recording import RecordingReader, iter_groups
 
     reader = RecordingReader(recording)
@@ -105,7 +110,7 @@ def read_camera_groups(
     groups: dict[str, list[SkeletonGroup]] = defaultdict(list)
     arrivals: dict[str, list[int]] = defaultdict(list)
     try:
-        for source, group in iter_groups(reader, drops=drops):
+        for source, group in iter_groups(reader, drops=drops, problems=problems):
             groups[source].append(group)
             arrivals[source].append(last_log_time[0])
     finally:
@@ -142,7 +147,10 @@ def calibrate_recording(
         transient=True,
     ) as bar:
         task = bar.add_task("reading the recording", total=100)
-        groups, arrivals = read_camera_groups(recording)
+        problems: list[str] = []
+        groups, arrivals = read_camera_groups(recording, problems=problems)
+        for problem in problems:  # a truncated or damaged recording: said before its result
+            bar.console.print(f"warning: {problem}", markup=False, highlight=False)
         if len(groups) < 2:
             msg = (
                 f"{recording}: calibration needs skeletons of two or more cameras, "

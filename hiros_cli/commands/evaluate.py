@@ -30,14 +30,16 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--report", type=Path, help="folder for report.html and its figures")
 
 
-def evaluate_output(output: Path, truth_dir: Path):  # noqa: ANN201 - RunEvaluation
-    """Read the run and the truth, compute every figure."""
+def evaluate_output(  # noqa: ANN201 - RunEvaluation
+    output: Path, truth_dir: Path, problems: list[str] | None = None
+):
+    """Read the run and the truth, compute every figure; ``problems``: see ``read_run``."""
     from hiros_core.calibration import load_calibration
     from hiros_core.recording import iter_groups
     from hiros_eval.run import evaluate_run, read_run
     from hiros_sim import load_truth
 
-    outputs, used = read_run(output)
+    outputs, used = read_run(output, problems)
     true = load_calibration(truth_dir / "calibration.yaml")
     camera_groups: dict = {}
     recording = truth_dir / "recording.mcap"
@@ -69,7 +71,10 @@ def print_evaluation(console: Console, evaluation) -> None:  # noqa: ANN001 - Ru
 def run(args: argparse.Namespace) -> int:
     """Evaluate, print, and optionally write the HTML report."""
     console = Console()
-    evaluation = evaluate_output(args.output, args.truth)
+    problems: list[str] = []
+    evaluation = evaluate_output(args.output, args.truth, problems)
+    for problem in problems:  # figures from a damaged output cover only what was read
+        console.print(f"warning: {problem}", markup=False, highlight=False)
     print_evaluation(console, evaluation)
     if args.report:
         from hiros_eval.report import write_report

@@ -33,7 +33,10 @@ def run(args: argparse.Namespace) -> int:
     from hiros_eval.run import read_run
 
     console = Console()
-    outputs, _ = read_run(args.output)
+    problems: list[str] = []
+    outputs, _ = read_run(args.output, problems)
+    for problem in problems:
+        console.print(f"warning: {problem}", markup=False, highlight=False)
     people = person_series(outputs[args.stage])
     args.out.mkdir(parents=True, exist_ok=True)
     written = 0

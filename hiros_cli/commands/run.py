@@ -13,6 +13,7 @@ Parameters are the nodes' own: `--params config/pipeline.yaml` (ROS parameter-fi
 from __future__ import annotations
 
 import argparse
+import math
 from pathlib import Path
 
 from rich.console import Console
@@ -20,7 +21,7 @@ from rich.table import Table
 
 from hiros_cli.progress import progress_bar
 from hiros_core.calibration import Calibration, load_calibration, save_calibration
-from hiros_core.errors import ConfigError
+from hiros_core.errors import ConfigError, RecordingError
 
 HELP = "offline pipeline over a recording -> one MCAP with every stage's output"
 OFFLINE_MERGE_RATE = 30.0
@@ -41,7 +42,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--force", action="store_true", help="overwrite --out if it exists")
     parser.add_argument(
         "--merge-rate",
-        type=float,
+        type=_rate,
         default=OFFLINE_MERGE_RATE,
         help="merger output rate in Hz offline (default 30; 0: on every camera frame, as live)",
     )
@@ -52,6 +53,18 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="2: read and track in a second process beside the other stages (default where "
         "a second core exists); 1: everything in this process. Same output either way",
     )
+
+
+def _rate(text: str) -> float:
+    """``--merge-rate``: Hz, finite and 0 or more (NaN or a negative rate has no period)."""
+    try:
+        value = float(text)
+    except ValueError:
+        value = math.nan
+    if not (math.isfinite(value) and value >= 0):
+        msg = f"{text!r} is not a rate in Hz (a number, 0 or more)"
+        raise argparse.ArgumentTypeError(msg)
+    return value
 
 
 def load_pipeline_params(path: Path | None):  # noqa: ANN201 - PipelineParams, imported lazily
@@ -90,17 +103,57 @@ def resolve_calibration(spec: str, recording: Path, out: Path, console: Console)
     return calibration
 
 
+def require_camera_topics(recording: Path) -> None:
+    """Refuse, before any work or output, a recording that holds no camera skeleton topic.
+
+    Raises:
+        RecordingError: naming the topics the recording does hold.
+
+    """
+    from hiros_core.recording import RecordingReader, group_topics
+
+    with RecordingReader(recording) as reader:
+        topics = reader.topics
+    if not group_topics(topics):
+        msg = (
+            f"{recording} holds no camera skeletons (SkeletonGroup topics or Azure-driver "
+            f"MarkerArray topics /<camera>/body_tracking_data); its topics: {sorted(topics)}"
+        )
+        raise RecordingError(msg)
+
+
+def remove_previous_output(out: Path) -> None:
+    """``--force``: remove an earlier output, a ``.mcap`` file or a rosbag2 folder of one.
+
+    Raises:
+        RecordingError: ``out`` is a folder holding anything else (it is left alone).
+
+    """
+    if not out.is_dir():
+        out.unlink(missing_ok=True)
+        return
+    ours = {f"{out.name}_0.mcap", "metadata.yaml"}
+    others = sorted(p.name for p in out.iterdir() if p.name not in ours)
+    if others:
+        msg = f"--force: {out} is a folder holding more than a recording ({others}); not removed"
+        raise RecordingError(msg)
+    for name in ours:
+        (out / name).unlink(missing_ok=True)
+    out.rmdir()
+
+
 def run(args: argparse.Namespace) -> int:
     """Run, then print the accounting table."""
     from hiros_pipeline import run_recording
     from hiros_pipeline.offline import message_count
 
     console = Console()
-    if args.out.exists() and args.force:
-        args.out.unlink()
+    require_camera_topics(args.recording)
     params = load_pipeline_params(args.params)
     params.merger.output_rate = args.merge_rate
     calibration = resolve_calibration(args.calibration, args.recording, args.out, console)
+    if args.force:
+        remove_previous_output(args.out)
     with progress_bar(f"hiros run {args.recording.name}", message_count(args.recording)) as advance:
         summary = run_recording(
             args.recording, calibration, args.out, params, advance, processes=args.processes
@@ -123,6 +176,8 @@ def print_summary(console: Console, summary, out: Path) -> None:  # noqa: ANN001
     if not summary.dropped:
         table.add_row("dropped", "0")
     console.print(table)
+    for problem in summary.problems:
+        console.print(f"warning: {problem}", markup=False, highlight=False)
     console.print(
         f"{summary.duration:.1f} s of recording in {summary.wall_time:.2f} s "
         f"({summary.real_time_factor:.0f}x real time)"

@@ -38,6 +38,8 @@ __all__ = [
 DRIVER_TOPIC_SUFFIX = "body_tracking_data"
 """Last name of the Azure Kinect driver's skeleton topic (``/<cam>/body_tracking_data``)."""
 _CAMERA_TOPICS = (DRIVER_TOPIC_SUFFIX, "skeletons")
+PIPELINE_OUTPUTS = frozenset(f"/hiros/{s}" for s in ("tracker", "merger", "optimizer", "filter"))
+"""The pipeline's own SkeletonGroup outputs: people already fused, not any camera's frames."""
 
 
 def source_name(topic: str) -> str:
@@ -51,13 +53,15 @@ def source_name(topic: str) -> str:
 def group_topics(topics: dict[str, str]) -> dict[str, str]:
     """The topics ``iter_groups`` reads by default: ``{topic: msgtype}``.
 
-    Every SkeletonGroup topic, and MarkerArray topics named ``.../body_tracking_data`` (other
-    MarkerArrays, such as the visualiser's, are drawings, not detections).
+    Every SkeletonGroup topic but the pipeline's outputs (``PIPELINE_OUTPUTS``, found in a
+    recording of a live session or a ``hiros run`` output), and MarkerArray topics named
+    ``.../body_tracking_data`` (other MarkerArrays, such as the visualiser's, are drawings,
+    not detections).
     """
     return {
         topic: msgtype
         for topic, msgtype in topics.items()
-        if msgtype == SKELETON_GROUP
+        if (msgtype == SKELETON_GROUP and topic not in PIPELINE_OUTPUTS)
         or (msgtype == MARKER_ARRAY and topic.rstrip("/").endswith(DRIVER_TOPIC_SUFFIX))
     }
 
@@ -68,6 +72,7 @@ def iter_groups(
     topics: Iterable[str] | None = None,
     bridge_params: DriverBridgeParams | None = None,
     drops: Counter[str] | None = None,
+    problems: list[str] | None = None,
 ) -> Iterator[tuple[str, SkeletonGroup]]:
     """``(source, group)`` for every skeleton message, in log-time order.
 
@@ -78,13 +83,17 @@ def iter_groups(
         bridge_params: ``DriverBridgeParams`` for MarkerArray topics (default: Azure driver).
         drops: counter that receives, when the iteration ends, the reader's and bridges'
             drop reasons plus ``undecodable`` (bytes the codec rejects).
+        problems: list that receives, when the iteration ends, the reader's sentences on
+            what it met (a truncated file, a damaged chunk), for the user.
 
     Yields:
         ``source`` is the camera name for ``/<cam>/body_tracking_data`` and
         ``/<cam>/skeletons``, else the topic; ``group`` is in the message's frame and clock.
 
     """
-    logged = iter_logged_groups(recording, topics=topics, bridge_params=bridge_params, drops=drops)
+    logged = iter_logged_groups(
+        recording, topics=topics, bridge_params=bridge_params, drops=drops, problems=problems
+    )
     with contextlib.closing(logged):
         for source, group, _ in logged:
             yield source, group
@@ -96,6 +105,7 @@ def iter_logged_groups(
     topics: Iterable[str] | None = None,
     bridge_params: DriverBridgeParams | None = None,
     drops: Counter[str] | None = None,
+    problems: list[str] | None = None,
 ) -> Iterator[tuple[str, SkeletonGroup, int]]:
     """``iter_groups`` with each group's log time (when the recorder received it), in ns.
 
@@ -127,6 +137,8 @@ def iter_logged_groups(
     finally:
         for counter in (reader.drops, *(b.drops for b in bridges.values())):
             drops.update({reason: n for reason, n in counter.items() if n})
+        if problems is not None:
+            problems.extend(reader.problems)
         if reader is not recording:
             reader.close()
 

@@ -9,7 +9,9 @@ in log-time order across topics and files, holding only a few chunks in memory a
   then position in the chunk). A file without a valid summary (the recorder was killed) is
   read straight through by the ``mcap`` library, in file order, up to its last complete
   record; what could not be read is counted ``truncated`` in ``drops`` and described in
-  ``problems``.
+  ``problems``. Each chunk is checked against its CRC; a damaged chunk is skipped (its
+  messages counted ``damaged_chunk``) and reading goes on after it. A summary that fails its
+  CRC is not trusted: the file is then read straight through.
 * sqlite3 (``.db3``) and ROS 1 bags are read with ``rosbags``' ``AnyReader``. ROS 1 messages
   are converted to ROS 2 CDR of the ROS 2 Jazzy type of the same name (a ROS 1 header's
   ``seq`` goes, newer fields get defaults), so every consumer sees one wire format.
@@ -24,6 +26,7 @@ import contextlib
 import heapq
 import io
 import struct
+import zlib
 from collections import Counter
 from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import dataclass
@@ -171,10 +174,12 @@ class _McapSource(_Source):
             msg = f"cannot open recording {path}: {exc}"
             raise RecordingError(msg) from exc
         self.summary = None
+        damage = ""  # what is wrong with the summary, if anything
         try:
             self.reader = SeekingReader(self.stream)
             self.summary = self.reader.get_summary()
         except (McapError, ValueError, struct.error, OSError) as exc:
+            damage = f"{type(exc).__name__}: {exc}"
             if self.stream.seek(0, io.SEEK_END) < 8:
                 self.stream.close()
                 msg = f"{path} is not an MCAP file (too short: {exc})"
@@ -184,6 +189,9 @@ class _McapSource(_Source):
                 self.stream.close()
                 msg = f"{path} is not an MCAP file (no MCAP magic bytes at its start)"
                 raise RecordingError(msg) from None
+        if self.summary is not None and not self._summary_intact():
+            self.summary = None  # its chunk index may point anywhere: read straight through
+            damage = "its CRC does not match"
         if self.summary is not None and self.summary.chunk_indexes:
             self.topics = {
                 c.topic: normalize_msgtype(self.summary.schemas[c.schema_id].name)
@@ -192,20 +200,47 @@ class _McapSource(_Source):
             }
         else:
             self.topics = {}
+            self._data_end = False
             for _ in self._scan(None, collect_only=True):
                 pass
+            if not self.topics and not self._data_end:
+                self.stream.close()
+                msg = (
+                    f"{path} ends early or is damaged at byte {self._stopped_at}, before any "
+                    "topic is defined in it: nothing in it can be read"
+                )
+                raise RecordingError(msg)
+            if damage and self._data_end:  # else the file ends early, which _scan reports
+                self.problems.append(
+                    f"{path}: its summary (the index at its end) is damaged ({damage}); "
+                    "read it straight through"
+                )
+
+    def _summary_intact(self) -> bool:
+        """Whether the summary section and footer match the footer's CRC (when it has one)."""
+        end = self.stream.seek(0, io.SEEK_END)
+        self.stream.seek(end - 8 - _FOOTER.size)
+        footer = self.stream.read(_FOOTER.size)
+        if len(footer) < _FOOTER.size:
+            return False
+        _, _, summary_start, _, crc = _FOOTER.unpack(footer)
+        if not crc:
+            return True
+        self.stream.seek(summary_start)
+        return zlib.crc32(self.stream.read(end - 8 - 4 - summary_start)) == crc
 
     def _scan(self, topics: set[str] | None, *, collect_only: bool = False) -> Iterator[Any]:
         """Records straight through the file, stopping cleanly at the first unreadable byte."""
         from mcap.exceptions import McapError
-        from mcap.records import Channel, Footer, Message, Schema
+        from mcap.records import Channel, DataEnd, Footer, Message, Schema
         from mcap.stream_reader import StreamReader
 
         self.stream.seek(0)
         schemas: dict[int, str] = {}
         channels: dict[int, tuple[str, str]] = {}
         count = 0
-        records = StreamReader(self.stream, skip_magic=False).records
+        chunked = StreamReader(self.stream, skip_magic=False, emit_chunks=True).records
+        records = self._unchunked(chunked, count_damage=not collect_only)
         try:
             for record in records:
                 if isinstance(record, Schema):
@@ -221,9 +256,11 @@ class _McapSource(_Source):
                     elif topics is None or topic in topics:
                         count += 1
                         yield RecordedMessage(topic, msgtype, record.log_time, record.data)
-                elif isinstance(record, Footer):
+                elif isinstance(record, (DataEnd, Footer)):  # the summary holds no messages
+                    self._data_end = True
                     return
         except (McapError, ValueError, struct.error, EOFError, OSError) as exc:
+            self._stopped_at = self.stream.tell()
             if not collect_only:
                 self.drops["truncated"] += 1
                 self.problems.append(
@@ -231,6 +268,31 @@ class _McapSource(_Source):
                     f"({type(exc).__name__}: {exc}); read {count} messages before that "
                     "(a recorder that was stopped without closing the file leaves this)"
                 )
+
+    def _unchunked(self, records: Iterable[Any], *, count_damage: bool) -> Iterator[Any]:
+        """``records`` with each chunk replaced by its records, checked by the chunk's CRC.
+
+        A damaged chunk is skipped (its messages are lost, counted once as ``damaged_chunk``)
+        and reading goes on with the next record: the chunk's length is outside its data.
+        """
+        from mcap.records import Chunk
+        from mcap.stream_reader import breakup_chunk
+
+        for record in records:
+            if not isinstance(record, Chunk):
+                yield record
+                continue
+            try:
+                inner = breakup_chunk(record, validate_crc=True)
+            except Exception as exc:  # mcap, zstandard and lz4 raise their own error types
+                if count_damage:
+                    self.drops["damaged_chunk"] += 1
+                    self.problems.append(
+                        f"{self.path}: a chunk before byte {self.stream.tell()} is damaged "
+                        f"({type(exc).__name__}: {exc}); skipped its messages, read on after it"
+                    )
+                continue
+            yield from inner
 
     def messages(self, topics: set[str] | None) -> Iterator[RecordedMessage]:
         if self.summary is None or not self.summary.chunk_indexes:
@@ -275,8 +337,7 @@ class _McapSource(_Source):
         )  # fmt: skip
         waiting = _Located(b"", np.empty((0, _COLUMNS), dtype=np.int64))
         for k, chunk in enumerate(chunks):
-            records = self._chunk_records(chunk.chunk_start_offset, transient=transient)
-            located = waiting.join(self._locate(records, chunk.chunk_start_offset, table))
+            located = waiting.join(self._chunk_located(chunk, table, transient=transient))
             ready, waiting = located.split(
                 (chunks[k + 1].message_start_time, chunks[k + 1].chunk_start_offset)
                 if k + 1 < len(chunks) else None
@@ -284,9 +345,47 @@ class _McapSource(_Source):
             if len(ready.rows):
                 yield ready.batch(tuple(names), tuple(types))
 
-    def _chunk_records(self, offset: int, *, transient: bool = False) -> bytes | memoryview:
-        """The decompressed records of the chunk record at ``offset``.
+    def _chunk_located(self, chunk: Any, table: dict[int, int], *, transient: bool) -> _Located:
+        """The messages of one chunk (``ChunkIndex``); none when it is damaged.
 
+        A damaged chunk (bytes changed, cut short) is skipped, not the rest of the file: its
+        messages of the wanted channels are counted ``damaged_chunk`` in ``drops`` (as many as
+        its message index lists) and the damage is described in ``problems``.
+        """
+        offset = chunk.chunk_start_offset
+        try:
+            records = self._chunk_records(offset, chunk.chunk_length, transient=transient)
+            return self._locate(records, offset, table)
+        except RecordingError as exc:
+            lost = self._indexed_messages(chunk, table)
+            self.drops["damaged_chunk"] += lost if lost is not None else 1
+            count = f"its {lost} messages" if lost is not None else "its messages"
+            self.problems.append(f"{exc}; skipped {count}, read on after it")
+            return _Located(b"", np.empty((0, _COLUMNS), dtype=np.int64))
+
+    def _indexed_messages(self, chunk: Any, table: dict[int, int]) -> int | None:
+        """Messages of the chunk on the channels of ``table``, from its message indexes."""
+        count = 0
+        try:
+            for channel_id, index_offset in chunk.message_index_offsets.items():
+                if channel_id in table:
+                    self.stream.seek(index_offset)
+                    head = self.stream.read(_MESSAGE_INDEX_HEAD.size)
+                    opcode, _, _, entries_length = _MESSAGE_INDEX_HEAD.unpack(head)
+                    if opcode != _MESSAGE_INDEX_OPCODE:
+                        return None
+                    count += entries_length // 16  # (log time, offset) per message
+        except (OSError, ValueError, struct.error):
+            return None
+        return count if chunk.message_index_offsets else None
+
+    def _chunk_records(
+        self, offset: int, indexed_length: int, *, transient: bool = False
+    ) -> bytes | memoryview:
+        """The decompressed records of the chunk record at ``offset``, checked by their CRC.
+
+        ``indexed_length``: the chunk record's length according to the summary, which is
+        read (a damaged length field in the record itself is then harmless).
         ``transient``: zstd chunks are decompressed into one buffer kept for the next chunk,
         whose memory is mapped already: fresh 4 MB allocations cost more in page faults than
         the decompression itself.
@@ -296,14 +395,25 @@ class _McapSource(_Source):
         if len(head) < _CHUNK_HEAD.size or head[0] != _CHUNK_OPCODE:
             msg = f"{self.path}: its index points at byte {offset}, where no chunk starts"
             raise RecordingError(msg)
-        _, length, _, _, size, _, name_length = _CHUNK_HEAD.unpack(head)
-        rest = self.stream.read(length - _CHUNK_HEAD.size + 9)
+        _, _, _, _, size, crc, name_length = _CHUNK_HEAD.unpack(head)
+        rest = self.stream.read(max(0, indexed_length - _CHUNK_HEAD.size))
+        try:
+            (data_length,) = _U64.unpack_from(rest, name_length)
+        except struct.error:
+            data_length = -1
+        if name_length + 8 + data_length != len(rest):
+            msg = f"{self.path}: the chunk at byte {offset} is damaged (its lengths disagree)"
+            raise RecordingError(msg)
         compression = rest[:name_length].decode("utf-8", "replace")
-        (data_length,) = _U64.unpack_from(rest, name_length)
-        data = memoryview(rest)[name_length + 8 : name_length + 8 + data_length]
+        data = memoryview(rest)[name_length + 8 :]
         if transient and compression == "zstd":
-            return self._decompress_into(data, size, offset)
-        return self._decompress(compression, data, size, offset)
+            records: bytes | memoryview = self._decompress_into(data, size, offset)
+        else:
+            records = self._decompress(compression, data, size, offset)
+        if crc and zlib.crc32(records) != crc:
+            msg = f"{self.path}: the chunk at byte {offset} is damaged (its CRC does not match)"
+            raise RecordingError(msg)
+        return records
 
     def _decompress_into(self, data: memoryview, size: int, offset: int) -> memoryview:
         """A zstd chunk's records in the reused buffer (valid until the next chunk is read)."""
@@ -379,6 +489,9 @@ _RECORD_HEAD = struct.Struct("<BQ")  # opcode, record length
 # chunk: opcode, length, message start/end time, uncompressed size, crc, compression length
 _CHUNK_HEAD = struct.Struct("<BQQQQII")
 _MESSAGE_HEAD = struct.Struct("<HIQQ")  # channel id, sequence, log time, publish time
+_FOOTER = struct.Struct("<BQQQI")  # opcode, length, summary start, offsets start, summary CRC
+_MESSAGE_INDEX_OPCODE = 0x07
+_MESSAGE_INDEX_HEAD = struct.Struct("<BQHI")  # opcode, length, channel id, entries' length
 _U64 = struct.Struct("<Q")
 _COLUMNS = 6  # log time, chunk offset, record position, channel index, data start, data end
 

@@ -11,6 +11,7 @@ A path ending in ``.mcap`` gives a single file; any other path gives a rosbag2 f
 
 from __future__ import annotations
 
+import contextlib
 from collections import Counter
 from pathlib import Path
 from types import TracebackType
@@ -56,6 +57,22 @@ class _Route:
         self.channel = channel
         self.counted = counted
         self.sequence = 0
+
+
+_MAX_TIME_NS = (1 << 64) - 1
+
+
+def _checked_time(topic: str, time_ns: int) -> int:
+    """``time_ns`` as an int, refused when MCAP cannot store it (unsigned 64-bit ns).
+
+    Checked before anything is written: a bad time met inside the MCAP writer would leave its
+    chunk half-recorded, and the file could not be finished.
+    """
+    time_ns = int(time_ns)
+    if not 0 <= time_ns <= _MAX_TIME_NS:
+        msg = f"{topic}: time {time_ns} ns cannot be recorded (MCAP times are 0 to 2^64-1 ns)"
+        raise RecordingError(msg)
+    return time_ns
 
 
 class RecordingWriter:
@@ -147,8 +164,8 @@ class RecordingWriter:
     ) -> None:
         """Append one message of CDR bytes; ``log_time_ns`` orders the recording."""
         route = self._route(topic, msgtype)
-        log_time_ns = int(log_time_ns)
-        publish = log_time_ns if publish_time_ns is None else int(publish_time_ns)
+        log_time_ns = _checked_time(topic, log_time_ns)
+        publish = log_time_ns if publish_time_ns is None else _checked_time(topic, publish_time_ns)
         route.sequence += 1
         self._writer.add_message(route.channel, log_time_ns, data, publish, route.sequence)
         self._counted(route, log_time_ns)
@@ -163,7 +180,7 @@ class RecordingWriter:
 
         route = self._route(topic, SKELETON_GROUP)
         stamp = group.stamp_ns if log_time_ns is None else log_time_ns  # type: ignore[attr-defined]
-        stamp = int(stamp)
+        stamp = _checked_time(topic, stamp)
         size = encode_group_into(group, self._space)  # type: ignore[arg-type]
         route.sequence += 1
         self._writer.commit(route.channel, stamp, size, stamp, route.sequence)
@@ -219,6 +236,20 @@ class RecordingWriter:
             self._stream.close()
         if self.folder is not None:
             (self.folder / "metadata.yaml").write_text(self._metadata())
+
+    def discard(self) -> None:
+        """Close and delete the recording: the output of a failed run must not pass for one.
+
+        Only what this writer created goes (its MCAP file, and for a folder its
+        ``metadata.yaml`` and the folder once empty).
+        """
+        with contextlib.suppress(Exception):  # the file goes anyway
+            self.close()
+        self.file_path.unlink(missing_ok=True)
+        if self.folder is not None:
+            (self.folder / "metadata.yaml").unlink(missing_ok=True)
+            with contextlib.suppress(OSError):  # not empty: something else was put there
+                self.folder.rmdir()
 
     def _metadata(self) -> str:
         """rosbag2 ``metadata.yaml`` (version 9) describing the folder's one MCAP file."""

@@ -54,3 +54,23 @@ def test_calibrate_takes_a_named_reference_and_rejects_an_unknown_one(recording,
     assert load_calibration(out).reference == "cam1"
     assert main(["calibrate", str(path), "--out", str(out), "--reference", "nope"]) == 1
     assert "reference camera 'nope' is not among the cameras" in capsys.readouterr().err
+
+
+def test_what_the_reader_lost_is_printed(recording, tmp_path, capsys):
+    _, path = recording
+    data = bytearray(path.read_bytes())
+    data[len(data) // 3] ^= 0xFF  # inside the chunk's compressed records
+    damaged = tmp_path / "damaged.mcap"
+    damaged.write_bytes(bytes(data))
+    main(["calibrate", str(damaged), "--out", str(tmp_path / "calib.yaml")])
+    printed = " ".join(capsys.readouterr().out.split())
+    assert "warning: " in printed
+    assert "is damaged (its CRC does not match)" in printed
+
+
+def test_a_recording_without_camera_topics_names_its_topics(tmp_path, capsys):
+    path = tmp_path / "chatter.mcap"
+    with RecordingWriter(path) as writer:
+        writer.write("/chatter", "std_msgs/msg/String", b"\x00\x01\x00\x00\x01\x00\x00\x00\x00", 1)
+    assert main(["calibrate", str(path), "--out", str(tmp_path / "calib.yaml")]) == 1
+    assert "holds no camera skeletons" in capsys.readouterr().err

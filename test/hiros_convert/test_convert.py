@@ -7,7 +7,7 @@ import pytest
 
 from hiros_cli.main import main as hiros
 from hiros_convert import convert, detect_format, read_multitrack_csv, read_unipd_csv
-from hiros_core.errors import RecordingError
+from hiros_core.errors import CodecError, RecordingError
 from hiros_core.recording import RecordingReader, iter_groups
 
 DATA = Path(__file__).resolve().parents[3] / "shared" / "data"
@@ -99,3 +99,14 @@ def test_command_line(tmp_path, capsys):
     assert hiros(["convert", str(source), "--out", str(tmp_path / "g.mcap")]) == 1
     assert "exists already" in capsys.readouterr().err
     assert hiros(["convert", str(tmp_path / "no.csv"), "--out", str(tmp_path / "n.mcap")]) == 1
+
+
+def test_a_failed_conversion_leaves_no_output_and_a_folder_is_named(tmp_path):
+    source = tmp_path / "g.csv"
+    year_2065 = 3_000_000_000 * 10**9  # beyond builtin_interfaces/Time's int32 seconds
+    source.write_text(f"camera,stamp_ns,body_id,joint,x,y,z\nk01,{year_2065},1,Pelvis,0,0,2\n")
+    with pytest.raises(CodecError, match="int32 seconds"):
+        convert(source, tmp_path / "g.mcap")
+    assert not (tmp_path / "g.mcap").exists()
+    with pytest.raises(RecordingError, match="is a folder, not a file"):
+        detect_format(tmp_path)

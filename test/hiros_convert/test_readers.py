@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from hiros_convert import read_generic_csv, read_k4abt_json, read_unipd_csv
+from hiros_convert import convert, read_generic_csv, read_k4abt_json, read_unipd_csv
 from hiros_core.errors import RecordingError
 from hiros_core.layouts import AZURE_KINECT, KINECT_V2
 
@@ -145,3 +145,32 @@ def test_generic_csv_needs_columns(tmp_path):
     path.write_text("stamp,body_id,x,y,z\n1.5,1,0,0,2\n")
     with pytest.raises(RecordingError, match="joint"):
         read_generic_csv(path)
+
+
+def test_generic_csv_garbled_rows_cost_only_themselves(tmp_path):
+    path = tmp_path / "g.csv"
+    path.write_text(
+        "camera,stamp_ns,body_id,joint,x,y,z,confidence\n"
+        "k01,1000,1,Pelvis,0,0,2,1\n"
+        "k01,garbage,1,Pelvis,0,0,2,1\n"  # stamp not an integer
+        "k01,99999999999999999999999,1,Pelvis,0,0,2,1\n"  # beyond int64
+        "k01,-5,1,Pelvis,0,0,2,1\n"  # before any recording time
+        "k01,2000,x,Pelvis,0,0,2,1\n"  # body id not an integer
+        "k01,2000,1,Pelvis,a,0,2,1\n"  # x not a number
+        "k01,2000,1,Pelvis,0,0,2,high\n"  # confidence not a number
+        "k01,3000,1,Pelvis,0,0,2,NA\n"
+    )
+    drops = Counter()
+    (groups,) = read_generic_csv(path, drops=drops).values()
+    assert [g.stamp_ns for g in groups] == [1000, 3000]
+    assert drops == Counter(bad_row=6)
+
+
+def test_generic_csv_stamps_in_seconds_that_cannot_be_times_are_bad_rows(tmp_path):
+    path = tmp_path / "g.csv"
+    path.write_text("stamp,body_id,joint,x,y,z\ninf,1,Pelvis,0,0,2\n1e300,1,Pelvis,0,0,2\n")
+    drops = Counter()
+    assert not read_generic_csv(path, drops=drops)
+    assert drops == Counter(bad_row=2)
+    with pytest.raises(RecordingError, match=r"no skeletons to convert \(dropped: bad_row 2\)"):
+        convert(path, tmp_path / "out.mcap")

@@ -6,6 +6,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from mcap.reader import make_reader
 
 from hiros_core.calibration import load_calibration
 from hiros_core.geometry import RigidTransform
@@ -109,3 +110,19 @@ def test_report_and_exports_are_written(run, tmp_path: Path) -> None:
     assert trc[0].startswith("PathFileType\t4")
     assert trc[2].split("\t")[2] == str(len(times))
     assert len(trc) == 6 + len(times)
+
+
+def test_read_run_hands_on_what_it_could_not_read(run, tmp_path: Path) -> None:
+    folder, _, _ = run
+    path = folder / "out.mcap"
+    with path.open("rb") as stream:
+        chunk = make_reader(stream).get_summary().chunk_indexes[-1]
+    data = bytearray(path.read_bytes())
+    data[chunk.chunk_start_offset + chunk.chunk_length // 2] ^= 0xFF
+    damaged = tmp_path / "damaged.mcap"
+    damaged.write_bytes(bytes(data))
+    problems: list[str] = []
+    outputs, _ = read_run(damaged, problems)
+    whole, _ = read_run(path)
+    assert 0 < len(outputs["filter"]) < len(whole["filter"])
+    assert "is damaged" in problems[0]

@@ -70,3 +70,30 @@ def test_an_unreadable_recording_raises_from_the_reading_process(tmp_path: Path)
     broken.write_bytes(b"not a recording at all")
     with pytest.raises(RecordingError):
         run_recording(broken, Calibration("k01"), tmp_path / "out.mcap", processes=2)
+
+
+def test_a_damaged_chunk_is_accounted_for_and_described(
+    short_recording: Path, tmp_path: Path
+) -> None:
+    data = bytearray((short_recording / "recording.mcap").read_bytes())
+    data[len(data) // 4] ^= 0xFF  # inside the first chunk's compressed records
+    damaged = tmp_path / "damaged.mcap"
+    damaged.write_bytes(bytes(data))
+    calibration = load_calibration(short_recording / "calibration.yaml")
+    summary = run_recording(damaged, calibration, tmp_path / "out.mcap", processes=1)
+    with RecordingReader(short_recording / "recording.mcap") as reader:
+        camera_messages = sum(1 for _ in reader.messages())
+    reader_dropped = sum(v for k, v in summary.dropped.items() if k.startswith("reader"))
+    assert summary.dropped["reader: damaged_chunk"] > 0
+    assert sum(summary.frames_in.values()) + reader_dropped == camera_messages
+    assert "damaged" in summary.problems[0]
+
+
+@pytest.mark.parametrize("processes", [1, 2])
+def test_a_failed_run_leaves_no_output_behind(tmp_path: Path, processes: int) -> None:
+    broken = tmp_path / "broken.mcap"
+    broken.write_bytes(b"not a recording at all")
+    for out in (tmp_path / "out.mcap", tmp_path / "folder"):
+        with pytest.raises(RecordingError):
+            run_recording(broken, Calibration("k01"), out, processes=processes)
+        assert not out.exists()  # a second try is not told the output "exists already"

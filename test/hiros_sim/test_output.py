@@ -1,3 +1,5 @@
+import io
+
 import numpy as np
 import pytest
 
@@ -56,6 +58,19 @@ def test_truth_and_calibration_files(small, tmp_path):
 def test_load_truth_error(tmp_path):
     with pytest.raises(RecordingError, match="cannot read simulation truth"):
         load_truth(tmp_path)
+
+
+def test_a_cut_or_foreign_truth_file_is_a_recording_error(small, tmp_path):
+    save_truth(small, tmp_path)
+    whole = (tmp_path / "truth.npz").read_bytes()
+    damaged = bytearray(whole)
+    damaged[len(whole) // 2] ^= 0xFF
+    array = io.BytesIO()
+    np.save(array, np.zeros(3))
+    for content in (whole[:1000], bytes(damaged), array.getvalue()):
+        (tmp_path / "truth.npz").write_bytes(content)
+        with pytest.raises(RecordingError, match="cannot read simulation truth"):
+            load_truth(tmp_path)
 
 
 def test_setup_from_calibration_file(small, tmp_path):

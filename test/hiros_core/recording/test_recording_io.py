@@ -323,3 +323,117 @@ def test_chunks_hold_messages_larger_than_their_buffer_and_reserved_space_commit
     stream.seek(0)
     read = [bytes(m.data) for _, _, m in make_reader(stream).iter_messages()]
     assert read == payloads
+
+
+def _chunk_offsets(path):
+    """(start, length) of each chunk record, from the file's summary."""
+    with path.open("rb") as stream:
+        summary = make_reader(stream).get_summary()
+    return [(c.chunk_start_offset, c.chunk_length) for c in summary.chunk_indexes]
+
+
+def _damaged_copy(path, out, offset):
+    data = bytearray(path.read_bytes())
+    data[offset] ^= 0xFF
+    out.write_bytes(bytes(data))
+    return out
+
+
+@pytest.mark.parametrize("transient", [False, True])
+def test_a_damaged_chunk_is_skipped_and_counted(tmp_path, driver_frames, transient):
+    path = tmp_path / "take.mcap"
+    _write(path, driver_frames, chunk_size=20_000)
+    (start, length), *rest = _chunk_offsets(path)[1:]
+    assert rest
+    damaged = _damaged_copy(path, tmp_path / "damaged.mcap", start + length // 2)
+    with RecordingReader(path) as reader:
+        whole = [b.data(i) for b in reader.batches() for i in range(len(b))]
+    with RecordingReader(damaged) as reader:
+        read = [b.data(i) for b in reader.batches(transient=transient) for i in range(len(b))]
+        lost = reader.drops["damaged_chunk"]
+        assert "chunk at byte" in reader.problems[0]
+    assert 0 < lost < 200
+    assert len(read) + lost == len(whole) == 200
+    assert set(read) <= set(whole)
+
+
+def test_a_damaged_chunk_of_a_file_without_summary_is_skipped(tmp_path, driver_frames):
+    path = tmp_path / "take.mcap"
+    _write(path, driver_frames, chunk_size=20_000)
+    chunks = _chunk_offsets(path)
+    cut = chunks[-1][0] + chunks[-1][1]  # the last chunk ends there: no index, no summary
+    start, length = chunks[1]
+    damaged = _damaged_copy(path, tmp_path / "damaged.mcap", start + length // 2)
+    damaged.write_bytes(damaged.read_bytes()[:cut])
+    with RecordingReader(damaged) as reader:
+        read = list(reader.messages())
+        assert reader.drops["damaged_chunk"] == 1
+        assert "damaged" in reader.problems[0]
+    assert 0 < len(read) < 200
+    last = driver_frames[-1][1].stamp_ns
+    assert read[-1].log_time_ns == last  # the chunks after the damaged one are read
+
+
+def test_a_damaged_summary_is_not_trusted(tmp_path, driver_frames):
+    path = tmp_path / "take.mcap"
+    _write(path, driver_frames, chunk_size=20_000)
+    damaged = _damaged_copy(path, tmp_path / "damaged.mcap", len(path.read_bytes()) - 60)
+    with RecordingReader(damaged) as reader:
+        assert len(list(reader.messages())) == 200
+        assert "summary" in reader.problems[0]
+        assert not reader.drops
+
+
+def test_a_file_cut_before_any_topic_is_refused(tmp_path, driver_frames):
+    path = tmp_path / "take.mcap"
+    _write(path, driver_frames)
+    path.write_bytes(path.read_bytes()[:100])
+    with pytest.raises(RecordingError, match="before any topic is defined"):
+        RecordingReader(path)
+
+
+def test_iter_groups_hands_the_readers_problems_on(tmp_path, driver_frames):
+    path = tmp_path / "cut.mcap"
+    _write(path, driver_frames, chunk_size=20_000)
+    path.write_bytes(path.read_bytes()[: int(path.stat().st_size * 0.6)])
+    problems: list[str] = []
+    assert list(iter_groups(path, problems=problems))
+    assert len(problems) == 1
+    assert "ends early" in problems[0]
+
+
+@pytest.mark.parametrize("name", ["take.mcap", "take"])
+def test_discard_removes_what_the_writer_made(tmp_path, driver_frames, name):
+    writer = _write(tmp_path / name, driver_frames[:4])
+    writer.discard()
+    assert not (tmp_path / name).exists()
+    folder = tmp_path / "kept"
+    writer = RecordingWriter(folder)
+    (folder / "notes.txt").write_text("mine")
+    writer.discard()
+    assert [p.name for p in folder.iterdir()] == ["notes.txt"]
+
+
+def test_a_time_mcap_cannot_hold_is_refused_and_the_file_still_closes(tmp_path, samples):
+    path = tmp_path / "take.mcap"
+    group = samples.make_group(0)
+    with RecordingWriter(path) as writer:
+        writer.write("/note", "std_msgs/msg/String", b"\x00\x01\x00\x00\x01\x00\x00\x00\x00", 5)
+        for bad in (-1, 1 << 64):
+            with pytest.raises(RecordingError, match="cannot be recorded"):
+                writer.write("/note", "std_msgs/msg/String", b"\x00\x01\x00\x00", bad)
+            with pytest.raises(RecordingError, match="cannot be recorded"):
+                writer.write_group("/k01/skeletons", group, bad)
+    with RecordingReader(path) as reader:
+        assert [m.log_time_ns for m in reader.messages()] == [5]
+
+
+def test_the_pipelines_outputs_are_not_camera_topics(tmp_path, samples):
+    path = tmp_path / "session.mcap"
+    with RecordingWriter(path) as writer:  # a live session recorded with every topic
+        for index in range(3):
+            group = samples.make_group(index)
+            writer.write_group("/k01/skeletons", group)
+            for stage in ("tracker", "merger", "optimizer", "filter"):
+                writer.write_group(f"/hiros/{stage}", group)
+    assert {source for source, _ in iter_groups(path)} == {"k01"}

@@ -1,0 +1,77 @@
+"""``hiros run`` on bad input: one clear line and no output, or warnings on what was lost."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+from mcap.reader import make_reader
+
+from hiros_cli.main import main
+from hiros_core.recording import RecordingWriter
+from hiros_sim import SimParams, simulate, write_recording
+
+
+@pytest.fixture(scope="module")
+def sim(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    folder = tmp_path_factory.mktemp("sim")
+    write_recording(simulate(SimParams(n_cameras=2, n_people=1, duration=8.0, seed=1)), folder)
+    return folder
+
+
+def _run(sim: Path, recording: Path, out: Path, *extra: str) -> int:
+    calibration = str(sim / "calibration.yaml")
+    return main(["run", str(recording), "--calibration", calibration, "--out", str(out), *extra])
+
+
+def test_a_recording_without_camera_topics_is_refused_before_any_output(
+    sim: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    chatter = tmp_path / "chatter.mcap"
+    with RecordingWriter(chatter) as writer:
+        writer.write("/chatter", "std_msgs/msg/String", b"\x00\x01\x00\x00\x02\x00\x00\x00a\x00", 1)
+    out = tmp_path / "out.mcap"
+    assert _run(sim, chatter, out) == 1
+    err = capsys.readouterr().err
+    assert "holds no camera skeletons" in err
+    assert "['/chatter']" in err
+    assert not out.exists()
+
+
+def test_what_the_reader_lost_is_printed(
+    sim: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    cut = tmp_path / "cut.mcap"
+    with (sim / "recording.mcap").open("rb") as stream:
+        (chunk, *_) = make_reader(stream).get_summary().chunk_indexes
+    end = chunk.chunk_start_offset + chunk.chunk_length
+    cut.write_bytes((sim / "recording.mcap").read_bytes()[: end + 5])  # a recorder killed there
+    assert _run(sim, cut, tmp_path / "out.mcap", "--processes", "1") == 0
+    printed = " ".join(capsys.readouterr().out.split())
+    assert "warning: " in printed
+    assert "ends early or is damaged" in printed
+
+
+def test_force_replaces_a_folder_output_but_not_a_folder_of_other_files(
+    sim: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    out = tmp_path / "out"
+    recording = sim / "recording.mcap"
+    assert _run(sim, recording, out, "--processes", "1") == 0
+    assert _run(sim, recording, out, "--processes", "1", "--force") == 0
+    assert sorted(p.name for p in out.iterdir()) == ["metadata.yaml", "out_0.mcap"]
+    (out / "notes.txt").write_text("mine")
+    capsys.readouterr()
+    assert _run(sim, recording, out, "--processes", "1", "--force") == 1
+    assert "holding more than a recording" in capsys.readouterr().err
+    assert (out / "out_0.mcap").exists()
+
+
+@pytest.mark.parametrize("rate", ["nan", "-5", "inf", "fast"])
+def test_a_merge_rate_without_a_period_is_a_usage_error(
+    sim: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str], rate: str
+) -> None:
+    with pytest.raises(SystemExit) as exit_:
+        _run(sim, sim / "recording.mcap", tmp_path / "out.mcap", "--merge-rate", rate)
+    assert exit_.value.code == 2
+    assert "is not a rate in Hz" in capsys.readouterr().err
