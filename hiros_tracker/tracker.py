@@ -39,7 +39,7 @@ from __future__ import annotations
 
 import heapq
 import itertools
-from collections import Counter
+from collections import Counter, deque
 from dataclasses import dataclass
 from functools import cache, cached_property
 from typing import NamedTuple
@@ -68,6 +68,11 @@ class TrackerParams:
     Attributes:
         max_delay: seconds a frame waits for late frames of other cameras before it is
             processed; frames older than the last processed one are dropped as ``late``.
+        max_jump: seconds a frame's stamp may lie ahead of the newest frame so far. A frame
+            further ahead is held until the next frame: kept if that one is far ahead too
+            (every camera paused, or a gap in a recording), else dropped as ``stamp far
+            ahead`` (one camera's clock glitch, which would otherwise hold the out-of-order
+            buffer open and make every later frame of the other cameras ``late``).
         gate_distance: metres; a detection farther than this (weighted mean joint distance)
             from a track's prediction cannot be assigned to it.
         gate_growth: metres per second; the gate widens by this for each second a track went
@@ -129,6 +134,7 @@ class TrackerParams:
     """
 
     max_delay: float = 0.05
+    max_jump: float = 1.0
     gate_distance: float = 0.5
     gate_growth: float = 0.5
     min_hits: int = 8
@@ -382,6 +388,8 @@ class Tracker:
         self._camera_codes: dict[str, int] = {}
         self._newest_ns: int | None = None
         self._released_ns: int | None = None
+        self._suspect: tuple[int, str, MovedFrame] | None = None  # a frame far ahead, on hold
+        self._recent: dict[str, deque[int]] = {}  # each camera's last stamps
         self._up = np.zeros(4)  # the world's up (x, y, z, known): see kernels._update_up
         self._info: _LayoutInfo | None = None
         self._camera_positions: dict[str, tuple[CameraCalibration, np.ndarray]] = {}
@@ -411,8 +419,8 @@ class Tracker:
 
     @property
     def pending(self) -> int:
-        """Frames waiting in the out-of-order buffer."""
-        return len(self._buffer)
+        """Frames waiting in the out-of-order buffer (or held for a stamp far ahead)."""
+        return len(self._buffer) + (self._suspect is not None)
 
     # ----------------------------------------------------------------------------------- flow
     def update(self, group: SkeletonGroup) -> SkeletonGroup:
@@ -426,18 +434,47 @@ class Tracker:
         if corrected is None:
             return self._output([])
         stamp_ns = corrected.group.stamp_ns
+        camera = corrected.camera or group.camera
+        if self._seen_before(camera, stamp_ns):
+            self.drops["duplicate frame"] += 1
+            return self._output([])
         if self._released_ns is not None and stamp_ns < self._released_ns:
             self.drops["late frame"] += 1
             return self._output([])
-        camera = corrected.camera or group.camera
-        heapq.heappush(self._buffer, (stamp_ns, next(self._sequence), camera, corrected))
-        if self._newest_ns is None or stamp_ns > self._newest_ns:
-            self._newest_ns = stamp_ns
-        return self._release(self._newest_ns - round(self.params.max_delay * 1e9))
+        jump_ns = round(self.params.max_jump * 1e9)
+        if self._suspect is not None:
+            held, self._suspect = self._suspect, None
+            if stamp_ns > self._newest_ns + jump_ns:  # type: ignore[operator]
+                self._buffered(*held)  # confirmed: every clock moved on
+            else:
+                self.drops["stamp far ahead"] += 1
+        if self._newest_ns is not None and stamp_ns > self._newest_ns + jump_ns:
+            self._suspect = (stamp_ns, camera, corrected)
+            return self._output([])
+        self._buffered(stamp_ns, camera, corrected)
+        return self._release(self._newest_ns - round(self.params.max_delay * 1e9))  # type: ignore[operator]
 
     def flush(self) -> SkeletonGroup:
-        """Process every buffered frame now (end of a recording)."""
+        """Process every buffered frame now (end of a recording), a held one included."""
+        if self._suspect is not None:
+            self._buffered(*self._suspect)
+            self._suspect = None
         return self._release(None)
+
+    def _seen_before(self, camera: str, stamp_ns: int) -> bool:
+        """Whether this camera already sent a frame with this stamp (among its last 64)."""
+        recent = self._recent.get(camera)
+        if recent is None:
+            recent = self._recent[camera] = deque(maxlen=64)
+        if stamp_ns in recent:
+            return True
+        recent.append(stamp_ns)
+        return False
+
+    def _buffered(self, stamp_ns: int, camera: str, frame: MovedFrame) -> None:
+        heapq.heappush(self._buffer, (stamp_ns, next(self._sequence), camera, frame))
+        if self._newest_ns is None or stamp_ns > self._newest_ns:
+            self._newest_ns = stamp_ns
 
     def _release(self, horizon_ns: int | None) -> SkeletonGroup:
         skeletons: list[Skeleton] = []

@@ -222,13 +222,54 @@ def test_empty_and_bad_frames_do_not_crash(scenes):
     scene = scenes.render(scenes.crossing, duration=0.5)
     tracker = Tracker(TrackerParams(), scene.calibration)
     frame = scene.frames[0]
-    empty = SkeletonGroup(frame.stamp_ns, frame.frame_id, [])
+    empty = SkeletonGroup(frame.stamp_ns - 1_000_000, frame.frame_id, [])
     assert tracker.update(empty).skeletons == []
     bad = frame.copy()
     bad.skeletons[0].positions[:] = np.nan
     tracker.update(bad)
     tracker.flush()
     assert tracker.drops["no finite joint"] == 1
+    assert tracker.pending == 0
+
+
+def _outputs_and_drops(scenes, scene, frames):
+    tracker, outputs = _track(scenes, scene, frames=frames)
+    return scenes.identities(outputs, scene.truth), tracker.drops
+
+
+def test_duplicate_frames_are_counted_and_left_out(scenes):
+    scene = scenes.render(scenes.crossing, duration=2.0)
+    frames = [copy for frame in scene.frames for copy in (frame, frame.copy())]
+    seen, drops = _outputs_and_drops(scenes, scene, frames)
+    assert drops["duplicate frame"] == len(scene.frames)
+    assert drops["late frame"] == 0
+    _assert_one_id_each(seen, 2)
+
+
+def test_one_stamp_far_ahead_is_dropped_and_the_rest_stays_in_order(scenes):
+    """A single clock glitch of one camera (+3 s) must not open the out-of-order buffer: without
+    the hold, every frame after it that arrives a little late would be dropped as late."""
+    scene = scenes.render(scenes.crossing, duration=3.0)
+    frames = [frame.copy() for frame in scene.frames]
+    frames[30].stamp_ns += 3_000_000_000
+    # from then on, each camera's frames arrive in pairs swapped (later one first)
+    for k in range(31, len(frames) - 1, 2):
+        frames[k], frames[k + 1] = frames[k + 1], frames[k]
+    seen, drops = _outputs_and_drops(scenes, scene, frames)
+    assert drops["stamp far ahead"] == 1
+    assert drops["late frame"] == 0
+    _assert_one_id_each(seen, 2)
+
+
+def test_a_pause_of_every_camera_is_not_a_glitch(scenes):
+    """All clocks jumping ahead together (a paused recording) keeps every frame."""
+    scene = scenes.render(scenes.crossing, duration=3.0)
+    frames = [frame.copy() for frame in scene.frames]
+    for frame in frames[len(frames) // 2 :]:
+        frame.stamp_ns += 5_000_000_000
+    tracker, _ = _track(scenes, scene, frames=frames)
+    assert tracker.drops["stamp far ahead"] == 0
+    assert tracker.drops["late frame"] == 0
     assert tracker.pending == 0
 
 
