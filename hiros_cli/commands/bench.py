@@ -3,7 +3,8 @@
 Suites:
   codec      our CDR codec vs rclpy message objects (SkeletonGroup and MarkerArray, 4 x 32)
   io         conversion and bridge throughput (messages per second)
-  calib      calibration accuracy over simulator seeds vs the Pose2Sim-style baseline
+  calib      calibration accuracy over simulator seeds: clocks vs Pose2Sim's lag, poses vs
+             Eichler et al.'s RANSAC + Kabsch alone, on the same recordings
   tracking   tracker and merger time per frame for 1-4 people vs Hi-ROS's published figures,
              and a norfair tracker on the same detections
   body       optimizer and filter time per frame vs Hi-ROS, filter lag/jitter vs One-Euro
