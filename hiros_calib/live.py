@@ -68,6 +68,10 @@ class LiveCalibratorParams(CalibratorParams):
     """... if it also exceeds this (m)."""
     recalibrate_after: float = 5.0
     """Seconds of frames after a change before the camera is recalibrated."""
+    restart_after_backwards: float = 1.0
+    """A frame stamped this many seconds before its camera's newest one starts the camera's
+    buffer again (its clock restarted, or the newest frame was a glitch); a smaller step back
+    is dropped as ``out_of_order``."""
 
 
 def _blend(old: CameraCalibration, new: CameraCalibration, weight: float) -> CameraCalibration:
@@ -147,7 +151,11 @@ class LiveCalibrator:
         horizon = round(self.params.buffer_length * 1e9)
         with self._lock:
             frames = self._frames.setdefault(camera, deque())
-            if frames and group.stamp_ns <= frames[-1][0].stamp_ns:
+            if (
+                frames
+                and group.stamp_ns <= frames[-1][0].stamp_ns
+                and not self._restarted(camera, frames, group.stamp_ns, arrival_ns)
+            ):
                 self.drops["out_of_order"] += 1
                 return group
             frames.append((group, arrival_ns))
@@ -156,6 +164,24 @@ class LiveCalibrator:
             if self._first_arrival is None:
                 self._first_arrival = arrival_ns
         return group
+
+    def _restarted(self, camera: str, frames: deque, stamp_ns: int, arrival_ns: int) -> bool:
+        """Empty the buffer of a camera whose stamps went far back; True if they did.
+
+        Without it, a camera whose clock restarted (or that sent one frame stamped far in
+        the future) had every later frame dropped as out of order, for good. A real change
+        of the camera's clock offset is then found by ``check`` like a clock jump.
+        """
+        back = frames[-1][0].stamp_ns - stamp_ns
+        if back <= self.params.restart_after_backwards * 1e9:
+            return False
+        frames.clear()
+        self._since.pop(camera, None)
+        self.drops["stamps_went_back"] += 1
+        self.events.append(
+            (arrival_ns, f"{camera}: stamps went back {back * 1e-9:.3g} s, buffer restarted")
+        )
+        return True
 
     # -- work
     def step(self, now_ns: int) -> bool:

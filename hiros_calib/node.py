@@ -99,8 +99,11 @@ class CalibNode(HirosNode):
         self._logged_events = 0
         qos = camera_qos(self.params.camera_qos)
         topics = [self.params.camera_topic.format(camera=c) for c in self.params.camera_names]
-        for topic in topics:
-            self.create_raw_subscription(SkeletonGroupMsg, topic, self.on_group, qos)
+        self._topic_cameras: dict[str, str] = {}
+        for camera, topic in zip(self.params.camera_names, topics, strict=True):
+            self.create_raw_subscription(
+                SkeletonGroupMsg, topic, lambda data, c=camera: self.on_group(c, data), qos
+            )
         tf_qos = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)
         self._tf = self.create_publisher(TFMessage, "/tf_static", tf_qos)
         self.create_service(Trigger, "~/save", self.on_save)
@@ -122,9 +125,30 @@ class CalibNode(HirosNode):
         self.get_logger().info(f"loaded {path}: cameras {sorted(calibration.cameras)}")
         return calibration
 
-    def on_group(self, data: bytes) -> None:
-        """Buffer one camera frame with its arrival time on this node's clock."""
-        self.live.update(decode_group(data), self.get_clock().now().nanoseconds)
+    def on_group(self, topic_camera: str, data: bytes) -> None:
+        """Buffer one frame of ``topic_camera``'s topic with its arrival time on our clock.
+
+        The calibrated camera is named by the frame id; a topic's frames name the topic's
+        camera, or else (drivers with other frame names) the first camera seen on it. Frames
+        naming any other camera are dropped: every new name would become a camera to buffer
+        and to pair with all the others in each estimate (a stream of ever-new frame ids
+        made the estimates crawl and log a line per camera).
+        """
+        group = decode_group(data)
+        camera = group.camera
+        if camera and camera != topic_camera:
+            bound = self._topic_cameras.setdefault(
+                topic_camera, camera if camera not in self.params.camera_names else topic_camera
+            )
+            if camera != bound:
+                self.drop(
+                    "frame_id of another camera",
+                    f"{group.frame_id!r} on the topic of {topic_camera!r}, which carries {bound!r}",
+                )
+                return
+        elif camera:
+            self._topic_cameras[topic_camera] = camera
+        self.live.update(group, self.get_clock().now().nanoseconds)
 
     def _work(self) -> None:
         while not self._stop.wait(self.params.step_period):

@@ -15,6 +15,7 @@ child) are refused with ``CodecError`` rather than silently altered.
 
 from __future__ import annotations
 
+import hashlib
 import struct
 import sys
 from collections.abc import Callable
@@ -794,10 +795,23 @@ def _layout_for(
         parents = [links[i][1] if i in links else -1 for i in range(size)]
         labels = [links[i][0] if i in links else "" for i in range(size)]
         try:
-            _DECODED_LAYOUTS[key] = Layout("decoded", tuple(names), tuple(parents), tuple(labels))
+            _DECODED_LAYOUTS[key] = Layout(
+                _decoded_name(key, size), tuple(names), tuple(parents), tuple(labels)
+            )
         except LayoutError as exc:
             reader.fail(str(exc))
     return _DECODED_LAYOUTS[key]
+
+
+def _decoded_name(key: tuple, size: int) -> str:
+    """A name of its own for each decoded layout, the same in every run.
+
+    The stages keep per-layout state (track memories, kernel constants, filter batches) by
+    layout name; two decoded layouts of one name, e.g. 3 and 32 joints, used to share that
+    state, and the optimizer's compiled kernels then wrote past their arrays (a segfault).
+    """
+    digest = hashlib.blake2b(repr(key).encode(), digest_size=4).hexdigest()
+    return f"decoded_{size}_{digest}"
 
 
 def _fits(

@@ -256,10 +256,10 @@ class Filter:
                 starts.append(result)
             else:
                 elapsed = skeleton.src_time_ns - tracks.time_ns.item(tracks.slots[skeleton.id])
-                if elapsed <= 0:
-                    self.drops["stamp not after the track's previous one"] += 1
+                continues = self._continues(elapsed, max_gap_ns)
+                if continues is None:
                     continue
-                if elapsed > max_gap_ns:
+                if not continues:
                     result = skeleton.copy()
                     starts.append(result)
                 else:
@@ -280,6 +280,20 @@ class Filter:
         return out
 
     # ------------------------------------------------------------------------ internals
+
+    def _continues(self, elapsed_ns: int, max_gap_ns: int) -> bool | None:
+        """Whether a track's new frame continues it (True), restarts it (False) or is dropped.
+
+        A frame far (over ``max_gap``) before the track's previous one restarts the track:
+        the previous stamp was a glitch or the source restarted, and dropping would stop
+        the track for good after one frame stamped far in the future.
+        """
+        if -max_gap_ns <= elapsed_ns <= 0:
+            self.drops["stamp not after the track's previous one"] += 1
+            return None
+        if elapsed_ns < 0:
+            self.drops["stamp far before the track's previous one (restarted)"] += 1
+        return 0 < elapsed_ns <= max_gap_ns
 
     def _valid(self, skeleton: Skeleton, seen: set[int]) -> bool:
         """Whether a usable skeleton (:func:`stack_frame`) has a new track id (else counted)."""

@@ -91,14 +91,17 @@ class PipelineNode(HirosNode):
             )
 
     def on_group(self, group) -> None:  # noqa: ANN001 - SkeletonGroup | None from a bridge
-        """One camera frame through the stages; publish what each stage produced."""
-        if group is None:
-            return
-        outputs = self.pipeline.update(group)
-        for stage, result in reversed(list(zip(STAGES, outputs, strict=True))):
-            publisher = self.publishers_[stage]
-            if result.skeletons and publisher.get_subscription_count():
-                self.publish_raw(publisher, encode_group(result))
+        """One camera frame through the stages; publish what each stage produced.
+
+        The drops are reported also when the bridge dropped the frame (``group`` None):
+        a camera sending only bad messages must show on /diagnostics too.
+        """
+        if group is not None:
+            outputs = self.pipeline.update(group)
+            for stage, result in reversed(list(zip(STAGES, outputs, strict=True))):
+                publisher = self.publishers_[stage]
+                if result.skeletons and publisher.get_subscription_count():
+                    self.publish_raw(publisher, encode_group(result))
         drops = self.pipeline.drops
         for bridge in self._bridges.values():
             drops.update({f"bridge: {k}": v for k, v in bridge.drops.items()})

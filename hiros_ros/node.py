@@ -98,11 +98,21 @@ class HirosNode(Node):
     def drop(self, reason: str, detail: str = "", amount: int = 1) -> None:
         """Count dropped input under ``reason`` and log it at most once per interval."""
         self.counters[f"dropped.{reason}"] += amount
+        total = self.counters[f"dropped.{reason}"]
+        self.warn_throttled(reason, lambda: f"dropped input ({reason}, {total} so far): {detail}")
+
+    def warn_throttled(self, key: str, message: Callable[[], str]) -> bool:
+        """Log ``message()`` unless ``key`` was logged within the interval; True if logged.
+
+        Whatever input can vary (a camera name, an id) must reach the log through here, so
+        that a stream of ever-new values cannot flood it.
+        """
         now = time.monotonic()
-        if now - self._last_log.get(reason, -1e9) >= self._log_interval:
-            self._last_log[reason] = now
-            total = self.counters[f"dropped.{reason}"]
-            self.get_logger().warning(f"dropped input ({reason}, {total} so far): {detail}")
+        if now - self._last_log.get(key, -1e9) < self._log_interval:
+            return False
+        self._last_log[key] = now
+        self.get_logger().warning(message())
+        return True
 
     def absorb_drops(self, drops: Counter[str], seen: Counter[str]) -> None:
         """Report the increase of a stage's own ``drops`` counter since the last call."""

@@ -74,22 +74,39 @@ class TrackerNode(HirosNode):
     def _on_calibration(self, calibration: Calibration) -> None:
         known = set(self.tracker.correction.cameras)
         self.tracker.set_calibration(calibration)
-        self._reported -= set(calibration.cameras)
+        self._reported &= self.tracker.uncalibrated  # (kept a subset: see _report_uncalibrated)
         if set(calibration.cameras) != known:
             self.get_logger().info(f"calibration: cameras {sorted(calibration.cameras)}")
 
     def on_group(self, data: bytes) -> None:
         """Decode one camera frame, track, publish what the tracker released."""
         result = self.tracker.update(decode_group(data))
-        for camera in self.tracker.uncalibrated - self._reported:
-            self._reported.add(camera)
-            self.get_logger().warning(
-                f"camera {camera!r} has no calibration: its frames are dropped until "
-                f"{self.params.calib_node} or the calibration file provides one"
-            )
+        self._report_uncalibrated()
         self.absorb_drops(self.tracker.drops, self._seen_drops)
         if result.skeletons:
             self.publish_raw(self.publisher, encode_group(result))
+
+    def _report_uncalibrated(self) -> None:
+        """Name each camera without calibration once, at most one line per log interval.
+
+        Frame ids come from the input: a publisher sending ever-new ones must not get a log
+        line per frame (the cameras not named yet are named in later intervals).
+        """
+        uncalibrated = self.tracker.uncalibrated
+        if len(uncalibrated) == len(self._reported):  # the same set: it is kept a subset
+            return
+        named: list[str] = []
+
+        def message() -> str:  # built only when the line is due
+            named.append(min(uncalibrated - self._reported))
+            return (
+                f"camera {named[0]!r} has no calibration ({len(uncalibrated)} camera(s) "
+                f"without one so far): its frames are dropped until {self.params.calib_node} "
+                "or the calibration file provides one"
+            )
+
+        if self.warn_throttled("camera without calibration", message):
+            self._reported.add(named[0])
 
 
 def main(args: list[str] | None = None) -> None:

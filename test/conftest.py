@@ -6,6 +6,7 @@ import itertools
 import os
 import subprocess
 import sys
+from collections.abc import Callable
 from pathlib import Path
 
 import pytest
@@ -85,3 +86,29 @@ def ros_processes(ros_env: dict[str, str]):
     processes = RosProcesses(ros_env)
     yield processes
     processes.stop()
+
+
+@pytest.fixture
+def ros_context(ros_env: dict[str, str]):
+    """rclpy initialised in this process (own domain id) for a node built in the test."""
+    rclpy = pytest.importorskip("rclpy")
+    pytest.importorskip("hiros_skeleton_msgs.msg")
+    rclpy.init()
+    yield
+    rclpy.shutdown()
+
+
+class LogLines:
+    """Stands in for a node's logger: keeps ``(level, message)`` of every line."""
+
+    def __init__(self) -> None:
+        self.lines: list[tuple[str, str]] = []
+
+    def __getattr__(self, level: str) -> Callable[..., None]:  # info, warning, error, ...
+        return lambda message, **_: self.lines.append((level, message))
+
+
+@pytest.fixture
+def log_lines() -> LogLines:
+    """A LogLines to put in place of a node's ``get_logger()``."""
+    return LogLines()

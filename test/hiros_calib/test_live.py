@@ -65,3 +65,18 @@ def test_live_calibrates_then_recalibrates_a_moved_camera(make_scene):
     assert live.calibration.cameras["cam1"].time_offset == pytest.approx(
         truth["cam1"].time_offset, abs=3e-3
     )
+
+
+def test_stamps_far_back_restart_the_cameras_buffer_small_steps_are_dropped():
+    """One frame stamped far ahead (or a restarted camera clock) used to make every later
+    frame of the camera 'out_of_order', for good."""
+    from hiros_core.model import SkeletonGroup
+
+    live = LiveCalibrator(LiveCalibratorParams())
+    second = 1_000_000_000
+    stamps = [1, 2, 3, 2**31 * second, 4, 5, 4.5, 6]  # a glitch, then a small step back
+    for index, stamp in enumerate(stamps):
+        live.update(SkeletonGroup(round(stamp * second), "cam0"), index)
+    assert live.snapshot()["buffered"] == {"cam0": 3}  # 4, 5, 6
+    assert live.drops == {"stamps_went_back": 1, "out_of_order": 1}
+    assert "cam0: stamps went back" in live.events[-1][1]

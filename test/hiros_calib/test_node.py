@@ -84,3 +84,32 @@ def test_result_parameters_are_flat_typed_values() -> None:
     assert values["cameras.k02.quality.joint_residual_m.Pelvis"] == 0.02
     assert values["cameras.k02.quality.drift_estimated"] is True
     assert values["cameras.k02.quality.status"] == "recalibrating"
+
+
+@pytest.mark.ros
+def test_frames_naming_other_cameras_are_dropped_not_buffered(ros_context) -> None:
+    """Ever-new frame ids on a camera topic used to become cameras of their own, each paired
+    with all the others in every estimate."""
+    import numpy as np
+
+    from hiros_calib.node import CalibNode
+    from hiros_core.codec import encode_group
+    from hiros_core.model import Skeleton, SkeletonGroup
+
+    def frame(frame_id: str, stamp_ns: int) -> bytes:
+        skeleton = Skeleton.from_positions(np.full((32, 3), 3.0), src_frame=frame_id)
+        return encode_group(SkeletonGroup(stamp_ns, frame_id, [skeleton]))
+
+    node = CalibNode()
+    node._stop.set()  # no estimates in this test
+    try:
+        node.on_group("k01", frame("k01_depth_camera_link", 1))
+        for index in range(50):
+            node.on_group("k01", frame(f"x{index}_depth_camera_link", index + 2))
+        node.on_group("k01", frame("k02_depth_camera_link", 100))  # a configured camera
+        node.on_group("k02", frame("driver_frame", 1))  # a driver's own frame names ...
+        node.on_group("k02", frame("driver_frame", 2))  # ... are the camera of that topic
+    finally:
+        node.destroy_node()
+    assert node.counters["dropped.frame_id of another camera"] == 51
+    assert sorted(node.live.snapshot()["buffered"].items()) == [("driver_frame", 2), ("k01", 1)]

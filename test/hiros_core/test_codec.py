@@ -372,3 +372,20 @@ def test_fast_walk_of_new_shapes_reads_as_the_field_reader(data, media) -> None:
         for cut in (1, len(raw) // 2):
             with pytest.raises(CodecError):
                 _walk_marker_array(raw[:-cut])
+
+
+def test_decoded_layouts_of_different_joints_have_different_names() -> None:
+    """Stages keep per-layout state by name: two decoded layouts must never share one."""
+    from hiros_skeleton_msgs.msg import Marker
+    from hiros_skeleton_msgs.msg import Skeleton as SkeletonMsg
+    from hiros_skeleton_msgs.msg import SkeletonGroup as GroupMsg
+
+    def layout_of(n_markers: int) -> object:
+        skeleton = SkeletonMsg(id=1, max_markers=n_markers)
+        skeleton.markers = [Marker(id=i, name="x") for i in range(n_markers)]
+        data = serialization.serialize_message(GroupMsg(skeletons=[skeleton]))
+        return decode_group(data).skeletons[0].layout
+
+    small, large, again = layout_of(3), layout_of(32), layout_of(3)
+    assert small.name != large.name
+    assert again.name == small.name

@@ -147,6 +147,17 @@ def test_stale_frames_and_bad_skeletons_are_counted():
     assert sum(stage.drops.values()) == 4
 
 
+def test_a_stamp_far_ahead_does_not_stop_the_track_for_good():
+    """One frame stamped far in the future used to make every later frame of the track
+    'not after the track's previous one', for the rest of the run."""
+    stage = Filter()
+    pose = base_pose(7)
+    for t in (1.0, 1.033, 1e6, 1.066, 1.1):
+        out = stage.update(frame(pose, t))
+    assert [s.id for s in out.skeletons] == [0]
+    assert stage.drops == {"stamp far before the track's previous one (restarted)": 1}
+
+
 def test_slerp():
     start = Rotation.identity().as_quat()
     end = Rotation.from_rotvec([0.0, 0.0, 1.0]).as_quat()

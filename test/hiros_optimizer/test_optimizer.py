@@ -244,3 +244,35 @@ def test_compiled_frames_equal_the_numpy_frames(noisy_people, group_at):
             np.testing.assert_array_equal(a.marker_present, b.marker_present)
             np.testing.assert_allclose(b.markers, a.markers, atol=1e-9, equal_nan=True)
             np.testing.assert_allclose(b.links, a.links, atol=1e-9, equal_nan=True)
+
+
+def _unknown_layout_bytes(n_markers: int, stamp_ns: int) -> bytes:
+    """A one-person group whose marker names fit no built-in layout (a decoded layout)."""
+    from hiros_skeleton_msgs.msg import Marker
+    from hiros_skeleton_msgs.msg import Skeleton as SkeletonMsg
+    from hiros_skeleton_msgs.msg import SkeletonGroup as GroupMsg
+    from rclpy.serialization import serialize_message
+
+    skeleton = SkeletonMsg(id=1, max_markers=n_markers)
+    skeleton.src_time.sec, skeleton.src_time.nanosec = divmod(stamp_ns, 10**9)
+    skeleton.markers = [Marker(id=i, name="x") for i in range(n_markers)]
+    for i, marker in enumerate(skeleton.markers):
+        marker.center.pose.position.z = 3.0 + 0.1 * i
+        marker.center.pose.orientation.w = 1.0
+    group = GroupMsg(skeletons=[skeleton])
+    group.header.stamp.sec, group.header.stamp.nanosec = divmod(stamp_ns, 10**9)
+    return serialize_message(group)
+
+
+@pytest.mark.parametrize("compiled", [False, True])
+def test_a_track_whose_decoded_layout_changes_size_is_learnt_again(compiled):
+    """A track seen with 3 then 32 unknown markers: two decoded layouts. They used to share
+    the name "decoded", hence one track memory, and the compiled learning wrote past its
+    arrays (the live optimizer node died of a segfault)."""
+    pytest.importorskip("hiros_skeleton_msgs.msg")
+    from hiros_core.codec import decode_group
+
+    stage = small_optimizer(compiled=compiled)
+    for frame, n_markers in enumerate([3] * 5 + [32] * 5):
+        out = stage.update(decode_group(_unknown_layout_bytes(n_markers, (frame + 1) * 10**8)))
+        assert [len(s.markers) for s in out.skeletons] == [n_markers]

@@ -61,3 +61,24 @@ def test_tracker_node_follows_the_calib_node_parameters(ros_processes) -> None:
     assert summary, log
     assert summary.group(1) == "0, 1", log
     assert summary.group(3) == "0, 1", log
+
+
+def test_ever_new_frame_ids_log_one_line_per_interval(ros_context, log_lines) -> None:
+    """A publisher sending a new frame id in every frame used to get one warning per frame."""
+    from hiros_core.codec import encode_group
+    from hiros_core.model import Skeleton, SkeletonGroup
+    from hiros_tracker.node import TrackerNode
+
+    node = TrackerNode()
+    node.get_logger = lambda: log_lines
+    try:
+        for index in range(200):
+            frame = f"x{index}_depth_camera_link"
+            skeleton = Skeleton.from_positions(np.full((32, 3), 3.0), src_frame=frame)
+            node.on_group(encode_group(SkeletonGroup(index + 1, frame, [skeleton])))
+    finally:
+        node.destroy_node()
+    named = [m for _, m in log_lines.lines if "has no calibration" in m]
+    assert named == [named[0]]
+    assert "'x0' has no calibration (1 camera(s)" in named[0]
+    assert node.counters["dropped.uncalibrated camera"] == 200
