@@ -102,6 +102,11 @@ class MergerParams:
         limb_cutoff: metres; with ``limb_residuals``, a camera's limb one of whose joints is
             this far from the estimate gets no weight (a single joint's blunder).
         track_timeout: seconds; a track unseen this long is forgotten.
+        max_jump: seconds; input stamped this much before the newest input so far restarts
+            the merger (its detections and output clock, counted ``stamps went back``): the
+            earlier input was stamped far ahead by mistake, or its source restarted (a
+            replayed recording looping). Without it every later detection would be older
+            than the one kept and dropped, for good.
         fuse_directions: after the robust mean, place each limb's joints root-outward along
             the cameras' robust mean link directions (weighted spherical median), with the
             fused link lengths, and shift the limb back onto its fused mean joint: the angles
@@ -133,6 +138,7 @@ class MergerParams:
     outlier_cutoff: float = 0.4
     iterations: int = 3
     track_timeout: float = 1.0
+    max_jump: float = 1.0
     limb_residuals: bool = True
     limb_cutoff: float = 0.8
     fuse_directions: bool = False
@@ -275,6 +281,7 @@ class Merger:
         self._frame_cameras: dict[str, int] = {}  # frame id -> camera index, as found
         self._next_tick_ns: int | None = None
         self._last_out_ns: int | None = None
+        self._newest_in_ns: int | None = None
         self._world_frame = "world"
         self._constants: dict[str, tuple] = {}  # layout name -> ``_kernel_constants``
         if calibration is not None:
@@ -319,12 +326,24 @@ class Merger:
         """Take one tracker output; return the fused people (empty when no output is due)."""
         if group.frame_id:
             self._world_frame = group.frame_id
+        if group.skeletons and self._went_back(group.stamp_ns):
+            self.drops["stamps went back (restarted)"] += 1
+            self._latest = LatestDetections()
+            self._next_tick_ns = self._last_out_ns = None
         newest = self._store(group.skeletons) if group.skeletons else None
         out_ns = self._output_time(newest, group.stamp_ns)
         if out_ns is None:
             return SkeletonGroup(group.stamp_ns, self._world_frame, [])
         self._last_out_ns = out_ns
         return SkeletonGroup(out_ns, self._world_frame, self.merge(out_ns))
+
+    def _went_back(self, stamp_ns: int) -> bool:
+        """Whether input stamped ``stamp_ns`` lies ``max_jump`` before the newest so far."""
+        newest = self._newest_in_ns
+        back = newest is not None and stamp_ns < newest - round(self.params.max_jump * 1e9)
+        if newest is None or back or stamp_ns > newest:
+            self._newest_in_ns = stamp_ns
+        return back
 
     def _store(self, skeletons: list[Skeleton]) -> int | None:
         """Keep each usable detection as its track's newest from its camera (else counted).

@@ -403,3 +403,16 @@ def test_a_frame_mixing_joint_counts_fuses_the_first_layout_s_tracks():
     out = Merger().update(_group([_detection(pose, "k01", track=3), other])).skeletons
     assert [s.id for s in out] == [3]
     np.testing.assert_allclose(out[0].positions, pose, atol=1e-9)
+
+
+def test_one_group_stamped_far_ahead_does_not_stop_the_output():
+    """Input going back by more than max_jump restarts the merger: without it, every later
+    detection is older than the glitch's and dropped, and no output follows."""
+    pose = _person()
+    merger = Merger()
+    stamps = [T0 + k * 33_333_333 for k in range(20)]
+    stamps.insert(5, T0 + 3_000_000_000)  # one tracker output stamped 3 s ahead
+    outputs = [merger.update(_group([_detection(pose, "k01", t_ns=t)], t)) for t in stamps]
+    assert all(out.skeletons for out in outputs[6:])
+    assert merger.drops["stamps went back (restarted)"] == 1
+    assert merger.drops["older than the camera's last detection"] == 0
