@@ -52,6 +52,7 @@ class CalibrationFollower:
         self.calibration = calibration
         self._on_change = on_change
         self._calib_node = calib_node
+        self._node = node
         node.create_subscription(ParameterEvent, "/parameter_events", self._on_event, 100)
 
     def _on_event(self, event: ParameterEvent) -> None:
@@ -62,21 +63,44 @@ class CalibrationFollower:
             parts = parameter.name.split(".")
             if len(parts) != 3 or parts[0] != "cameras" or parts[2] not in _FIELDS:
                 continue
-            value = _value(parameter)
+            value = _checked(parts[2], _value(parameter))
             if value is None:
+                self._refused(parameter.name)
                 continue
             camera = self.calibration.cameras.setdefault(
                 parts[1], CameraCalibration(frame_id=f"{parts[1]}_depth_camera_link")
             )
-            if parts[2] == "rotation" and (
-                len(value) != 4 or not np.isclose(np.linalg.norm(value), 1, atol=1e-3)
-            ):
-                continue
-            if parts[2] == "translation" and len(value) != 3:
-                continue
             setattr(camera, parts[2], value)
             if not self.calibration.reference:
                 self.calibration.reference = parts[1]
             changed = True
         if changed:
             self._on_change(copy.deepcopy(self.calibration))
+
+    def _refused(self, name: str) -> None:
+        """Count (and log, throttled) a calib parameter of the wrong type or out of range."""
+        drop = getattr(self._node, "drop", None)  # a HirosNode counts it on /diagnostics
+        if drop is not None:
+            drop("calibration parameter of the wrong type or not finite", name)
+        else:
+            self._node.get_logger().warning(f"ignored calibration parameter {name}")
+
+
+def _checked(field: str, value: object) -> object | None:
+    """The value if it fits the field (finite numbers, a unit quaternion, a name), else None.
+
+    Anything may be set on the calib node's parameters by hand; a value of the wrong type
+    must not reach the stages (or raise in this callback, which would stop the node).
+    """
+    if field == "frame_id":
+        return value if isinstance(value, str) and value else None
+    if field in {"translation", "rotation"}:
+        size = 3 if field == "translation" else 4
+        if not isinstance(value, np.ndarray) or value.shape != (size,):
+            return None
+        if not np.isfinite(value).all():
+            return None
+        if field == "rotation" and not np.isclose(np.linalg.norm(value), 1.0, atol=1e-3):
+            return None
+        return value
+    return value if isinstance(value, float) and np.isfinite(value) else None
