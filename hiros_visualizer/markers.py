@@ -74,7 +74,7 @@ def skeleton_markers(
         data.points, data.texts = [], []
         return data
     ids = [s.id for s in skeletons]
-    data.ids[:] = [3 * i + k for i in ids for k in (0, 1, 2)]
+    data.ids[:] = [_marker_id(i, k) for i in ids for k in (0, 1, 2)]
     data.types[:] = _KINDS * len(skeletons)
     data.colors[:] = [_id_color(int(i)) for i in ids for _ in (0, 1, 2)]
     sizes = (params.joint_size, params.link_width, params.label_height) * len(skeletons)
@@ -107,6 +107,16 @@ def skeleton_markers(
     data.points = [points for joints, lines in drawn for points in (joints, lines, _NO_POINTS)]
     data.texts = [text for i in ids for text in ("", "", f"id {i}")]
     return data
+
+
+def _marker_id(skeleton_id: int, kind: int) -> int:
+    """Marker ``3 * id + kind``, wrapped into int32 (a Marker's id) for ids near its limits.
+
+    A skeleton id from elsewhere may be any int32; without the wrap its markers overflow and
+    the whole frame could not be drawn.
+    """
+    value = 3 * int(skeleton_id) + kind
+    return value if -(2**31) <= value < 2**31 else value % 2**31
 
 
 @lru_cache(maxsize=16)

@@ -97,3 +97,13 @@ def stacked(group):
     )
     assert np.shares_memory(stack_rows(made).markers, made[-1].markers)
     return SkeletonGroup(group.stamp_ns, group.frame_id, made)
+
+
+def test_ids_near_the_int32_limits_are_drawn():
+    """Marker ids (3 per person) stay in int32 for any int32 skeleton id."""
+    big, low = person(0, skeleton_id=2**31 - 1), person(1, skeleton_id=-(2**31))
+    group = SkeletonGroup(5, "world", [big, low])
+    ids = skeleton_markers(group).ids.tolist()
+    assert all(-(2**31) <= i < 2**31 for i in ids)
+    assert len(set(ids)) == 6
+    assert encode_skeleton_markers(group) == encode_marker_array(skeleton_markers(group))
