@@ -133,21 +133,16 @@ def convert(
         )
         raise RecordingError(msg)
     counts: Counter[str] = Counter()
-    writer = RecordingWriter(out_path)
-    try:
-        with writer:
-            for done, (receive_ns, name, i) in enumerate(order, start=1):
-                group = streams[name].groups[i]
-                if skeleton_groups:
-                    topic = f"/{name}/skeletons"
-                    writer.write_group(topic, group, receive_ns)
-                else:
-                    topic = f"/{name}/body_tracking_data"
-                    writer.write_marker_array(topic, group_to_driver_markers(group), receive_ns)
-                counts[topic] += 1
-                if progress is not None:
-                    progress(done, len(order))
-    except Exception:  # a message that cannot be encoded: no half-written recording is left
-        writer.discard()
-        raise
+    with RecordingWriter(out_path, discard_on_error=True) as writer:  # no half-written output
+        for done, (receive_ns, name, i) in enumerate(order, start=1):
+            group = streams[name].groups[i]
+            if skeleton_groups:
+                topic = f"/{name}/skeletons"
+                writer.write_group(topic, group, receive_ns)
+            else:
+                topic = f"/{name}/body_tracking_data"
+                writer.write_marker_array(topic, group_to_driver_markers(group), receive_ns)
+            counts[topic] += 1
+            if progress is not None:
+                progress(done, len(order))
     return counts

@@ -141,33 +141,27 @@ def run_recording(
     cpu_started = time.thread_time(), time.process_time(), _children_cpu()
     processes = default_processes() if processes is None else processes
     clock, parts = time.perf_counter, {"stages": 0.0, "write": 0.0}
-    writer: RecordingWriter | None = None
-    try:
-        with (
-            _tracking(recording, pipeline.tracker, processes) as tracked,
-            RecordingWriter(out) as writer,
-        ):
-            writer.write("/hiros/calibration", "std_msgs/msg/String",
-                         _calibration_message(calibration), 0)  # fmt: skip
-            for item in tracked:
-                if isinstance(item, _TrackingEnd):
-                    break
-                source, group = item
-                summary.frames_in[source] += 1
-                computed = clock()
-                outputs = pipeline.downstream(group)
-                written = clock()
-                _write(writer, outputs, summary)
-                if progress is not None:
-                    progress(1)
-                parts["stages"] += written - computed
-                parts["write"] += clock() - written
-            finishing = clock()
-            _write(writer, pipeline.downstream(item.flushed), summary)
-    except Exception:  # an unreadable recording, say: no half-written output is left behind
-        if writer is not None:
-            writer.discard()
-        raise
+    with (
+        _tracking(recording, pipeline.tracker, processes) as tracked,
+        RecordingWriter(out, discard_on_error=True) as writer,  # no half-written output
+    ):
+        writer.write("/hiros/calibration", "std_msgs/msg/String",
+                     _calibration_message(calibration), 0)  # fmt: skip
+        for item in tracked:
+            if isinstance(item, _TrackingEnd):
+                break
+            source, group = item
+            summary.frames_in[source] += 1
+            computed = clock()
+            outputs = pipeline.downstream(group)
+            written = clock()
+            _write(writer, outputs, summary)
+            if progress is not None:
+                progress(1)
+            parts["stages"] += written - computed
+            parts["write"] += clock() - written
+        finishing = clock()
+        _write(writer, pipeline.downstream(item.flushed), summary)
     summary.seconds = {**item.seconds, **parts, "finish": clock() - finishing}
     summary.dropped.update({f"reader: {k}": v for k, v in item.reader_drops.items()})
     summary.problems.extend(item.reader_problems)

@@ -85,6 +85,9 @@ class RecordingWriter:
         chunk_size: bytes per chunk before compression; a reader holds about one chunk per
             topic in memory.
         level: zstd level (default ``mcap_out.ZSTD_LEVEL``; negative is faster and larger).
+        discard_on_error: as a context manager, delete the recording (:meth:`discard`) when
+            the block or the closing fails with an error, so that a failed run or conversion
+            leaves no half-written output to pass for one; an interrupt (Ctrl-C) keeps it.
 
     Raises:
         RecordingError: the path exists already or cannot be written.
@@ -103,8 +106,10 @@ class RecordingWriter:
         compression: str = "zstd",
         chunk_size: int = 4 << 20,
         level: int = ZSTD_LEVEL,
+        discard_on_error: bool = False,
     ) -> None:
         self.path = Path(path)
+        self.discard_on_error = discard_on_error
         if self.path.exists():
             msg = f"{self.path} exists already; choose a new recording path"
             raise RecordingError(msg)
@@ -300,4 +305,13 @@ class RecordingWriter:
         exc: BaseException | None,
         traceback: TracebackType | None,
     ) -> None:
-        self.close()
+        if not self.discard_on_error:
+            self.close()
+        elif exc_type is not None and issubclass(exc_type, Exception):
+            self.discard()
+        else:
+            try:
+                self.close()
+            except Exception:
+                self.discard()
+                raise

@@ -414,6 +414,27 @@ def test_discard_removes_what_the_writer_made(tmp_path, driver_frames, name):
     assert [p.name for p in folder.iterdir()] == ["notes.txt"]
 
 
+def test_discard_on_error_removes_the_output_of_a_failed_block_only(tmp_path):
+    def write_then_raise(path, error, options):
+        with RecordingWriter(path, **options) as writer:
+            writer.write("/t", "std_msgs/msg/String", b"\x00\x01\x00\x00\x01\x00\x00\x00\x00", 1)
+            raise error
+
+    def fail(path, error, **options):
+        with pytest.raises(type(error)):
+            write_then_raise(path, error, options)
+
+    fail(tmp_path / "failed.mcap", ValueError("bad frame"), discard_on_error=True)
+    assert not (tmp_path / "failed.mcap").exists()
+    fail(tmp_path / "stopped.mcap", KeyboardInterrupt(), discard_on_error=True)  # Ctrl-C keeps it
+    assert (tmp_path / "stopped.mcap").exists()
+    fail(tmp_path / "kept.mcap", ValueError("bad frame"))  # the default keeps what was written
+    assert (tmp_path / "kept.mcap").exists()
+    with RecordingWriter(tmp_path / "fine.mcap", discard_on_error=True):
+        pass
+    assert (tmp_path / "fine.mcap").exists()
+
+
 def test_a_time_mcap_cannot_hold_is_refused_and_the_file_still_closes(tmp_path, samples):
     path = tmp_path / "take.mcap"
     group = samples.make_group(0)
