@@ -137,6 +137,7 @@ def calibrate_recording(
     from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 
     from hiros_calib.calibrator import Calibrator
+    from hiros_cli.progress import print_warnings
     from hiros_core.errors import RecordingError
 
     with Progress(
@@ -149,8 +150,7 @@ def calibrate_recording(
         task = bar.add_task("reading the recording", total=100)
         problems: list[str] = []
         groups, arrivals = read_camera_groups(recording, problems=problems)
-        for problem in problems:  # a truncated or damaged recording: said before its result
-            bar.console.print(f"warning: {problem}", markup=False, highlight=False)
+        print_warnings(bar.console, problems)  # a damaged recording: said before its result
         if len(groups) < 2:
             msg = (
                 f"{recording}: calibration needs skeletons of two or more cameras, "

@@ -15,6 +15,8 @@ from pathlib import Path
 from rich.console import Console
 from rich.table import Table
 
+from hiros_cli.progress import print_warnings
+
 HELP = "accuracy of a run's output against the simulator's truth (tables, --report HTML)"
 
 
@@ -73,8 +75,7 @@ def run(args: argparse.Namespace) -> int:
     console = Console()
     problems: list[str] = []
     evaluation = evaluate_output(args.output, args.truth, problems)
-    for problem in problems:  # figures from a damaged output cover only what was read
-        console.print(f"warning: {problem}", markup=False, highlight=False)
+    print_warnings(console, problems)  # figures from a damaged output cover only what was read
     print_evaluation(console, evaluation)
     if args.report:
         from hiros_eval.report import write_report

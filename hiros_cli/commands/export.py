@@ -12,6 +12,8 @@ from pathlib import Path
 
 from rich.console import Console
 
+from hiros_cli.progress import print_warnings
+
 HELP = "per-person joint positions (CSV, OpenSim .trc) and joint angles (CSV)"
 
 
@@ -35,8 +37,7 @@ def run(args: argparse.Namespace) -> int:
     console = Console()
     problems: list[str] = []
     outputs, _ = read_run(args.output, problems)
-    for problem in problems:
-        console.print(f"warning: {problem}", markup=False, highlight=False)
+    print_warnings(console, problems)
     people = person_series(outputs[args.stage])
     args.out.mkdir(parents=True, exist_ok=True)
     written = 0

@@ -19,7 +19,7 @@ from pathlib import Path
 from rich.console import Console
 from rich.table import Table
 
-from hiros_cli.progress import progress_bar
+from hiros_cli.progress import print_warnings, progress_bar
 from hiros_core.calibration import Calibration, load_calibration, save_calibration
 from hiros_core.errors import ConfigError, RecordingError
 
@@ -176,8 +176,7 @@ def print_summary(console: Console, summary, out: Path) -> None:  # noqa: ANN001
     if not summary.dropped:
         table.add_row("dropped", "0")
     console.print(table)
-    for problem in summary.problems:
-        console.print(f"warning: {problem}", markup=False, highlight=False)
+    print_warnings(console, summary.problems)
     console.print(
         f"{summary.duration:.1f} s of recording in {summary.wall_time:.2f} s "
         f"({summary.real_time_factor:.0f}x real time)"
