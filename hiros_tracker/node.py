@@ -95,18 +95,17 @@ class TrackerNode(HirosNode):
         uncalibrated = self.tracker.uncalibrated
         if len(uncalibrated) == len(self._reported):  # the same set: it is kept a subset
             return
-        named: list[str] = []
+        camera = min(uncalibrated - self._reported)
 
         def message() -> str:  # built only when the line is due
-            named.append(min(uncalibrated - self._reported))
             return (
-                f"camera {named[0]!r} has no calibration ({len(uncalibrated)} camera(s) "
-                f"without one so far): its frames are dropped until {self.params.calib_node} "
-                "or the calibration file provides one"
+                f"camera {camera!r} has no calibration ({len(uncalibrated)} camera(s) without "
+                f"one so far): its frames are dropped until {self.params.calib_node} or the "
+                "calibration file provides one"
             )
 
         if self.warn_throttled("camera without calibration", message):
-            self._reported.add(named[0])
+            self._reported.add(camera)
 
 
 def main(args: list[str] | None = None) -> None:
