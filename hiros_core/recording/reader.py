@@ -8,8 +8,9 @@ in log-time order across topics and files, holding only a few chunks in memory a
   message, in the order the ``mcap`` library's reader gives (log time, then chunk position,
   then position in the chunk). A file without a valid summary (the recorder was killed) is
   read straight through by the ``mcap`` library, in file order, up to its last complete
-  record; what could not be read is counted ``truncated`` in ``drops`` and described in
-  ``problems``. Each chunk is checked against its CRC; a damaged chunk is skipped (its
+  record, and then the whole messages at the start of a chunk the file's end cuts (zstd and
+  lz4 decompress as a stream); what could not be read is counted ``truncated`` in ``drops``
+  and described in ``problems``. Each chunk is checked against its CRC; a damaged chunk is skipped (its
   messages counted ``damaged_chunk``) and reading goes on after it. A summary that fails its
   CRC is not trusted: the file is then read straight through.
 * sqlite3 (``.db3``) and ROS 1 bags are read with ``rosbags``' ``AnyReader``. ROS 1 messages
@@ -174,6 +175,7 @@ class _McapSource(_Source):
             msg = f"cannot open recording {path}: {exc}"
             raise RecordingError(msg) from exc
         self.summary = None
+        self._salvaged = 0  # messages read from the start of a chunk cut by the file's end
         damage = ""  # what is wrong with the summary, if anything
         try:
             self.reader = SeekingReader(self.stream)
@@ -263,10 +265,16 @@ class _McapSource(_Source):
             self._stopped_at = self.stream.tell()
             if not collect_only:
                 self.drops["truncated"] += 1
+                salvaged = (
+                    f", {self._salvaged} of them from the chunk the end cuts"
+                    if self._salvaged
+                    else ""
+                )
                 self.problems.append(
                     f"{self.path} ends early or is damaged at byte {self.stream.tell()} "
-                    f"({type(exc).__name__}: {exc}); read {count} messages before that "
-                    "(a recorder that was stopped without closing the file leaves this)"
+                    f"({type(exc).__name__}: {exc}); read {count} messages before that"
+                    f"{salvaged} (a recorder that was stopped without closing the file leaves "
+                    "this)"
                 )
 
     def _unchunked(self, records: Iterable[Any], *, count_damage: bool) -> Iterator[Any]:
@@ -275,24 +283,56 @@ class _McapSource(_Source):
         A damaged chunk is skipped (its messages are lost, counted once as ``damaged_chunk``)
         and reading goes on with the next record: the chunk's length is outside its data.
         """
-        from mcap.records import Chunk
+        from mcap.records import Chunk, Message
         from mcap.stream_reader import breakup_chunk
 
-        for record in records:
+        start = self.stream.tell()  # where the record the next step reads begins
+        while True:
+            try:
+                record = next(records)
+            except StopIteration:
+                return
+            except Exception:  # the file ends early or is damaged here: _scan reports it
+                salvaged = _whole_records(self._cut_chunk_records(start))
+                self._salvaged = sum(isinstance(r, Message) for r in salvaged)
+                yield from salvaged
+                raise
             if not isinstance(record, Chunk):
                 yield record
-                continue
-            try:
-                inner = breakup_chunk(record, validate_crc=True)
-            except Exception as exc:  # mcap, zstandard and lz4 raise their own error types
-                if count_damage:
-                    self.drops["damaged_chunk"] += 1
-                    self.problems.append(
-                        f"{self.path}: a chunk before byte {self.stream.tell()} is damaged "
-                        f"({type(exc).__name__}: {exc}); skipped its messages, read on after it"
-                    )
-                continue
-            yield from inner
+            else:
+                try:
+                    inner = breakup_chunk(record, validate_crc=True)
+                except Exception as exc:  # mcap, zstandard and lz4 raise their own error types
+                    if count_damage:
+                        self.drops["damaged_chunk"] += 1
+                        self.problems.append(
+                            f"{self.path}: a chunk before byte {self.stream.tell()} is damaged "
+                            f"({type(exc).__name__}: {exc}); skipped its messages, read on "
+                            "after it"
+                        )
+                else:
+                    yield from inner
+            start = self.stream.tell()
+
+    def _cut_chunk_records(self, start: int) -> bytes:
+        """The records bytes that the beginning of a chunk cut by the file's end gives.
+
+        A recorder killed while writing leaves such a chunk: the messages at its start are
+        whole. Empty when the record at ``start`` is not a chunk or is not cut short (a
+        chunk damaged inside the file is not trusted at all).
+        """
+        self.stream.seek(start)
+        data = self.stream.read()
+        if len(data) < _RECORD_HEAD.size + _CHUNK_FIELDS.size + 4:
+            return b""
+        opcode, length = _RECORD_HEAD.unpack_from(data)
+        if opcode != _CHUNK_OPCODE or _RECORD_HEAD.size + length <= len(data):
+            return b""
+        at = _RECORD_HEAD.size + _CHUNK_FIELDS.size
+        (name_length,) = struct.unpack_from("<I", data, at)
+        compression = bytes(data[at + 4 : at + 4 + name_length]).decode(errors="replace")
+        records_at = at + 4 + name_length + 8
+        return _readable_prefix(compression, data[records_at:])
 
     def messages(self, topics: set[str] | None) -> Iterator[RecordedMessage]:
         if self.summary is None or not self.summary.chunk_indexes:
@@ -481,6 +521,52 @@ class _McapSource(_Source):
 
     def close(self) -> None:
         self.stream.close()
+
+
+_RECORD_HEAD = struct.Struct("<BQ")  # an MCAP record's opcode and content length
+
+
+_CHUNK_OPCODE = 0x06
+_CHUNK_FIELDS = struct.Struct("<QQQI")  # start and end time, uncompressed size and CRC
+
+
+def _readable_prefix(compression: str, data: bytes) -> bytes:
+    """As much of a cut chunk's records as its compressed beginning ``data`` gives.
+
+    zstd and lz4 frames decompress as a stream, so a cut frame still yields what came before
+    the cut; a decompressor error ends the prefix where it happens.
+    """
+    if not compression:
+        return data
+    pieces: list[bytes] = []
+    with contextlib.suppress(Exception):  # zstandard and lz4 raise their own error types
+        if compression == "zstd":
+            import zstandard
+
+            reader = zstandard.ZstdDecompressor().stream_reader(io.BytesIO(data))
+            while piece := reader.read(1 << 16):
+                pieces.append(piece)
+        elif compression == "lz4":
+            import lz4.frame
+
+            pieces.append(lz4.frame.LZ4FrameDecompressor().decompress(data))
+    return b"".join(pieces)
+
+
+def _whole_records(records: bytes) -> list[Any]:
+    """The complete records at the start of a chunk's records bytes (a cut one ends them)."""
+    from mcap.records import Chunk
+    from mcap.stream_reader import breakup_chunk
+
+    end = 0
+    while end + _RECORD_HEAD.size <= len(records):
+        _, length = _RECORD_HEAD.unpack_from(records, end)
+        if end + _RECORD_HEAD.size + length > len(records):
+            break
+        end += _RECORD_HEAD.size + length
+    whole = Chunk(compression="", data=records[:end], message_start_time=0, message_end_time=0,
+                  uncompressed_size=end, uncompressed_crc=0)  # fmt: skip
+    return breakup_chunk(whole)
 
 
 _CHUNK_OPCODE = 0x06

@@ -203,6 +203,33 @@ def test_truncated_mcap_reads_what_it_can(tmp_path, driver_frames):
     assert drops["truncated"] == 1
 
 
+@pytest.mark.parametrize("compression", ["zstd", "lz4", "none"])
+def test_a_chunk_cut_by_the_files_end_gives_its_whole_messages(
+    tmp_path, driver_frames, compression
+):
+    """A recorder killed while writing a chunk: the messages at the chunk's start are read.
+
+    zstd and lz4 decompress a block (up to 128 or 64 kB) at a time: the chunk is larger.
+    """
+    path = tmp_path / "take.mcap"
+    _write(path, driver_frames, chunk_size=400_000, compression=compression)
+    with RecordingReader(path) as reader:
+        whole = [m.data for m in reader.messages()]
+    (start, length), *_ = _chunk_offsets(path)[1:]
+    cut = tmp_path / "cut.mcap"
+    cut.write_bytes(path.read_bytes()[: start + int(length * 0.7)])
+    complete = tmp_path / "complete.mcap"  # the same file cut before that chunk instead
+    complete.write_bytes(path.read_bytes()[:start])
+    with RecordingReader(complete) as reader:
+        before = len(list(reader.messages()))
+    with RecordingReader(cut) as reader:
+        read = [m.data for m in reader.messages()]
+        assert reader.drops["truncated"] == 1
+        assert "from the chunk the end cuts" in reader.problems[0]
+    assert before < len(read) < len(whole)
+    assert read == whole[: len(read)]  # each one whole, in the file's order
+
+
 def test_sqlite3_file(tmp_path, samples):
     folder = tmp_path / "sq"
     writer = Rosbag2Writer(folder, version=9, storage_plugin=StoragePlugin.SQLITE3)
