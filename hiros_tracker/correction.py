@@ -21,6 +21,9 @@ from hiros_tracker import kernels
 __all__ = ["CameraCorrection", "MovedFrame"]
 
 UNCALIBRATED = "uncalibrated camera"
+MAX_REMEMBERED = 64
+"""Frame ids (and cameras without calibration) remembered at most: frame ids come from the
+input, and a publisher of ever-new ones must not make a long-running node grow."""
 """Drop reason of a group whose camera has no calibration."""
 
 
@@ -35,7 +38,8 @@ class CameraCorrection:
     Attributes:
         world_frame: frame id of the output groups.
         drops: reason -> count, shared with the owning stage.
-        uncalibrated: cameras seen without calibration since the last ``set_calibration``.
+        uncalibrated: cameras seen without calibration since the last ``set_calibration``
+            (the first ``MAX_REMEMBERED``; the frames of all of them are counted).
 
     """
 
@@ -87,6 +91,8 @@ class CameraCorrection:
         name = group.camera
         if name not in self._cameras:
             name = self._by_frame.get(frame_id)
+        if len(self._names) >= MAX_REMEMBERED:
+            self._names.clear()
         self._names[frame_id] = name
         return name
 
@@ -104,7 +110,8 @@ class CameraCorrection:
         """``apply``, keeping the moved rows stacked for a caller working on the whole frame."""
         name = self.camera_name(group)
         if name is None:
-            self.uncalibrated.add(group.camera)
+            if len(self.uncalibrated) < MAX_REMEMBERED:
+                self.uncalibrated.add(group.camera)
             self.drops[UNCALIBRATED] += 1
             return None
         camera = self._cameras[name]

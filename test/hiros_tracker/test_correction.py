@@ -4,7 +4,7 @@ from scipy.spatial.transform import Rotation
 from hiros_core.calibration import Calibration, CameraCalibration
 from hiros_core.layouts import AZURE_KINECT
 from hiros_core.model import Skeleton, SkeletonGroup, stack_rows
-from hiros_tracker.correction import UNCALIBRATED, CameraCorrection
+from hiros_tracker.correction import MAX_REMEMBERED, UNCALIBRATED, CameraCorrection
 
 
 def _calibration(time_offset: float = 0.5, drift: float = 0.0) -> Calibration:
@@ -65,6 +65,16 @@ def test_uncalibrated_camera_is_dropped_counted_and_reported_once():
         assert correction.apply(_group(frame="k09_depth_camera_link")) is None
     assert correction.drops[UNCALIBRATED] == 3
     assert correction.uncalibrated == {"k09"}
+
+
+def test_ever_new_frame_ids_are_counted_without_growing_memory():
+    correction = CameraCorrection(_calibration())
+    for k in range(10 * MAX_REMEMBERED):
+        assert correction.apply(_group(frame=f"x{k}_depth_camera_link")) is None
+    assert correction.drops[UNCALIBRATED] == 10 * MAX_REMEMBERED
+    assert len(correction.uncalibrated) == MAX_REMEMBERED
+    assert len(correction._names) <= MAX_REMEMBERED
+    assert correction.apply(_group()) is not None  # the calibrated camera is still found
 
 
 def test_calibration_replaced_at_runtime():
