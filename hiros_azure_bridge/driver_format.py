@@ -28,7 +28,6 @@ from __future__ import annotations
 
 import math
 import sys
-from collections import Counter
 from dataclasses import dataclass, field
 from functools import cache
 from pathlib import Path
@@ -37,6 +36,7 @@ from typing import Any
 import numpy as np
 import yaml
 
+from hiros_core.accounting import Accounted, Drops
 from hiros_core.codec import (
     MarkerArrayData,
     MarkerFields,
@@ -200,13 +200,17 @@ def _level(text: str) -> float:
         return math.nan
 
 
-class DriverBridge:
+class DriverBridge(Accounted):
     """One driver topic's MarkerArrays -> SkeletonGroups in the camera's frame and clock.
 
     Keep one bridge per camera: it remembers the last stamp to refuse messages that go back
-    in time. Bad input is never raised: it is counted in ``drops`` by reason:
+    in time. Bad input is never raised: it is counted in ``drops`` by reason, each reason
+    dropping the whole message (a frame: see ``Accounted``) or some of its markers:
 
-    * ``empty_array``: a MarkerArray with no markers (nothing to stamp a group with);
+    * ``empty_array``: a MarkerArray with no markers (nothing to stamp a group with; frame);
+    * ``nothing_to_add``: a message of DELETE or unknown markers alone (frame);
+    * ``stale_deleteall``: DELETEALL markers alone, not newer than the last message (frame);
+    * ``undecodable``: bytes the codec rejects, in ``update_batch`` (frame);
     * ``delete_marker`` / ``deleteall_marker``: DELETE / DELETEALL markers (a message of
       DELETEALL markers alone still gives an empty group: "nobody in view");
     * ``unknown_action``: actions other than ADD, DELETE, DELETEALL;
@@ -215,8 +219,10 @@ class DriverBridge:
     * ``duplicate_marker``: a second marker for the same body and joint (the first is kept);
     * ``mixed_stamps``: markers of one message with different stamps (the first is used);
     * ``stamp_backwards`` / ``repeated_stamp``: a message older than, or as old as, the last
-      one (dropped whole); a jump back larger than ``reset_after_backwards`` counts
+      one (frame); a jump back larger than ``reset_after_backwards`` counts
       ``source_restarted`` and is accepted.
+
+    ``processed`` counts the messages that gave a group.
     """
 
     def __init__(self, params: DriverBridgeParams | None = None) -> None:
@@ -228,7 +234,7 @@ class DriverBridge:
         if self.params.id_stride < 1:
             msg = f"id_stride must be a positive integer, not {self.params.id_stride}"
             raise ConfigError(msg)
-        self.drops: Counter[str] = Counter()
+        self.drops = Drops()
         self.last_stamp_ns: int | None = None
         self._lookups: dict[str, tuple[Layout, np.ndarray | None]] = {}
         self._shapes: dict[tuple, _IdShape] = {}
@@ -294,6 +300,7 @@ class DriverBridge:
                     self.drops["mixed_stamps"] += 1
                 frame = self.params.frame_id or people.frame(m)
                 out.append(SkeletonGroup(stamp, frame, people.skeletons(m, stamp, frame)))
+                self.processed += 1
         return out
 
     def _update_counted(self, data: bytes) -> SkeletonGroup | None:
@@ -301,14 +308,20 @@ class DriverBridge:
         try:
             return self.update_bytes(data)
         except CodecError:
-            self.drops["undecodable"] += 1
+            self.drops.frame("undecodable")
             return None
 
     def update(self, data: MarkerArrayData | MarkerFields) -> SkeletonGroup | None:
         """Convert one MarkerArray; None when the whole message is dropped (see ``drops``)."""
+        group = self._convert(data)
+        if group is not None:
+            self.processed += 1
+        return group
+
+    def _convert(self, data: MarkerArrayData | MarkerFields) -> SkeletonGroup | None:
         actions = np.asarray(data.actions)
         if len(actions) == 0:
-            self.drops["empty_array"] += 1
+            self.drops.frame("empty_array")
             return None
         add = actions == ADD
         if add.all():  # the driver's usual message: every marker a joint to add
@@ -320,6 +333,7 @@ class DriverBridge:
             self._count("unknown_action", int((~add & ~deleteall & (actions != DELETE)).sum()))
             rows = np.flatnonzero(add if add.any() else deleteall)
             if len(rows) == 0:
+                self.drops.frame("nothing_to_add")
                 return None
         first = 0 if rows is None else int(rows[0])
         stamp = int(data.stamps_ns[first])
@@ -328,6 +342,7 @@ class DriverBridge:
             # Clearing markers are often unstamped: they say "nobody in view" only when they
             # carry a new stamp, and never restart the clock.
             if self.last_stamp_ns is not None and stamp <= self.last_stamp_ns:
+                self.drops.frame("stale_deleteall")
                 return None
             self.last_stamp_ns = stamp
             return SkeletonGroup(stamp, frame, [])
@@ -344,7 +359,7 @@ class DriverBridge:
             if last - stamp > self.params.reset_after_backwards * 1e9:
                 self.drops["source_restarted"] += 1
             else:
-                self.drops["repeated_stamp" if stamp == last else "stamp_backwards"] += 1
+                self.drops.frame("repeated_stamp" if stamp == last else "stamp_backwards")
                 return False
         self.last_stamp_ns = stamp
         return True

@@ -20,7 +20,6 @@ driver: by a parameter file (``--ros-args --params-file my_driver.yaml``) or by 
 from __future__ import annotations
 
 import dataclasses
-from collections import Counter
 from dataclasses import dataclass, field
 
 from hiros_skeleton_msgs.msg import SkeletonGroup as SkeletonGroupMsg
@@ -28,6 +27,7 @@ from rclpy.parameter import Parameter
 from visualization_msgs.msg import MarkerArray
 
 from hiros_azure_bridge.driver_format import DriverBridge, DriverBridgeParams, load_bridge_params
+from hiros_core.accounting import Merged
 from hiros_core.codec import encode_group
 from hiros_ros import HirosNode, run_node
 from hiros_ros.node import camera_qos, pipeline_qos
@@ -69,12 +69,10 @@ class BridgeNode(HirosNode):
             **{k: v for k, v in dataclasses.asdict(self.params).items() if k in bridge_fields}
         )
         self.bridges: dict[str, DriverBridge] = {}
-        self._seen: dict[str, Counter[str]] = {}
         for camera in self.params.cameras:
             source = self.params.input_topic.format(camera=camera)
             target = self.params.output_topic.format(camera=camera)
             self.bridges[camera] = DriverBridge(bridge_params)
-            self._seen[camera] = Counter()
             publisher = self.create_raw_publisher(SkeletonGroupMsg, target, pipeline_qos())
             self.create_raw_subscription(
                 MarkerArray,
@@ -83,6 +81,8 @@ class BridgeNode(HirosNode):
                 camera_qos(self.params.input_qos),
             )
             self.get_logger().info(f"{source} -> DriverBridge({bridge_params.layout}) -> {target}")
+        bridges = self.bridges.values()
+        self.accounted = Merged([(f"{c}.", b) for c, b in self.bridges.items()], bridges)
 
     def _apply_description(self, path: str) -> None:
         """Replace the parameters by those of a description file, visibly (set_parameters)."""
@@ -102,11 +102,7 @@ class BridgeNode(HirosNode):
 
     def on_markers(self, camera: str, publisher: object, data: bytes) -> None:
         """Decode, convert, publish; a dropped message publishes nothing."""
-        bridge = self.bridges[camera]
-        group = bridge.update_bytes(data)
-        self.absorb_drops(
-            Counter({f"{camera}.{k}": v for k, v in bridge.drops.items()}), self._seen[camera]
-        )
+        group = self.bridges[camera].update_bytes(data)
         if group is not None:
             self.publish_raw(publisher, encode_group(group))
 

@@ -21,7 +21,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import threading
-from collections import Counter, deque
+from collections import deque
 from dataclasses import dataclass
 from typing import Any
 
@@ -32,6 +32,7 @@ from hiros_calib.calibrator import Calibrator, CalibratorParams
 from hiros_calib.extrinsics import Correspondences, associate, pair_correspondences
 from hiros_calib.sync import CameraClock
 from hiros_calib.tracks import extract_tracks
+from hiros_core.accounting import Accounted, Drops
 from hiros_core.calibration import Calibration, CameraCalibration
 from hiros_core.errors import CalibrationError
 from hiros_core.geometry import RigidTransform
@@ -107,7 +108,7 @@ def _clock(name: str, cam: CameraCalibration) -> CameraClock:
     return CameraClock(name, "ok", "", cam.time_offset, cam.drift, cam.drift_epoch)
 
 
-class LiveCalibrator:
+class LiveCalibrator(Accounted):
     """Sliding-window calibration that refines itself and notices moved cameras.
 
     Args:
@@ -116,7 +117,9 @@ class LiveCalibrator:
 
     Attributes:
         calibration: the current calibration (cameras appear as they are calibrated).
-        drops: counted drop reasons of the frames and of the estimates.
+        drops: counted drop reasons of the frames (frames: no frame id, out of order) and
+            of the estimates (not frames: see ``Accounted``).
+        processed: frames kept in the window.
         events: ``(receiver time ns, message)`` of what happened: cameras calibrated,
             estimates that failed, changes detected.
 
@@ -129,7 +132,7 @@ class LiveCalibrator:
         self.calibration = calibration or Calibration(
             reference=self.params.reference, world_frame=self.params.world_frame
         )
-        self.drops: Counter[str] = Counter()
+        self.drops = Drops()
         self.events: list[tuple[int, str]] = []
         self._frames: dict[str, deque[tuple[SkeletonGroup, int]]] = {}
         self._since: dict[str, int] = {}  # per camera: frames stamped earlier are ignored
@@ -145,7 +148,7 @@ class LiveCalibrator:
     def update(self, group: SkeletonGroup, arrival_ns: int) -> SkeletonGroup:
         """Keep a camera frame (and when it arrived); returns it unchanged."""
         if not group.frame_id:
-            self.drops["no_frame_id"] += 1
+            self.drops.frame("no_frame_id")
             return group
         camera = group.camera
         horizon = round(self.params.buffer_length * 1e9)
@@ -156,9 +159,10 @@ class LiveCalibrator:
                 and group.stamp_ns <= frames[-1][0].stamp_ns
                 and not self._restarted(camera, frames, group.stamp_ns, arrival_ns)
             ):
-                self.drops["out_of_order"] += 1
+                self.drops.frame("out_of_order")
                 return group
             frames.append((group, arrival_ns))
+            self.processed += 1
             while frames and frames[0][0].stamp_ns < group.stamp_ns - horizon:
                 frames.popleft()
             if self._first_arrival is None:

@@ -15,7 +15,6 @@ from __future__ import annotations
 
 import copy
 import threading
-from collections import Counter
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -95,7 +94,7 @@ class CalibNode(HirosNode):
         self._current = copy.deepcopy(self.live.calibration)
         self._latest: Calibration | None = self._current
         self._published: dict[str, Any] = {}
-        self._seen_drops: Counter[str] = Counter()
+        self.accounted = self.live
         self._logged_events = 0
         qos = camera_qos(self.params.camera_qos)
         topics = [self.params.camera_topic.format(camera=c) for c in self.params.camera_names]
@@ -157,7 +156,7 @@ class CalibNode(HirosNode):
                     self._current = copy.deepcopy(self.live.calibration)
                     self._latest = self._current
             except Exception as exc:  # the worker must survive a bad window
-                self.drop(type(exc).__name__, f"calibration step: {exc}")
+                self.error(type(exc).__name__, f"calibration step: {exc}")
 
     def publish_result(self) -> None:
         """Apply a new result (parameters, TF) and log what happened since the last call."""
@@ -165,7 +164,6 @@ class CalibNode(HirosNode):
         for _, message in events[self._logged_events :]:
             self.get_logger().info(message)
         self._logged_events = len(events)
-        self.absorb_drops(self.live.drops, self._seen_drops)
         latest, self._latest = self._latest, None
         if latest is None or not latest.cameras:
             return

@@ -26,13 +26,14 @@ the output. Frames whose stamp is not after the track's last one are dropped wit
 
 from __future__ import annotations
 
-from collections import Counter, deque
+from collections import deque
 from dataclasses import dataclass
 from functools import lru_cache
 from typing import NamedTuple
 
 import numpy as np
 
+from hiros_core.accounting import Accounted, Drops
 from hiros_core.errors import ConfigError
 from hiros_core.layouts import Layout
 from hiros_core.model import Skeleton, SkeletonGroup, SkeletonRows, link_rows
@@ -204,18 +205,19 @@ class _Tracks:
             self.low_pass.grow(capacity)
 
 
-class Filter:
+class Filter(Accounted):
     """Causal smoothing with velocities and accelerations (module docstring).
 
     Attributes:
         params: the parameters.
-        drops: reason -> count of skeletons not filtered.
+        drops: reason -> count of skeletons not filtered (a frame is never dropped whole:
+            each ``update`` is processed, see ``Accounted``).
 
     """
 
     def __init__(self, params: FilterParams | None = None) -> None:
         self.params = params or FilterParams()
-        self.drops: Counter[str] = Counter()
+        self.drops = Drops()
         self._layouts: dict[str, _Tracks] = {}
         self._layout_of: dict[int, str] = {}
         self._intervals: deque[float] = deque(maxlen=_RATE_WINDOW)
@@ -277,6 +279,7 @@ class Filter:
                 for step, result in zip(steps, results, strict=True):
                     out.skeletons[step.index] = result
         self._forget_old_tracks(group.stamp_ns)
+        self.processed += 1  # (once it went through: a frame whose update raised is not)
         return out
 
     # ------------------------------------------------------------------------ internals
@@ -289,19 +292,19 @@ class Filter:
         the track for good after one frame stamped far in the future.
         """
         if -max_gap_ns <= elapsed_ns <= 0:
-            self.drops["stamp not after the track's previous one"] += 1
+            self.drops.detections("stamp not after the track's previous one")
             return None
         if elapsed_ns < 0:
-            self.drops["stamp far before the track's previous one (restarted)"] += 1
+            self.drops.detections("stamp far before the track's previous one (restarted)")
         return 0 < elapsed_ns <= max_gap_ns
 
     def _valid(self, skeleton: Skeleton, seen: set[int]) -> bool:
         """Whether a usable skeleton (:func:`stack_frame`) has a new track id (else counted)."""
         if skeleton.id < 0:
-            self.drops["no track id (passed through)"] += 1
+            self.drops.detections("no track id (passed through)")
             return False
         if skeleton.id in seen:
-            self.drops["track id repeated within a group"] += 1
+            self.drops.detections("track id repeated within a group")
             return False
         seen.add(skeleton.id)
         return True

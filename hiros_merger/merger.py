@@ -39,11 +39,11 @@ Shapes: ``M`` tracks, ``C`` detections per track (padded), ``J`` joints; metres,
 
 from __future__ import annotations
 
-from collections import Counter
 from dataclasses import dataclass
 
 import numpy as np
 
+from hiros_core.accounting import Accounted, Drops
 from hiros_core.calibration import Calibration, CameraCalibration
 from hiros_core.layouts import AZURE_KINECT, Layout
 from hiros_core.model import (
@@ -254,13 +254,14 @@ def _quaternion_mean(quaternions: np.ndarray, weights: np.ndarray) -> np.ndarray
     return np.where((weights.sum(axis=1) > 0)[..., None], mean, np.nan)
 
 
-class Merger:
+class Merger(Accounted):
     """Fuses each track's camera detections into one skeleton (see the module docstring).
 
     Attributes:
         params: the parameters it was built with (the fusion's are read once, at a layout's
             first fusion).
-        drops: reason -> count of input left out.
+        drops: reason -> count of input left out (detections; a frame is never dropped
+            whole: each ``update`` is processed, see ``Accounted``).
         agreement: camera name -> running mean distance (m) of its detections to the fused
             skeletons.
 
@@ -271,7 +272,7 @@ class Merger:
     ) -> None:
         warm_up()
         self.params = params or MergerParams()
-        self.drops: Counter[str] = Counter()
+        self.drops = Drops()
         self.agreement: dict[str, float] = {}
         self._latest = LatestDetections()
         self._cameras: dict[str, int] = {}  # camera name -> index into the arrays below
@@ -327,15 +328,18 @@ class Merger:
         if group.frame_id:
             self._world_frame = group.frame_id
         if group.skeletons and self._went_back(group.stamp_ns):
-            self.drops["stamps went back (restarted)"] += 1
+            self.drops.detections("stamps went back (restarted)")  # the held ones forgotten
             self._latest = LatestDetections()
             self._next_tick_ns = self._last_out_ns = None
         newest = self._store(group.skeletons) if group.skeletons else None
         out_ns = self._output_time(newest, group.stamp_ns)
         if out_ns is None:
+            self.processed += 1
             return SkeletonGroup(group.stamp_ns, self._world_frame, [])
         self._last_out_ns = out_ns
-        return SkeletonGroup(out_ns, self._world_frame, self.merge(out_ns))
+        merged = SkeletonGroup(out_ns, self._world_frame, self.merge(out_ns))
+        self.processed += 1  # (once it went through: a frame whose merge raised is not)
+        return merged
 
     def _went_back(self, stamp_ns: int) -> bool:
         """Whether input stamped ``stamp_ns`` lies ``max_jump`` before the newest so far."""
@@ -364,16 +368,16 @@ class Merger:
         newest = None
         for row, skeleton in enumerate(skeletons):
             if skeleton.id < 0:
-                self.drops["no track id"] += 1
+                self.drops.detections("no track id")
                 continue
             if not has_joints[row]:
-                self.drops["no joint"] += 1
+                self.drops.detections("no joint")
                 continue
             camera = self._camera_of(skeleton.src_frame)
             stamp_ns = skeleton.src_time_ns
             slot = latest.claim(skeleton.id, camera, stamp_ns, skeleton.layout)
             if slot is None:
-                self.drops["older than the camera's last detection"] += 1
+                self.drops.detections("older than the camera's last detection")
                 continue
             if stack is None:
                 latest.write([slot], skeleton.markers[None], skeleton.marker_present[None])

@@ -76,7 +76,7 @@ class OptimizerNode(StageNode):
                 self.params.calibration_file, self.stage.export_calibrations()
             )
         except ConfigError as exc:
-            self.drop("calibration file not written", str(exc))
+            self.error("calibration file not written", str(exc))
 
 
 def main(args: list[str] | None = None) -> None:

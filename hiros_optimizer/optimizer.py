@@ -30,13 +30,13 @@ Person calibrations can be restarted (:meth:`Optimizer.calibrate`), moved to ano
 
 from __future__ import annotations
 
-from collections import Counter
 from dataclasses import dataclass
 from functools import lru_cache
 from typing import Any, NamedTuple
 
 import numpy as np
 
+from hiros_core.accounting import Accounted, Drops
 from hiros_core.errors import ConfigError
 from hiros_core.layouts import Layout, get_layout
 from hiros_core.model import Skeleton, SkeletonGroup, SkeletonRows
@@ -191,19 +191,20 @@ class _Item(NamedTuple):
     row: int  # in the frame's stack of the layout
 
 
-class Optimizer:
+class Optimizer(Accounted):
     """Limb-length-preserving fit of each tracked person (module docstring).
 
     Attributes:
         params: the parameters.
-        drops: reason -> count of skeletons not optimised (passed through or dropped).
+        drops: reason -> count of skeletons not optimised (passed through or dropped; a
+            frame is never dropped whole: each ``update`` is processed, see ``Accounted``).
         calibrations: track id -> accepted :class:`PersonCalibration`.
 
     """
 
     def __init__(self, params: OptimizerParams | None = None) -> None:
         self.params = params or OptimizerParams()
-        self.drops: Counter[str] = Counter()
+        self.drops = Drops()
         self.calibrations: dict[int, PersonCalibration] = {}
         self._tracks: dict[int, _Track] = {}
         self._renames: dict[int, int] = {}
@@ -306,6 +307,7 @@ class Optimizer:
         self.new_calibrations = []
         out = SkeletonGroup(group.stamp_ns, group.frame_id, [])
         if not group.skeletons:
+            self.processed += 1
             return out
         seen: set[int] = set()
         batches: dict[int, tuple[LayoutRows, list[_Item]]] = {}
@@ -316,13 +318,13 @@ class Optimizer:
                 continue
             track_id = self._renames.get(skeleton.id, skeleton.id)
             if track_id < 0:
-                self.drops["no track id (passed through)"] += 1
+                self.drops.detections("no track id (passed through)")
                 result = skeleton.copy()
                 result.id = track_id
                 out.skeletons.append(result)
                 continue
             if track_id in seen:
-                self.drops["track id repeated within a group"] += 1
+                self.drops.detections("track id repeated within a group")
                 continue
             seen.add(track_id)
             stack, row = place
@@ -332,6 +334,7 @@ class Optimizer:
             out.skeletons.append(skeleton)  # replaced by its result below
         for stack, items in batches.values():
             self._update_layout(stack, items, out.skeletons)
+        self.processed += 1  # (once it went through: a frame whose fit raised is not)
         return out
 
     def _track(self, track_id: int, layout: Layout) -> _Track:
@@ -350,7 +353,7 @@ class Optimizer:
     def _calibration_for(self, track_id: int, layout: Layout) -> PersonCalibration | None:
         calibration = self.calibrations.get(track_id)
         if calibration is not None and calibration.layout.name != layout.name:
-            self.drops["person calibration is for another layout (recalibrating)"] += 1
+            self.drops.detections("person calibration is for another layout (recalibrating)")
             del self.calibrations[track_id]
             return None
         return calibration

@@ -10,12 +10,12 @@ consumers should not wait while the intermediate stages' outputs are encoded.
 
 from __future__ import annotations
 
-from collections import Counter
 from dataclasses import dataclass, field
 
 from hiros_skeleton_msgs.msg import SkeletonGroup as SkeletonGroupMsg
 from visualization_msgs.msg import MarkerArray
 
+from hiros_core.accounting import Merged
 from hiros_core.calibration import Calibration, load_calibration
 from hiros_core.codec import decode_group, encode_group
 from hiros_core.parameters import stage_config_defaults
@@ -57,10 +57,12 @@ class PipelineNode(HirosNode):
             stage: self.create_raw_publisher(SkeletonGroupMsg, f"/hiros/{stage}", pipeline_qos())
             for stage in STAGES
         }
-        self._seen_drops: Counter[str] = Counter()
         self._bridges = {}
         for camera in self.params.cameras:
             self._subscribe(camera)
+        # A frame the bridge keeps goes on to the tracker: the pipeline counts it.
+        parts = [("bridge: ", bridge) for bridge in self._bridges.values()]
+        self.accounted = Merged([*parts, ("", self.pipeline)], [self.pipeline])
         self.get_logger().info(
             f"cameras {self.params.cameras} ({self.params.input}) -> "
             + ", ".join(f"/hiros/{s}" for s in STAGES)
@@ -93,8 +95,8 @@ class PipelineNode(HirosNode):
     def on_group(self, group) -> None:  # noqa: ANN001 - SkeletonGroup | None from a bridge
         """One camera frame through the stages; publish what each stage produced.
 
-        The drops are reported also when the bridge dropped the frame (``group`` None):
-        a camera sending only bad messages must show on /diagnostics too.
+        The counts are taken also when the bridge dropped the frame (``group`` None): a
+        camera sending only bad messages must show on /diagnostics at once.
         """
         if group is not None:
             outputs = self.pipeline.update(group)
@@ -102,10 +104,7 @@ class PipelineNode(HirosNode):
                 publisher = self.publishers_[stage]
                 if result.skeletons and publisher.get_subscription_count():
                     self.publish_raw(publisher, encode_group(result))
-        drops = self.pipeline.drops
-        for bridge in self._bridges.values():
-            drops.update({f"bridge: {k}": v for k, v in bridge.drops.items()})
-        self.absorb_drops(drops, self._seen_drops)
+        self.absorb_stage()
 
 
 def main(args: list[str] | None = None) -> None:

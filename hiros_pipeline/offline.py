@@ -22,6 +22,7 @@ from pathlib import Path
 import yaml
 
 from hiros_azure_bridge.driver_format import warm_up
+from hiros_core.accounting import Drops
 from hiros_core.calibration import Calibration
 from hiros_core.errors import RecordingError
 from hiros_core.model import SkeletonGroup
@@ -39,9 +40,17 @@ DRAWN_STAGES = ("merger", "filter")
 class RunSummary:
     """What ``run_recording`` did, for the user and for tests.
 
+    Every camera frame is accounted for: ``frames_total`` (the frames read plus those the
+    reader lost) == ``processed`` + ``sum(dropped.values())``; the tracker holds none at
+    the end. What processed frames left out is counted apart, in ``dropped_detections``.
+
     Attributes:
         frames_in: camera frames read, per camera.
-        dropped: reason -> frames (or detections) left out, reader and stages together.
+        processed: camera frames the tracker processed (each went on through every stage).
+        dropped: reason -> camera frames dropped whole, by the reader (``reader: ...``,
+            messages lost or rejected) or the tracker (``tracker: ...``).
+        dropped_detections: reason -> detections (or parts of one, e.g. a bridge's
+            ``nan_position``) left out of processed frames, reader and stages together.
         problems: the reader's sentences on what it met (a truncated file, a damaged chunk).
         published: stage -> output groups written.
         people: stage -> distinct skeleton ids seen.
@@ -51,7 +60,9 @@ class RunSummary:
     """
 
     frames_in: Counter[str] = field(default_factory=Counter)
+    processed: int = 0
     dropped: Counter[str] = field(default_factory=Counter)
+    dropped_detections: Counter[str] = field(default_factory=Counter)
     problems: list[str] = field(default_factory=list)
     published: Counter[str] = field(default_factory=Counter)
     people: dict[str, set[int]] = field(default_factory=lambda: {s: set() for s in STAGES})
@@ -72,6 +83,17 @@ class RunSummary:
     processes, ``child`` (reading and tracking). Unlike wall time, CPU time leaves out the
     waits for a busy core, so it stays readable on a shared machine (it still follows the
     host's speed)."""
+
+    @property
+    def frames_total(self) -> int:
+        """Camera frames in: read, or lost by the reader (``processed`` + dropped ones)."""
+        lost = sum(n for reason, n in self.dropped.items() if reason.startswith("reader: "))
+        return sum(self.frames_in.values()) + lost
+
+    def add_drops(self, drops: Drops, prefix: str = "") -> None:
+        """Count a stage's (or the reader's) drops, frames and detections apart."""
+        self.dropped.update({prefix + r: n for r, n in drops.of_frames().items()})
+        self.dropped_detections.update({prefix + r: n for r, n in drops.of_detections().items()})
 
     @property
     def duration(self) -> float:
@@ -163,10 +185,11 @@ def run_recording(
         finishing = clock()
         _write(writer, pipeline.downstream(item.flushed), summary)
     summary.seconds = {**item.seconds, **parts, "finish": clock() - finishing}
-    summary.dropped.update({f"reader: {k}": v for k, v in item.reader_drops.items()})
+    summary.add_drops(item.reader_drops, "reader: ")
     summary.problems.extend(item.reader_problems)
-    summary.dropped.update({f"tracker: {k}": v for k, v in item.tracker_drops.items()})
-    summary.dropped.update(pipeline.downstream_drops)
+    summary.add_drops(item.tracker_drops, "tracker: ")
+    summary.add_drops(pipeline.downstream_drops)
+    summary.processed = item.tracker_processed
     summary.wall_time = time.perf_counter() - started
     main = time.thread_time() - cpu_started[0]
     summary.cpu = {"main": main, "writer": time.process_time() - cpu_started[1] - main}
@@ -186,9 +209,10 @@ class _TrackingEnd:
     """Last item of a tracked stream: what the tracker still held, and the accounting."""
 
     flushed: SkeletonGroup
-    reader_drops: Counter[str]
+    reader_drops: Drops
     reader_problems: list[str]
-    tracker_drops: Counter[str]
+    tracker_drops: Drops
+    tracker_processed: int
     seconds: dict[str, float]
 
 
@@ -196,7 +220,7 @@ def _tracked_frames(
     recording: str | Path, tracker: Tracker
 ) -> Iterator[tuple[str, SkeletonGroup] | _TrackingEnd]:
     """``(camera, tracker output)`` per camera frame read, then a ``_TrackingEnd``."""
-    reader_drops: Counter[str] = Counter()
+    reader_drops = Drops()
     reader_problems: list[str] = []
     clock, read, tracking = time.perf_counter, 0.0, 0.0
     mark = clock()
@@ -210,7 +234,9 @@ def _tracked_frames(
         mark = clock()
     flushed = tracker.flush()
     seconds = {"read": read, "tracker": tracking}
-    yield _TrackingEnd(flushed, reader_drops, reader_problems, tracker.drops, seconds)
+    yield _TrackingEnd(
+        flushed, reader_drops, reader_problems, tracker.drops, tracker.processed, seconds
+    )
 
 
 _BATCH = 32

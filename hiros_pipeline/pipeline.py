@@ -7,10 +7,10 @@ exactly the same data flow as the separate nodes (which call the same ``update``
 
 from __future__ import annotations
 
-from collections import Counter
 from dataclasses import dataclass, field
 from typing import NamedTuple
 
+from hiros_core.accounting import Accounted, Drops, Merged
 from hiros_core.calibration import Calibration
 from hiros_core.model import SkeletonGroup
 from hiros_filter import Filter, FilterParams
@@ -42,11 +42,12 @@ class StageOutputs(NamedTuple):
     filter: SkeletonGroup
 
 
-class Pipeline:
+class Pipeline(Accounted):
     """tracker -> merger -> optimizer -> filter over camera SkeletonGroups.
 
     Attributes:
         tracker, merger, optimizer, filter: the stage objects (their state is the pipeline's).
+        processed, held, drops: the account of its camera frames (``Accounted``).
 
     """
 
@@ -82,18 +83,28 @@ class Pipeline:
         return StageOutputs(tracked, merged, optimized, self.filter.update(optimized))
 
     @property
-    def drops(self) -> Counter[str]:
-        """Every stage's drop reasons, prefixed with the stage name."""
-        return self._drops(STAGES)
+    def processed(self) -> int:
+        """Camera frames processed: the tracker's (each goes on through the later stages)."""
+        return self.tracker.processed
 
     @property
-    def downstream_drops(self) -> Counter[str]:
-        """The drop reasons of the stages after the tracker (see :meth:`downstream`)."""
-        return self._drops(STAGES[1:])
+    def held(self) -> int:
+        """Camera frames the tracker holds (its out-of-order buffer)."""
+        return self.tracker.held
 
-    def _drops(self, stages: tuple[str, ...]) -> Counter[str]:
-        total: Counter[str] = Counter()
-        for name in stages:
-            for reason, count in getattr(getattr(self, name), "drops", Counter()).items():
-                total[f"{name}: {reason}"] += count
-        return total
+    @property
+    def drops(self) -> Drops:
+        """Every stage's drop reasons, prefixed with the stage name, with their kinds.
+
+        Only the tracker drops camera frames whole; the later stages take its outputs and
+        leave out detections (see ``Accounted``).
+        """
+        return Merged(self._parts(STAGES), [self.tracker]).drops
+
+    @property
+    def downstream_drops(self) -> Drops:
+        """The drop reasons of the stages after the tracker (see :meth:`downstream`)."""
+        return Merged(self._parts(STAGES[1:]), []).drops
+
+    def _parts(self, stages: tuple[str, ...]) -> list[tuple[str, Accounted]]:
+        return [(f"{name}: ", getattr(self, name)) for name in stages]

@@ -79,9 +79,10 @@ class CalibrationFollower:
 
     def _refused(self, name: str) -> None:
         """Count (and log, throttled) a calib parameter of the wrong type or out of range."""
-        drop = getattr(self._node, "drop", None)  # a HirosNode counts it on /diagnostics
-        if drop is not None:
-            drop("calibration parameter of the wrong type or not finite", name)
+        # A HirosNode counts it on /diagnostics as an error: no input frame is lost.
+        error = getattr(self._node, "error", None)
+        if error is not None:
+            error("calibration parameter of the wrong type or not finite", name)
         else:
             self._node.get_logger().warning(f"ignored calibration parameter {name}")
 

@@ -3,7 +3,16 @@
 A node built on it reads as its data flow: declare parameters from the stage's dataclass,
 subscribe raw CDR bytes, decode with the fast codec, call the stage, encode, publish bytes.
 Bad input never raises out of a callback: ``drop(reason)`` counts it, logs once per reason and
-interval, and the counts go out on ``/diagnostics`` every second.
+interval, and the counts go out on ``/diagnostics`` every second. Every frame a node receives
+is accounted for there, at any moment:
+
+    received == processed + sum(dropped.*) + held
+
+``dropped.<reason>`` counts whole frames (the node's own drops, an exception in a callback, and
+the frame reasons of its stage); ``dropped_detections.<reason>`` counts what was left out of
+processed frames; ``errors.<reason>`` counts failures that lost no input frame (an output not
+published, a calibration step, a file not written). ``processed`` and ``held`` are the stage's
+own counts (``hiros_core.accounting``) when the node names it in ``accounted``.
 """
 
 from __future__ import annotations
@@ -22,6 +31,7 @@ from rclpy.executors import Executor, ExternalShutdownException, SingleThreadedE
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, qos_profile_sensor_data
 
+from hiros_core.accounting import Accounted
 from hiros_ros.params import declare_params
 
 T = TypeVar("T")
@@ -49,13 +59,20 @@ class HirosNode(Node):
     """Base class of every hiros node.
 
     Attributes:
-        counters: ``received``, ``published`` and ``dropped.<reason>`` counts.
+        counters: ``received``, ``processed``, ``held``, ``published``, ``dropped.<reason>``,
+            ``dropped_detections.<reason>`` and ``errors.<reason>`` counts (module docstring).
+        accounted: the stage (or ``Merged`` stages) the received frames go to, whose
+            ``processed``, ``held`` and drops become the node's after every callback; None:
+            a frame whose callback returns is processed.
 
     """
 
     def __init__(self, node_name: str, *, log_interval: float = 5.0, **kwargs: Any) -> None:
         super().__init__(node_name, **kwargs)
         self.counters: Counter[str] = Counter()
+        self.accounted: Accounted | None = None
+        self._frames_dropped = 0  # sum of dropped.*, kept as it goes (checked every frame)
+        self._seen_drops: Counter[str] = Counter()  # the stage's drops already counted
         self._log_interval = log_interval
         self._last_log: dict[str, float] = {}
         self._diagnostics = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
@@ -70,14 +87,24 @@ class HirosNode(Node):
     def create_raw_subscription(
         self, msg_type: type, topic: str, callback: Callable[[bytes], None], qos: QoSProfile
     ) -> Any:
-        """Subscribe to CDR bytes; exceptions in ``callback`` become counted drops."""
+        """Subscribe to CDR bytes; every frame is accounted for (module docstring).
+
+        An exception in ``callback`` drops the frames it left unaccounted for (the one
+        received, or one the stage was processing) under the exception's name; raised
+        after the stage accounted for them (e.g. while publishing), it counts as an error.
+        """
 
         def guarded(data: bytes) -> None:
             self.counters["received"] += 1
             try:
                 callback(data)
             except Exception as exc:
-                self.drop(type(exc).__name__, f"{topic}: {exc}")
+                self._count_exception(exc, topic)
+            else:
+                if self.accounted is None:
+                    self.counters["processed"] += 1
+                else:
+                    self.absorb_stage()
 
         return self.create_subscription(msg_type, topic, guarded, qos, raw=True)
 
@@ -96,10 +123,39 @@ class HirosNode(Node):
         self.counters[name] += amount
 
     def drop(self, reason: str, detail: str = "", amount: int = 1) -> None:
-        """Count dropped input under ``reason`` and log it at most once per interval."""
-        self.counters[f"dropped.{reason}"] += amount
-        total = self.counters[f"dropped.{reason}"]
-        self.warn_throttled(reason, lambda: f"dropped input ({reason}, {total} so far): {detail}")
+        """Count ``amount`` input frames dropped whole for ``reason``; log once per interval."""
+        self._frames_dropped += amount
+        self._count_logged("dropped", reason, detail, amount, "dropped input")
+
+    def drop_detections(self, reason: str, detail: str = "", amount: int = 1) -> None:
+        """Count detections (or parts of one) left out of processed frames, logged likewise."""
+        self._count_logged("dropped_detections", reason, detail, amount, "dropped detections")
+
+    def error(self, reason: str, detail: str = "", amount: int = 1) -> None:
+        """Count a failure that lost no input frame (see the module docstring), logged likewise."""
+        self._count_logged("errors", reason, detail, amount, "error")
+
+    def _count_logged(self, kind: str, reason: str, detail: str, amount: int, what: str) -> None:
+        key = f"{kind}.{reason}"
+        self.counters[key] += amount
+        total = self.counters[key]
+        self.warn_throttled(key, lambda: f"{what} ({reason}, {total} so far): {detail}")
+
+    @property
+    def frames_accounted(self) -> int:
+        """Frames processed, dropped whole or held (``received`` once every callback ended)."""
+        return self.counters["processed"] + self._frames_dropped + self.counters["held"]
+
+    def _count_exception(self, exc: Exception, topic: str) -> None:
+        """Drop the frames the failed callback left unaccounted for; else count an error."""
+        if self.accounted is not None:
+            self.absorb_stage()
+        lost = self.counters["received"] - self.frames_accounted
+        reason, detail = type(exc).__name__, f"{topic}: {exc}"
+        if lost > 0:
+            self.drop(reason, detail, amount=lost)
+        else:
+            self.error(reason, detail)
 
     def warn_throttled(self, key: str, message: Callable[[], str]) -> bool:
         """Log ``message()`` unless ``key`` was logged within the interval; True if logged.
@@ -114,24 +170,54 @@ class HirosNode(Node):
         self.get_logger().warning(message())
         return True
 
-    def absorb_drops(self, drops: Counter[str], seen: Counter[str]) -> None:
-        """Report the increase of a stage's own ``drops`` counter since the last call."""
-        for reason, total in drops.items():
-            new = total - seen[reason]
+    def absorb_stage(self) -> None:
+        """Make ``accounted``'s counts the node's: ``processed``, ``held`` and new drops.
+
+        Called after every callback (and for each diagnostics message): a stage may drop
+        or release frames it held at any call.
+        """
+        stage = self.accounted
+        if stage is None:
+            return
+        drops = stage.drops
+        for reason, total in tuple(drops.items()):
+            new = total - self._seen_drops[reason]
             if new > 0:
-                self.drop(reason, f"{new} more from the stage", amount=new)
-                seen[reason] = total
+                count = self.drop if drops.is_frame(reason) else self.drop_detections
+                count(reason, f"{new} more from the stage", amount=new)
+                self._seen_drops[reason] = total
+        self.counters["processed"] = stage.processed
+        self.counters["held"] = stage.held
 
     def publish_diagnostics(self) -> None:
-        """One DiagnosticStatus with every counter; WARN when anything was dropped."""
+        """One DiagnosticStatus with every counter; WARN when a frame was dropped or failed.
+
+        What processed frames left out (a skeleton without joints, a duplicate track) is
+        normal in a crowded scene: it shows in the counts and the message, at level OK.
+        """
+        self.absorb_stage()
         status = DiagnosticStatus(name=self.get_fully_qualified_name(), hardware_id="hiros")
-        dropped = sum(v for k, v in self.counters.items() if k.startswith("dropped."))
-        status.level = DiagnosticStatus.WARN if dropped else DiagnosticStatus.OK
-        status.message = f"{dropped} input(s) dropped" if dropped else "ok"
+        status.level, status.message = self._status()
         status.values = [KeyValue(key=k, value=str(v)) for k, v in sorted(self.counters.items())]
         array = DiagnosticArray(status=[status])
         array.header.stamp = self.get_clock().now().to_msg()
         self._diagnostics.publish(array)
+
+    def _status(self) -> tuple[bytes, str]:
+        """Diagnostic level and message from the counters."""
+        totals: Counter[str] = Counter()
+        for key, value in self.counters.items():
+            totals[key.partition(".")[0]] += value
+        parts = []
+        if self._frames_dropped:
+            received = self.counters["received"]
+            parts.append(f"{self._frames_dropped} of {received} frame(s) dropped")
+        if totals["errors"]:
+            parts.append(f"{totals['errors']} error(s)")
+        level = DiagnosticStatus.WARN if parts else DiagnosticStatus.OK
+        if totals["dropped_detections"]:
+            parts.append(f"{totals['dropped_detections']} detection(s) left out")
+        return level, "; ".join(parts) or "ok"
 
 
 _STOP = threading.Event()

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-from collections import Counter
 from collections.abc import Callable
 from typing import Any
 
@@ -19,7 +18,8 @@ class StageNode(HirosNode):
     """Subscribes ``input_topic`` (raw), runs the stage, publishes ``output_topic`` (raw).
 
     The topics and the input QoS are parameters of their own, beside the stage's dataclass
-    fields. Whatever the stage drops (its ``drops`` counter) is reported as the node's drops.
+    fields. The stage accounts for the node's frames (``HirosNode.accounted``): what it
+    processes, holds and drops is reported as the node's.
     """
 
     def __init__(
@@ -38,7 +38,7 @@ class StageNode(HirosNode):
         input_topic = self.declare_parameter("input_topic", input_topic).value
         output_topic = self.declare_parameter("output_topic", output_topic).value
         qos_kind = self.declare_parameter("input_qos", input_qos).value
-        self._seen_drops: Counter[str] = Counter()
+        self.accounted = self.stage
         self.publisher = self.create_raw_publisher(SkeletonGroupMsg, output_topic, pipeline_qos())
         self.create_raw_subscription(
             SkeletonGroupMsg, input_topic, self.on_group, camera_qos(qos_kind)
@@ -48,7 +48,6 @@ class StageNode(HirosNode):
     def on_group(self, data: bytes) -> None:
         """Decode, update, publish; an empty result is published too (a frame with nobody)."""
         result = self.stage.update(decode_group(data))
-        self.absorb_drops(getattr(self.stage, "drops", Counter()), self._seen_drops)
         if isinstance(result, SkeletonGroup):
             self.publish_raw(self.publisher, encode_group(result))
 

@@ -8,11 +8,11 @@ DESIGN.md: ``p_world = R p_camera + t`` and
 
 from __future__ import annotations
 
-from collections import Counter
 from typing import NamedTuple
 
 import numpy as np
 
+from hiros_core.accounting import Drops
 from hiros_core.calibration import Calibration, CameraCalibration
 from hiros_core.geometry import RigidTransform
 from hiros_core.model import STATE_WIDTH, Skeleton, SkeletonGroup, SkeletonRows, stack_rows
@@ -21,10 +21,10 @@ from hiros_tracker import kernels
 __all__ = ["CameraCorrection", "MovedFrame"]
 
 UNCALIBRATED = "uncalibrated camera"
+"""Drop reason of a group whose camera has no calibration (a whole frame)."""
 MAX_REMEMBERED = 64
 """Frame ids (and cameras without calibration) remembered at most: frame ids come from the
 input, and a publisher of ever-new ones must not make a long-running node grow."""
-"""Drop reason of a group whose camera has no calibration."""
 
 
 class CameraCorrection:
@@ -37,16 +37,15 @@ class CameraCorrection:
 
     Attributes:
         world_frame: frame id of the output groups.
-        drops: reason -> count, shared with the owning stage.
+        drops: reason -> count, shared with the owning stage (an uncalibrated camera's
+            frame is dropped whole).
         uncalibrated: cameras seen without calibration since the last ``set_calibration``
             (the first ``MAX_REMEMBERED``; the frames of all of them are counted).
 
     """
 
-    def __init__(
-        self, calibration: Calibration | None = None, drops: Counter[str] | None = None
-    ) -> None:
-        self.drops: Counter[str] = drops if drops is not None else Counter()
+    def __init__(self, calibration: Calibration | None = None, drops: Drops | None = None) -> None:
+        self.drops = drops if drops is not None else Drops()
         self.world_frame = "world"
         self.uncalibrated: set[str] = set()
         self._cameras: dict[str, CameraCalibration] = {}
@@ -112,7 +111,7 @@ class CameraCorrection:
         if name is None:
             if len(self.uncalibrated) < MAX_REMEMBERED:
                 self.uncalibrated.add(group.camera)
-            self.drops[UNCALIBRATED] += 1
+            self.drops.frame(UNCALIBRATED)
             return None
         camera = self._cameras[name]
         header_ns = group.stamp_ns

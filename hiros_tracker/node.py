@@ -10,7 +10,6 @@ and counted on ``/diagnostics``.
 
 from __future__ import annotations
 
-from collections import Counter
 from dataclasses import dataclass, field
 
 from hiros_skeleton_msgs.msg import SkeletonGroup as SkeletonGroupMsg
@@ -56,7 +55,7 @@ class TrackerNode(HirosNode):
         topics = [self.params.camera_topic.format(camera=c) for c in self.params.cameras]
         for topic in topics:
             self.create_raw_subscription(SkeletonGroupMsg, topic, self.on_group, qos)
-        self._seen_drops: Counter[str] = Counter()
+        self.accounted = self.tracker
         self._reported: set[str] = set()
         self.get_logger().info(f"{topics} -> Tracker -> {self.params.output_topic}")
 
@@ -82,7 +81,6 @@ class TrackerNode(HirosNode):
         """Decode one camera frame, track, publish what the tracker released."""
         result = self.tracker.update(decode_group(data))
         self._report_uncalibrated()
-        self.absorb_drops(self.tracker.drops, self._seen_drops)
         if result.skeletons:
             self.publish_raw(self.publisher, encode_group(result))
 

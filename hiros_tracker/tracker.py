@@ -39,7 +39,7 @@ from __future__ import annotations
 
 import heapq
 import itertools
-from collections import Counter, deque
+from collections import deque
 from dataclasses import dataclass
 from functools import cache, cached_property
 from typing import NamedTuple
@@ -47,6 +47,7 @@ from typing import NamedTuple
 import numpy as np
 from scipy.optimize import linear_sum_assignment
 
+from hiros_core.accounting import Accounted, Drops
 from hiros_core.calibration import Calibration, CameraCalibration
 from hiros_core.layouts import AZURE_KINECT, Layout
 from hiros_core.model import Skeleton, SkeletonGroup
@@ -363,12 +364,14 @@ def _joint_weights(layout: Layout, decay: float) -> np.ndarray:
     return decay**depth
 
 
-class Tracker:
+class Tracker(Accounted):
     """Gives every camera detection a persistent track id (see the module docstring).
 
     Attributes:
         params: the parameters it was built with.
-        drops: reason -> count of input left out (uncalibrated camera, late frame, ...).
+        drops: reason -> count of input left out: whole frames (uncalibrated camera, late
+            frame, ...) or detections (no finite joint, ...); see ``Accounted``.
+        processed: frames released from the buffer and associated (``held``: still in it).
         correction: the calibration being applied (``set_calibration`` replaces it).
 
     """
@@ -378,7 +381,7 @@ class Tracker:
     ) -> None:
         warm_up()
         self.params = params or TrackerParams()
-        self.drops: Counter[str] = Counter()
+        self.drops = Drops()
         self.correction = CameraCorrection(calibration, self.drops)
         self._table: TrackTable | None = None  # made for the first detections' joint count
         self._doomed: list[int] = []  # rows of duplicate tracks, removed at the frame's end
@@ -422,6 +425,11 @@ class Tracker:
         """Frames waiting in the out-of-order buffer (or held for a stamp far ahead)."""
         return len(self._buffer) + (self._suspect is not None)
 
+    @property
+    def held(self) -> int:  # type: ignore[override]
+        """``pending``: the frames of the frame balance not processed nor dropped yet."""
+        return self.pending
+
     # ----------------------------------------------------------------------------------- flow
     def update(self, group: SkeletonGroup) -> SkeletonGroup:
         """Take one camera frame; return the detections released by it, with track ids.
@@ -436,10 +444,10 @@ class Tracker:
         stamp_ns = corrected.group.stamp_ns
         camera = corrected.camera or group.camera
         if self._seen_before(camera, stamp_ns):
-            self.drops["duplicate frame"] += 1
+            self.drops.frame("duplicate frame")
             return self._output([])
         if self._released_ns is not None and stamp_ns < self._released_ns:
-            self.drops["late frame"] += 1
+            self.drops.frame("late frame")
             return self._output([])
         jump_ns = round(self.params.max_jump * 1e9)
         if self._suspect is not None:
@@ -447,7 +455,7 @@ class Tracker:
             if stamp_ns > self._newest_ns + jump_ns:  # type: ignore[operator]
                 self._buffered(*held)  # confirmed: every clock moved on
             else:
-                self.drops["stamp far ahead"] += 1
+                self.drops.frame("stamp far ahead")
         if self._newest_ns is not None and stamp_ns > self._newest_ns + jump_ns:
             self._suspect = (stamp_ns, camera, corrected)
             return self._output([])
@@ -482,6 +490,7 @@ class Tracker:
             stamp_ns, _, camera, frame = heapq.heappop(self._buffer)
             self._released_ns = stamp_ns
             skeletons.extend(self._process(frame, camera))
+            self.processed += 1  # (after: a frame whose processing raised is not processed)
         return self._output(skeletons)
 
     def _output(self, skeletons: list[Skeleton]) -> SkeletonGroup:
@@ -537,14 +546,14 @@ class Tracker:
         )
         index = np.arange(len(skeletons))
         if unusable:
-            self.drops["no finite joint"] += unusable
+            self.drops.detections("no finite joint", unusable)
             skeletons = [s for s, ok in zip(skeletons, usable.tolist(), strict=True) if ok]
             positions, kept, index = positions[usable], kept[usable], index[usable]
         if not skeletons:
             return None
         table = self._table
         if table is not None and table.n and positions.shape[1] != table.n_joints:
-            self.drops["layout differs from the tracks"] += len(skeletons)
+            self.drops.detections("layout differs from the tracks", len(skeletons))
             return None
         return _Detections(skeletons, positions, kept, index, rows, stack is not None)
 
@@ -553,9 +562,9 @@ class Tracker:
         valid: list[Skeleton] = []
         for skeleton in skeletons:
             if valid and skeleton.layout is not valid[0].layout:
-                self.drops["layout differs within a frame"] += 1
+                self.drops.detections("layout differs within a frame")
             elif not (skeleton.marker_present & np.isfinite(skeleton.positions).all(1)).any():
-                self.drops["no finite joint"] += 1
+                self.drops.detections("no finite joint")
             else:
                 valid.append(skeleton)
         return valid
@@ -716,7 +725,7 @@ class Tracker:
             r, c, feasible, flips, found.kept, self.params.min_joints
         )
         if dropped:
-            self.drops["too few joints"] += dropped
+            self.drops.detections("too few joints", dropped)
         if new:
             for u in np.flatnonzero(rows < 0).tolist():
                 rows[u] = table.add(self._next_id, found.positions[dets[u]], stamp)
@@ -864,7 +873,7 @@ class Tracker:
             )
             if (distance < params.duplicate_distance).any():
                 self._doomed.append(row)
-                self.drops["duplicate of a confirmed track"] += 1
+                self.drops.detections("duplicate of a confirmed track")
                 return
         table.confirmed[row] = True
 

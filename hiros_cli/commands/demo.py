@@ -143,7 +143,7 @@ def _print_summary(  # noqa: PLR0917 - the four results of the demo and where th
             f"{figures.identity.id_switches}",
         )
     _add_chain_rows(table, evaluation)
-    frames = sum(summary.frames_in.values())
+    frames = summary.frames_total
     dropped = sum(summary.dropped.values())
     table.add_row("camera frames in / dropped with a reason", f"{frames} / {dropped}")
     table.add_row("pipeline speed", f"{summary.real_time_factor:.1f}x real time")

@@ -163,18 +163,26 @@ def run(args: argparse.Namespace) -> int:
 
 
 def print_summary(console: Console, summary, out: Path) -> None:  # noqa: ANN001 - RunSummary
-    """Frames in per camera, outputs per stage, drops by reason, speed."""
+    """Frames in = processed + dropped frames by reason; then detections dropped, speed.
+
+    The frames read per camera come first; ``frames in`` adds what the reader lost, so
+    that the rows under it add up to it.
+    """
     table = Table(title=f"hiros run -> {out}", show_header=True)
     table.add_column("what")
     table.add_column("count", justify="right")
     for camera, frames in sorted(summary.frames_in.items()):
-        table.add_row(f"frames in: {camera}", str(frames))
+        table.add_row(f"frames read: {camera}", str(frames))
+    table.add_row("frames in", str(summary.frames_total))
+    table.add_row("  processed", str(summary.processed))
+    for reason, count in sorted(summary.dropped.items()):
+        table.add_row(f"  dropped: {reason}", str(count))
+    if not summary.dropped:
+        table.add_row("  dropped", "0")
     for stage, groups in summary.published.items():
         table.add_row(f"published /hiros/{stage}", f"{groups} ({len(summary.people[stage])} ids)")
-    for reason, count in sorted(summary.dropped.items()):
-        table.add_row(f"dropped: {reason}", str(count))
-    if not summary.dropped:
-        table.add_row("dropped", "0")
+    for reason, count in sorted(summary.dropped_detections.items()):
+        table.add_row(f"detections dropped: {reason}", str(count))
     console.print(table)
     print_warnings(console, summary.problems)
     console.print(

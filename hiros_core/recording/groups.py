@@ -18,6 +18,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from hiros_core.accounting import Drops
 from hiros_core.codec import decode_group
 from hiros_core.errors import CodecError
 from hiros_core.model import SkeletonGroup
@@ -82,7 +83,8 @@ def iter_groups(
             topic given here is read as driver output whatever its name.
         bridge_params: ``DriverBridgeParams`` for MarkerArray topics (default: Azure driver).
         drops: counter that receives, when the iteration ends, the reader's and bridges'
-            drop reasons plus ``undecodable`` (bytes the codec rejects).
+            drop reasons plus ``undecodable`` (bytes the codec rejects); a ``Drops`` also
+            learns which reasons dropped whole messages (all of the reader's do).
         problems: list that receives, when the iteration ends, the reader's sentences on
             what it met (a truncated file, a damaged chunk), for the user.
 
@@ -114,7 +116,7 @@ def iter_logged_groups(
     before its group is yielded.
     """
     reader = recording if isinstance(recording, RecordingReader) else RecordingReader(recording)
-    drops = drops if drops is not None else Counter()
+    lost = Drops()
     wanted = (
         group_topics(reader.topics)
         if topics is None
@@ -128,15 +130,20 @@ def iter_logged_groups(
     )
     try:
         for batch in batches:
-            groups = _batch_groups(batch, bridges, bridge_params, drops)
+            groups = _batch_groups(batch, bridges, bridge_params, lost)
             sources = [source_name(topic) for topic in batch.topics]
             found = zip(batch.channels.tolist(), batch.log_times_ns.tolist(), groups, strict=True)
             for channel, log_time, group in found:
                 if group is not None:
                     yield sources[channel], group, log_time
     finally:
-        for counter in (reader.drops, *(b.drops for b in bridges.values())):
-            drops.update({reason: n for reason, n in counter.items() if n})
+        lost.add(reader.drops, frames=True)  # (messages)
+        for bridge in bridges.values():
+            lost.add(bridge.drops)
+        if isinstance(drops, Drops):
+            drops.add(lost)
+        elif drops is not None:
+            drops.update(lost)
         if problems is not None:
             problems.extend(reader.problems)
         if reader is not recording:
@@ -147,7 +154,7 @@ def _batch_groups(
     batch: MessageBatch,
     bridges: dict[str, DriverBridge],
     bridge_params: DriverBridgeParams | None,
-    drops: Counter[str],
+    drops: Drops,
 ) -> list[SkeletonGroup | None]:
     """The group of each message of ``batch`` (None: dropped, the reason counted)."""
     from hiros_azure_bridge.driver_format import DriverBridge
@@ -160,7 +167,7 @@ def _batch_groups(
                 try:
                     groups[i] = decode_group(batch.data(i))
                 except CodecError:
-                    drops["undecodable"] += 1
+                    drops.frame("undecodable")
         elif msgtype == MARKER_ARRAY:
             bridge = bridges.get(topic)
             if bridge is None:
@@ -169,5 +176,5 @@ def _batch_groups(
             for i, group in zip(rows.tolist(), made, strict=True):
                 groups[i] = group
         else:
-            drops["not_skeletons"] += len(rows)
+            drops.frame("not_skeletons", len(rows))
     return groups

@@ -31,6 +31,7 @@ def test_every_stage_writes_and_every_frame_is_accounted_for(
         camera_messages = sum(1 for _ in reader.messages())
     bridge_dropped = sum(v for k, v in summary.dropped.items() if k.startswith("reader"))
     assert sum(summary.frames_in.values()) + bridge_dropped == camera_messages
+    assert summary.frames_total == summary.processed + sum(summary.dropped.values())
     with RecordingReader(out) as reader:
         topics = set(reader.topics)
     assert {f"/hiros/{stage}" for stage in STAGES} <= topics
@@ -55,6 +56,8 @@ def test_runs_are_deterministic_in_one_process_or_two(
             messages[name] = [(m.topic, m.log_time_ns, m.data) for m in reader.messages()]
     assert messages["one"] == messages["again"] == messages["two"]
     assert runs["one"].dropped == runs["two"].dropped
+    assert runs["one"].dropped_detections == runs["two"].dropped_detections
+    assert runs["one"].processed == runs["two"].processed
     assert runs["one"].frames_in == runs["two"].frames_in
     assert runs["one"].published == runs["two"].published
     assert "waiting" in runs["two"].seconds
@@ -86,6 +89,7 @@ def test_a_damaged_chunk_is_accounted_for_and_described(
     reader_dropped = sum(v for k, v in summary.dropped.items() if k.startswith("reader"))
     assert summary.dropped["reader: damaged_chunk"] > 0
     assert sum(summary.frames_in.values()) + reader_dropped == camera_messages
+    assert summary.frames_total == summary.processed + sum(summary.dropped.values())
     assert "damaged" in summary.problems[0]
 
 

@@ -18,7 +18,7 @@ class _Node:
     def create_subscription(self, *_):
         return None
 
-    def drop(self, reason, detail=""):
+    def error(self, reason, detail=""):
         self.dropped.append(detail)
 
 

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import re
 from pathlib import Path
 
@@ -81,4 +82,38 @@ def test_ever_new_frame_ids_log_one_line_per_interval(ros_context, log_lines) ->
     named = [m for _, m in log_lines.lines if "has no calibration" in m]
     assert named == [named[0]]
     assert "'x0' has no calibration (1 camera(s)" in named[0]
+    node.absorb_stage()  # (done after each subscription callback; called directly here)
     assert node.counters["dropped.uncalibrated camera"] == 200
+
+
+def test_the_diagnostics_account_for_every_frame_sent(ros_processes, tmp_path: Path) -> None:
+    """received == processed + dropped frames + held on /diagnostics, with detection drops
+    apart: the stage's frame and detection drops used to be summed together."""
+    pytest.importorskip("hiros_skeleton_msgs.msg")
+    calibration = Calibration(
+        "k01", "world", {"k01": CameraCalibration(frame_id="k01_depth_camera_link")}
+    )
+    path = tmp_path / "calibration.yaml"
+    save_calibration(calibration, path)
+    params = _params("cameras:=[k01]", f"calibration_file:={path}", "camera_qos:=reliable")
+    ros_processes.node("hiros_tracker.node", *params)
+    client = ros_processes.client(HERE / "diagnostics_client.py")
+    log = client.stdout + client.stderr + ros_processes.stop()
+    assert client.returncode == 0, log
+    found = re.search(r"sent (\d+) diagnostics (\{.*\})", log)
+    assert found, log
+    sent, counters = int(found.group(1)), json.loads(found.group(2))
+    count = {key: int(value) for key, value in counters.items() if key not in {"message", "level"}}
+    frames_dropped = {k: v for k, v in count.items() if k.startswith("dropped.")}
+    assert count["received"] == sent, log
+    assert count["received"] == count["processed"] + sum(frames_dropped.values()) + count["held"]
+    assert frames_dropped == {
+        "dropped.duplicate frame": 1,
+        "dropped.late frame": 1,
+        "dropped.uncalibrated camera": 1,
+        "dropped.CodecError": 1,
+    }, log
+    assert count["dropped_detections.no finite joint"] == 2, log
+    assert counters["level"] == 1, log  # WARN: frames were dropped
+    assert f"4 of {sent} frame(s) dropped" in counters["message"], log
+    assert "Traceback" not in log, log
