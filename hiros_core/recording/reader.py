@@ -10,9 +10,9 @@ in log-time order across topics and files, holding only a few chunks in memory a
   read straight through by the ``mcap`` library, in file order, up to its last complete
   record, and then the whole messages at the start of a chunk the file's end cuts (zstd and
   lz4 decompress as a stream); what could not be read is counted ``truncated`` in ``drops``
-  and described in ``problems``. Each chunk is checked against its CRC; a damaged chunk is skipped (its
-  messages counted ``damaged_chunk``) and reading goes on after it. A summary that fails its
-  CRC is not trusted: the file is then read straight through.
+  and described in ``problems``. Each chunk is checked against its CRC; a damaged chunk is
+  skipped (its messages counted ``damaged_chunk``) and reading goes on after it. A summary
+  that fails its CRC is not trusted: the file is then read straight through.
 * sqlite3 (``.db3``) and ROS 1 bags are read with ``rosbags``' ``AnyReader``. ROS 1 messages
   are converted to ROS 2 CDR of the ROS 2 Jazzy type of the same name (a ROS 1 header's
   ``seq`` goes, newer fields get defaults), so every consumer sees one wire format.
