@@ -22,7 +22,7 @@ from hiros_core.accounting import Drops
 from hiros_core.codec import decode_group
 from hiros_core.errors import CodecError
 from hiros_core.model import SkeletonGroup
-from hiros_core.recording.reader import MessageBatch, RecordingReader
+from hiros_core.recording.reader import UNCOUNTED_DROPS, MessageBatch, RecordingReader
 from hiros_core.recording.writer import MARKER_ARRAY, SKELETON_GROUP
 
 if TYPE_CHECKING:
@@ -84,7 +84,9 @@ def iter_groups(
         bridge_params: ``DriverBridgeParams`` for MarkerArray topics (default: Azure driver).
         drops: counter that receives, when the iteration ends, the reader's and bridges'
             drop reasons plus ``undecodable`` (bytes the codec rejects); a ``Drops`` also
-            learns which reasons dropped whole messages (all of the reader's do).
+            learns which reasons dropped whole messages (all of the reader's do). A file's
+            cut end is not among them (the messages it took are unknown): ``problems``
+            tells it.
         problems: list that receives, when the iteration ends, the reader's sentences on
             what it met (a truncated file, a damaged chunk), for the user.
 
@@ -137,7 +139,7 @@ def iter_logged_groups(
                 if group is not None:
                     yield sources[channel], group, log_time
     finally:
-        lost.add(reader.drops, frames=True)  # (messages)
+        lost.add(_counted(reader.drops), frames=True)  # messages (a cut end: in ``problems``)
         for bridge in bridges.values():
             lost.add(bridge.drops)
         if isinstance(drops, Drops):
@@ -178,3 +180,8 @@ def _batch_groups(
         else:
             drops.frame("not_skeletons", len(rows))
     return groups
+
+
+def _counted(drops: Counter[str]) -> Counter[str]:
+    """The reader's drops that count messages (see ``UNCOUNTED_DROPS``)."""
+    return Counter({reason: n for reason, n in drops.items() if reason not in UNCOUNTED_DROPS})

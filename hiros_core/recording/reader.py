@@ -41,7 +41,11 @@ import yaml
 from hiros_core.errors import RecordingError
 from hiros_core.recording.msgdefs import normalize_msgtype
 
-__all__ = ["MessageBatch", "RecordedMessage", "RecordingReader"]
+__all__ = ["UNCOUNTED_DROPS", "MessageBatch", "RecordedMessage", "RecordingReader"]
+
+UNCOUNTED_DROPS = frozenset({"truncated"})
+"""Reasons in ``RecordingReader.drops`` counted once per occurrence, not per message: how
+many messages a file's cut end took is unknown. The others count messages."""
 
 _BATCH_SIZE = 256
 """Messages per batch of a recording read one message at a time (not an indexed MCAP)."""
