@@ -26,7 +26,6 @@ from __future__ import annotations
 import queue
 import struct
 import threading
-import zlib
 from collections.abc import Callable
 from typing import IO
 
@@ -44,6 +43,8 @@ from mcap.records import (
     Statistics,
     SummaryOffset,
 )
+
+from hiros_core.recording.checksum import crc32
 
 __all__ = ["COMPRESSIONS", "McapWriter"]
 
@@ -266,7 +267,7 @@ class McapWriter:
         # One call per step, each releasing the GIL for its whole length (crc32, the
         # compressor, the file write), so the producing thread keeps its core.
         data = memoryview(buffer)[:size]
-        crc = zlib.crc32(data)
+        crc = crc32(data)
         compressed = self._compress(data)
         data.release()
         self._free.put(buffer)
@@ -349,8 +350,8 @@ class McapWriter:
         offset_start = summary_start + len(summary)
         for offset in offsets:
             summary += _record(offset)
-        crc = zlib.crc32(summary)
-        crc = zlib.crc32(_FOOTER_CRC_HEAD.pack(Opcode.FOOTER, 20, summary_start, offset_start), crc)
+        crc = crc32(summary)
+        crc = crc32(_FOOTER_CRC_HEAD.pack(Opcode.FOOTER, 20, summary_start, offset_start), crc)
         footer = Footer(summary_start=summary_start, summary_offset_start=offset_start,
                         summary_crc=crc)  # fmt: skip
         self._write(bytes(summary) + _record(footer) + MAGIC)

@@ -27,7 +27,6 @@ import contextlib
 import heapq
 import io
 import struct
-import zlib
 from collections import Counter
 from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import dataclass
@@ -39,6 +38,7 @@ import numpy as np
 import yaml
 
 from hiros_core.errors import RecordingError
+from hiros_core.recording.checksum import crc32
 from hiros_core.recording.msgdefs import normalize_msgtype
 
 __all__ = ["UNCOUNTED_DROPS", "MessageBatch", "RecordedMessage", "RecordingReader"]
@@ -233,7 +233,7 @@ class _McapSource(_Source):
         if not crc:
             return True
         self.stream.seek(summary_start)
-        return zlib.crc32(self.stream.read(end - 8 - 4 - summary_start)) == crc
+        return crc32(self.stream.read(end - 8 - 4 - summary_start)) == crc
 
     def _scan(self, topics: set[str] | None, *, collect_only: bool = False) -> Iterator[Any]:
         """Records straight through the file, stopping cleanly at the first unreadable byte."""
@@ -454,7 +454,7 @@ class _McapSource(_Source):
             records: bytes | memoryview = self._decompress_into(data, size, offset)
         else:
             records = self._decompress(compression, data, size, offset)
-        if crc and zlib.crc32(records) != crc:
+        if crc and crc32(records) != crc:
             msg = f"{self.path}: the chunk at byte {offset} is damaged (its CRC does not match)"
             raise RecordingError(msg)
         return records
