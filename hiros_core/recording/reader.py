@@ -634,7 +634,7 @@ class _RosbagsSource(_Source):
         try:
             self.reader.open()
         except (AnyReaderError, OSError, ValueError, KeyError) as exc:
-            msg = f"cannot read recording {path}: {exc}"
+            msg = f"cannot read recording {path}: {exc}{_bag_advice(path, exc)}"
             raise RecordingError(msg) from exc
         except Exception as exc:  # rosbags' storage errors have no common base
             msg = f"cannot read recording {path}: {type(exc).__name__}: {exc}"
@@ -665,6 +665,19 @@ class _RosbagsSource(_Source):
     def close(self) -> None:
         with contextlib.suppress(Exception):
             self.reader.close()
+
+
+_REINDEX = (
+    "a ROS 1 recorder stopped without closing the bag (a .bag.active file) leaves no index; "
+    "ROS 1's `rosbag reindex` writes it, then the bag can be read"
+)
+
+
+def _bag_advice(path: Path, error: Exception) -> str:
+    """What to do about a ROS 1 bag whose index cannot be read (else nothing)."""
+    if path.suffix != ".bag" or "index" not in str(error).lower():
+        return ""
+    return f". {_REINDEX[0].upper()}{_REINDEX[1:]}"
 
 
 def _ros1_converter(bag_store: Any, msgtype: str) -> Callable[[bytes], bytes]:
@@ -753,6 +766,9 @@ class RecordingReader:
             self._sources = [_McapSource(self.path, self.drops, self.problems)]
         elif self.path.suffix in {".db3", ".bag"}:
             self._sources = [_RosbagsSource(self.path)]
+        elif self.path.name.endswith(".bag.active"):
+            msg = f"cannot read {self.path}: {_REINDEX}"
+            raise RecordingError(msg)
         else:
             msg = (
                 f"{self.path} is not a recording: expected a rosbag2 folder or a .mcap, .db3 "

@@ -9,6 +9,7 @@ from rosbags.rosbag1 import Writer as Rosbag1Writer
 from rosbags.typesys import Stores, get_typestore
 
 from hiros_core.codec import decode_marker_array
+from hiros_core.errors import RecordingError
 from hiros_core.recording import MARKER_ARRAY, RecordingReader, iter_groups
 
 SHARED_DATA = Path(__file__).resolve().parents[4] / "shared" / "data"
@@ -85,3 +86,20 @@ def test_ros1_driver_bag_from_unipd_frames(tmp_path):
     np.testing.assert_array_equal(skeleton.positions, positions[-1])
     np.testing.assert_allclose(skeleton.confidences[:4], [0, 1 / 3, 2 / 3, 1])
     assert sum(drops.values()) == 0
+
+
+def test_a_bag_without_its_index_is_refused_with_the_repair(tmp_path):
+    """A ROS 1 recorder killed mid-take leaves a .bag.active with no index at its end."""
+    store = get_typestore(Stores.ROS1_NOETIC)
+    bag = tmp_path / "take.bag"
+    with Rosbag1Writer(bag) as writer:
+        connection = writer.add_connection("/note", "std_msgs/msg/String", typestore=store)
+        for k in range(500):
+            note = store.types["std_msgs/msg/String"](data=f"{k}" * 200)
+            writer.write(connection, 10**9 + k, store.serialize_ros1(note, "std_msgs/msg/String"))
+    data = bag.read_bytes()
+    for name in ("cut.bag", "take.bag.active"):
+        cut = tmp_path / name
+        cut.write_bytes(data[: len(data) * 2 // 3])
+        with pytest.raises(RecordingError, match="rosbag reindex"):
+            RecordingReader(cut)
