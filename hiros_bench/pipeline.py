@@ -2,7 +2,9 @@
 
 Offline: a simulated recording of 3 cameras x 30 Hz x 4 people through ``hiros run``'s runner
 (reading, bridging, all four stages, writing), as recording seconds per wall-clock second, in
-one process and in two (reading and tracking in a child, the default where two cores exist).
+one process and in two (reading and tracking in a child, the default where two cores exist),
+writing every output (the default, what the target is for), and in two writing only the
+final stream and its markers (``--write filter,markers``, for long recordings).
 Latency: camera message published -> filter output received, over real DDS, for the composed
 ``pipeline`` node and for the four stages as separate nodes (see ``hiros_bench.latency``); the
 processes run in a loopback-only network namespace.
@@ -21,14 +23,21 @@ from hiros_core.isolation import isolated, isolated_env
 TARGET_REAL_TIME = 100.0
 
 
-def offline_throughput(
-    duration: float, processes: tuple[int, ...] = (1, 2)
-) -> dict[int, tuple[float, float, float, dict[str, float]]]:
-    """``run_recording`` on 3 cameras x 30 Hz x 4 people, simulated, per process count.
+FINAL_ONLY = ("filter", "markers")
+"""``hiros run --write filter,markers``: the final stream and its drawing only."""
+RUNS = ((1, None), (2, None), (2, FINAL_ONLY))
+"""(processes, what is written; None: everything, the default) of each throughput run."""
 
-    Returns, for each entry of ``processes``: recording seconds, wall seconds, the real-time
-    factor and the wall seconds by part (``RunSummary.seconds``) followed by the CPU
-    seconds of ``RunSummary.cpu`` as ``cpu main``, ``cpu writer`` and ``cpu child``.
+
+def offline_throughput(
+    duration: float, runs: tuple[tuple[int, tuple[str, ...] | None], ...] = RUNS
+) -> list[tuple[float, float, float, dict[str, float]]]:
+    """``run_recording`` on 3 cameras x 30 Hz x 4 people, simulated, per entry of ``runs``.
+
+    Returns, for each entry of ``runs`` (process count, outputs written): recording seconds,
+    wall seconds, the real-time factor and the wall seconds by part (``RunSummary.seconds``)
+    followed by the CPU seconds of ``RunSummary.cpu`` as ``cpu main``, ``cpu writer`` and
+    ``cpu child``.
     """
     from hiros_cli.commands.run import OFFLINE_MERGE_RATE, load_pipeline_params
     from hiros_pipeline import run_recording
@@ -36,23 +45,23 @@ def offline_throughput(
 
     params = load_pipeline_params(None)  # what `hiros run` uses: config/ and its defaults
     params.merger.output_rate = OFFLINE_MERGE_RATE
-    results = {}
+    results = []
     with tempfile.TemporaryDirectory() as folder:
         sim = Path(folder) / "sim"
         write_recording(
             simulate(SimParams(n_cameras=3, n_people=4, duration=duration, seed=11)), sim
         )
         calibration = load_calibration(sim / "calibration.yaml")
-        for count in processes:
-            out = Path(folder) / f"out{count}.mcap"
+        for k, (count, write) in enumerate(runs):
             summary = run_recording(
-                sim / "recording.mcap", calibration, out, params, processes=count
-            )
+                sim / "recording.mcap", calibration, Path(folder) / f"out{k}.mcap", params,
+                processes=count, **({} if write is None else {"write": write}),
+            )  # fmt: skip
             cpu = {f"cpu {part}": seconds for part, seconds in summary.cpu.items()}
-            results[count] = (
+            results.append((
                 summary.duration, summary.wall_time, summary.real_time_factor,
                 {**summary.seconds, **cpu},
-            )  # fmt: skip
+            ))  # fmt: skip
     return results
 
 
@@ -81,11 +90,13 @@ def run(console, quick: bool = False) -> list[str]:  # noqa: ANN001 - rich Conso
     """Print the offline throughput and both latencies."""
     duration = 20.0 if quick else 60.0
     lines = []
-    for count, (recorded, wall, factor, parts) in offline_throughput(duration).items():
+    measured = offline_throughput(duration)
+    for (count, write), (recorded, wall, factor, parts) in zip(RUNS, measured, strict=True):
         cpu = {part: parts.pop(part) for part in list(parts) if part.startswith("cpu")}
         busiest = max(cpu.values())
+        what = "its default parameters" if write is None else f"--write {','.join(write)}"
         lines += [
-            "offline hiros run (its default parameters), "
+            f"offline hiros run ({what}), "
             f"3 cameras x 30 Hz x 4 people, {count} process"
             f"{'es' if count > 1 else ''}: {recorded:.1f} s of recording in {wall:.2f} s = "
             f"{factor:.1f}x real time (target {TARGET_REAL_TIME:.0f}x)",

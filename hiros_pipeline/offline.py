@@ -13,7 +13,7 @@ import os
 import resource
 import time
 from collections import Counter
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterable, Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 from multiprocessing.connection import Connection
@@ -24,16 +24,19 @@ import yaml
 from hiros_azure_bridge.driver_format import warm_up
 from hiros_core.accounting import Drops
 from hiros_core.calibration import Calibration
-from hiros_core.errors import RecordingError
+from hiros_core.errors import ConfigError, RecordingError
 from hiros_core.model import SkeletonGroup
 from hiros_core.recording import MARKER_ARRAY, RecordingWriter, iter_groups
 from hiros_pipeline.pipeline import STAGES, Pipeline, PipelineParams, StageOutputs
 from hiros_tracker import Tracker
 from hiros_visualizer.markers import encode_skeleton_markers
 
-__all__ = ["RunSummary", "default_processes", "message_count", "run_recording"]
+__all__ = ["OUTPUTS", "RunSummary", "default_processes", "message_count", "run_recording"]
 
 DRAWN_STAGES = ("merger", "filter")
+OUTPUTS = (*STAGES, "markers")
+"""What ``run_recording`` can write: each stage's output, and the markers of the drawn stages
+written (``/hiros/<stage>/markers``). All of them by default."""
 
 
 @dataclass
@@ -52,7 +55,7 @@ class RunSummary:
         dropped_detections: reason -> detections (or parts of one, e.g. a bridge's
             ``nan_position``) left out of processed frames, reader and stages together.
         problems: the reader's sentences on what it met (a truncated file, a damaged chunk).
-        published: stage -> output groups written.
+        published: stage -> output groups it gave (not empty); in ``out`` if written.
         people: stage -> distinct skeleton ids seen.
         duration: seconds of recording (reference clock) covered by the tracker output.
         wall_time: seconds the run took.
@@ -65,6 +68,8 @@ class RunSummary:
     dropped_detections: Counter[str] = field(default_factory=Counter)
     problems: list[str] = field(default_factory=list)
     published: Counter[str] = field(default_factory=Counter)
+    written: frozenset[str] = frozenset(OUTPUTS)
+    """What ``out`` holds beside the calibration (``run_recording``'s ``write``)."""
     people: dict[str, set[int]] = field(default_factory=lambda: {s: set() for s in STAGES})
     first_ns: int | None = None
     last_ns: int | None = None
@@ -147,8 +152,12 @@ def run_recording(
     *,
     keep_outputs: bool = False,
     processes: int | None = None,
+    write: Iterable[str] = OUTPUTS,
 ) -> RunSummary:
     """Run the pipeline over ``recording``; write ``out`` (MCAP); return the summary.
+
+    ``write`` picks what goes into ``out`` beside the calibration (``OUTPUTS``; e.g. only
+    ``filter``: a fifth of the bytes); the summary counts every stage whatever is written.
 
     ``keep_outputs`` also keeps every stage's groups in ``summary.outputs`` (what the demo
     evaluates, without reading the MCAP back). ``processes`` 2 reads and tracks in a child
@@ -156,7 +165,9 @@ def run_recording(
     per frame, so the pipeline splits across cores like an assembly line); 1 runs all here.
     Both give the same bytes. Default: :func:`default_processes`.
     """
-    summary = RunSummary(outputs={stage: [] for stage in STAGES} if keep_outputs else None)
+    summary = RunSummary(
+        outputs={stage: [] for stage in STAGES} if keep_outputs else None, written=_chosen(write)
+    )
     pipeline = Pipeline(params, calibration)
     warm_up()  # like the stages' kernels, loaded before the clock starts (~20 ms)
     started = time.perf_counter()
@@ -314,11 +325,20 @@ def _track_and_send(recording: str | Path, tracker: Tracker, sender: Connection)
         sender.close()
 
 
+def _chosen(write: Iterable[str]) -> frozenset[str]:
+    """The outputs to write, checked against ``OUTPUTS``."""
+    chosen = frozenset(write)
+    unknown = sorted(chosen - set(OUTPUTS))
+    if unknown:
+        msg = f"cannot write {', '.join(unknown)}: choose among {', '.join(OUTPUTS)}"
+        raise ConfigError(msg)
+    return chosen
+
+
 def _write(writer: RecordingWriter, outputs: StageOutputs, summary: RunSummary) -> None:
     for stage, group in zip(STAGES, outputs, strict=True):
         if not group.skeletons:
             continue
-        writer.write_group(f"/hiros/{stage}", group)
         summary.published[stage] += 1
         if summary.outputs is not None:
             summary.outputs[stage].append(group)
@@ -326,7 +346,10 @@ def _write(writer: RecordingWriter, outputs: StageOutputs, summary: RunSummary) 
         if stage == "tracker":
             summary.first_ns = group.stamp_ns if summary.first_ns is None else summary.first_ns
             summary.last_ns = group.stamp_ns
-        if stage in DRAWN_STAGES:
+        if stage not in summary.written:
+            continue
+        writer.write_group(f"/hiros/{stage}", group)
+        if stage in DRAWN_STAGES and "markers" in summary.written:
             writer.write(
                 f"/hiros/{stage}/markers",
                 MARKER_ARRAY,

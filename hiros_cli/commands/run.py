@@ -47,12 +47,33 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="merger output rate in Hz offline (default 30; 0: on every camera frame, as live)",
     )
     parser.add_argument(
+        "--write",
+        type=_outputs,
+        default=None,
+        metavar="WHAT",
+        help="what goes into --out beside the calibration, comma-separated among tracker, "
+        "merger, optimizer, filter, markers (default: all; e.g. filter,markers for the final "
+        "stream and its drawing: about a quarter of the bytes)",
+    )
+    parser.add_argument(
         "--processes",
         type=int,
         choices=(1, 2),
         help="2: read and track in a second process beside the other stages (default where "
         "a second core exists); 1: everything in this process. Same output either way",
     )
+
+
+def _outputs(text: str) -> tuple[str, ...]:
+    """``--write``: names among ``OUTPUTS``, comma-separated."""
+    from hiros_pipeline.offline import OUTPUTS
+
+    names = tuple(name.strip() for name in text.split(",") if name.strip())
+    unknown = [name for name in names if name not in OUTPUTS]
+    if not names or unknown:
+        msg = f"{text!r}: give one or more of {', '.join(OUTPUTS)}, comma-separated"
+        raise argparse.ArgumentTypeError(msg)
+    return names
 
 
 def _rate(text: str) -> float:
@@ -156,8 +177,9 @@ def run(args: argparse.Namespace) -> int:
         remove_previous_output(args.out)
     with progress_bar(f"hiros run {args.recording.name}", message_count(args.recording)) as advance:
         summary = run_recording(
-            args.recording, calibration, args.out, params, advance, processes=args.processes
-        )
+            args.recording, calibration, args.out, params, advance, processes=args.processes,
+            **({} if args.write is None else {"write": args.write}),
+        )  # fmt: skip
     print_summary(console, summary, args.out)
     return 0
 
@@ -180,7 +202,8 @@ def print_summary(console: Console, summary, out: Path) -> None:  # noqa: ANN001
     if not summary.dropped:
         table.add_row("  dropped", "0")
     for stage, groups in summary.published.items():
-        table.add_row(f"published /hiros/{stage}", f"{groups} ({len(summary.people[stage])} ids)")
+        what = f"published /hiros/{stage}" if stage in summary.written else f"{stage} (not written)"
+        table.add_row(what, f"{groups} ({len(summary.people[stage])} ids)")
     for reason, count in sorted(summary.dropped_detections.items()):
         table.add_row(f"detections dropped: {reason}", str(count))
     console.print(table)

@@ -8,7 +8,7 @@ import pytest
 from mcap.reader import make_reader
 
 from hiros_cli.main import main
-from hiros_core.recording import RecordingWriter
+from hiros_core.recording import RecordingReader, RecordingWriter
 from hiros_sim import SimParams, simulate, write_recording
 
 
@@ -75,3 +75,17 @@ def test_a_merge_rate_without_a_period_is_a_usage_error(
         _run(sim, sim / "recording.mcap", tmp_path / "out.mcap", "--merge-rate", rate)
     assert exit_.value.code == 2
     assert "is not a rate in Hz" in capsys.readouterr().err
+
+
+def test_write_picks_the_outputs_and_refuses_unknown_ones(
+    sim: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    out = tmp_path / "filter.mcap"
+    assert _run(sim, sim / "recording.mcap", out, "--processes", "1", "--write", "filter") == 0
+    assert "merger (not written)" in capsys.readouterr().out
+    with RecordingReader(out) as reader:
+        assert set(reader.topics) == {"/hiros/calibration", "/hiros/filter"}
+    with pytest.raises(SystemExit) as exit_:
+        _run(sim, sim / "recording.mcap", tmp_path / "x.mcap", "--write", "filter,tracks")
+    assert exit_.value.code == 2
+    assert "give one or more of tracker" in capsys.readouterr().err

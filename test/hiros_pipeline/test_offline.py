@@ -7,7 +7,7 @@ from pathlib import Path
 import pytest
 
 from hiros_core.calibration import Calibration, load_calibration
-from hiros_core.errors import RecordingError
+from hiros_core.errors import ConfigError, RecordingError
 from hiros_core.recording import RecordingReader
 from hiros_pipeline import STAGES, PipelineParams, run_recording
 from hiros_sim import SimParams, simulate, write_recording
@@ -66,6 +66,29 @@ def test_runs_are_deterministic_in_one_process_or_two(
     assert set(runs["two"].cpu) == {"main", "writer", "child"}
     assert 0 < runs["one"].cpu["main"] <= runs["one"].wall_time * 1.05 + 0.01
     assert runs["two"].cpu["child"] > 0
+
+
+def test_only_the_outputs_asked_for_are_written_and_all_are_counted(
+    short_recording: Path, tmp_path: Path
+) -> None:
+    calibration = load_calibration(short_recording / "calibration.yaml")
+    recording = short_recording / "recording.mcap"
+    whole = run_recording(recording, calibration, tmp_path / "all.mcap", processes=1)
+    part = run_recording(
+        recording, calibration, tmp_path / "filter.mcap", processes=1, write=("filter", "markers")
+    )
+    read = {}
+    for name in ("all", "filter"):
+        with RecordingReader(tmp_path / f"{name}.mcap") as reader:
+            read[name] = [(m.topic, m.log_time_ns, m.data) for m in reader.messages()]
+    kept = {"/hiros/calibration", "/hiros/filter", "/hiros/filter/markers"}
+    assert {topic for topic, _, _ in read["filter"]} == kept
+    assert read["filter"] == [m for m in read["all"] if m[0] in kept]
+    assert part.published == whole.published
+    assert part.duration == whole.duration
+    with pytest.raises(ConfigError, match="cannot write skeletons"):
+        run_recording(recording, calibration, tmp_path / "x.mcap", write=("skeletons",))
+    assert not (tmp_path / "x.mcap").exists()
 
 
 def test_an_unreadable_recording_raises_from_the_reading_process(tmp_path: Path) -> None:
