@@ -173,10 +173,11 @@ class Skeleton:
     bounding_box: np.ndarray = field(default_factory=lambda: np.full(BOX_WIDTH, np.nan))
     max_markers: int = -1
     max_links: int = -1
-    _rows: tuple[SkeletonRows, int] | None = field(
+    _rows: tuple[SkeletonRows, int, tuple[object, ...]] | None = field(
         default=None, init=False, repr=False, compare=False
     )
-    """The stack this skeleton's fields are row ``[1]`` of (set by ``SkeletonRows.skeletons``)."""
+    """The stack this skeleton's fields are row ``[1]`` of, and the ``base`` of every view of
+    each of its fields (set by ``SkeletonRows.skeletons``; ``shared_stack`` checks them)."""
 
     def __post_init__(self) -> None:
         if self.max_markers < 0:
@@ -433,12 +434,16 @@ class SkeletonRows(NamedTuple):
         made = []
         # Positional arguments in field order: this runs for every person of every frame.
         for p, skeleton_id in enumerate(skeleton_ids):
-            skeleton = Skeleton(
+            made.append(Skeleton(
                 int(skeleton_id), stamps[p], frames[p], layouts[p], markers[p], links[p],
                 present[p], link_present[p], scores[p], boxes[p], *sizes[p],
-            )  # fmt: skip
-            skeleton._rows = (self, p)
-            made.append(skeleton)
+            ))  # fmt: skip
+        if made:
+            first = made[0]  # numpy makes any view's ``base`` its owner: the same for every row
+            roots = (first.markers.base, first.marker_present.base, first.links.base,
+                     first.link_present.base, first.bounding_box.base)  # fmt: skip
+            for p, skeleton in enumerate(made):
+                skeleton._rows = (self, p, roots)
         return made
 
 
@@ -464,25 +469,27 @@ def stack_rows(skeletons: Sequence[Skeleton]) -> SkeletonRows:
 
 def shared_stack(skeletons: Sequence[Skeleton]) -> SkeletonRows | None:
     """The stack (or a slice of it) the skeletons are consecutive rows of, or None."""
-    if not skeletons or skeletons[0]._rows is None:
+    place = skeletons[0]._rows if skeletons else None
+    if place is None:
         return None
-    rows, first = skeletons[0]._rows
-    roots = [field[:0].base for field in rows]  # what numpy makes any view's base
-    for offset, skeleton in enumerate(skeletons):
-        if skeleton._rows is None:
-            return None
-        stack, p = skeleton._rows
+    rows, first, roots = place
+    markers_root, present_root, links_root, link_present_root, boxes_root = roots
+    p = first
+    for skeleton in skeletons:
+        place = skeleton._rows
         if (
-            stack is not rows
-            or p != first + offset
+            place is None
+            or place[0] is not rows
+            or place[1] != p
             # a field replaced since (views of one owner share its ``base``)
-            or skeleton.markers.base is not roots[0]
-            or skeleton.marker_present.base is not roots[1]
-            or skeleton.links.base is not roots[2]
-            or skeleton.link_present.base is not roots[3]
-            or skeleton.bounding_box.base is not roots[4]
+            or skeleton.markers.base is not markers_root
+            or skeleton.marker_present.base is not present_root
+            or skeleton.links.base is not links_root
+            or skeleton.link_present.base is not link_present_root
+            or skeleton.bounding_box.base is not boxes_root
         ):
             return None
+        p += 1
     if first == 0 and len(skeletons) == len(rows.markers):
         return rows
     return SkeletonRows(*(field[first : first + len(skeletons)] for field in rows))

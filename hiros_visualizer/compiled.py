@@ -12,7 +12,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-__all__ = ["draw"]
+__all__ = ["draw", "visible_joints"]
 
 _LABEL_LIFT = 0.25  # metres above the highest visible joint, as markers._label_tops
 
@@ -59,3 +59,23 @@ def draw(  # noqa: PLR0917 - a compiled kernel takes plain positional values
         words[stamps[i]] = sec
         words[stamps[i] + 1] = nanosec
     return out
+
+
+@njit(cache=True)
+def visible_joints(rows: np.ndarray, column: int, present: np.ndarray) -> np.ndarray:
+    """``(P, J)`` present joints with three finite coordinates in ``rows[..., column:column+3]``.
+
+    ``present & np.isfinite(positions).all(axis=2)`` in one call instead of four numpy calls
+    (~7 us for four people, on every drawn frame).
+    """
+    n_people, n_joints = present.shape
+    visible = np.zeros((n_people, n_joints), dtype=np.bool_)
+    for p in range(n_people):
+        for j in range(n_joints):
+            visible[p, j] = (
+                present[p, j]
+                and np.isfinite(rows[p, j, column])
+                and np.isfinite(rows[p, j, column + 1])
+                and np.isfinite(rows[p, j, column + 2])
+            )
+    return visible

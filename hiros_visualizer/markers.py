@@ -184,7 +184,13 @@ def encode_skeleton_markers(
         rows, column = np.array([s.positions for s in skeletons], dtype=float), 0
         present = np.array([s.marker_present for s in skeletons])
     positions = rows[..., column : column + 3]  # (P, J, 3)
-    visible = present & np.isfinite(positions).all(axis=2)
+    compiled = "numba" in sys.modules
+    if compiled:
+        from hiros_visualizer.compiled import draw, visible_joints
+
+        visible = visible_joints(rows, column, present)
+    else:
+        visible = present & np.isfinite(positions).all(axis=2)
     ids = tuple(s.id for s in skeletons)
     drawing = tuple(getattr(params, name) for name in _DRAWING_FIELDS)
     key = (group.frame_id, namespace, drawing, layout, ids, visible.tobytes())
@@ -194,9 +200,7 @@ def encode_skeleton_markers(
             _DRAW_PLANS.clear()
         data = skeleton_markers(group, namespace, params)
         plan = _DRAW_PLANS[key] = _draw_plan(data, encode_marker_array(data), visible, layout)
-    if "numba" in sys.modules:
-        from hiros_visualizer.compiled import draw
-
+    if compiled:
         out = draw(plan.template, rows, column, visible, plan.points, plan.sources, plan.tops,
                    plan.stamps, sec, nanosec)  # fmt: skip
     else:

@@ -107,3 +107,17 @@ def test_ids_near_the_int32_limits_are_drawn():
     assert all(-(2**31) <= i < 2**31 for i in ids)
     assert len(set(ids)) == 6
     assert encode_skeleton_markers(group) == encode_marker_array(skeleton_markers(group))
+
+
+def test_compiled_visible_joints_equal_numpy():
+    from hiros_visualizer.compiled import visible_joints
+
+    rng = np.random.default_rng(3)
+    rows = rng.normal(size=(3, 6, 20))
+    rows[0, 1, 1], rows[1, 2, 2], rows[2, 3, 3], rows[2, 4, 2] = np.nan, np.inf, -np.inf, np.nan
+    rows[0, 5, 0] = np.nan  # another column: not a coordinate
+    present = rng.random((3, 6)) > 0.2
+    for column in (1, 0):
+        positions = rows[..., column : column + 3]
+        expected = present & np.isfinite(positions).all(axis=2)
+        assert np.array_equal(visible_joints(rows, column, present), expected)
