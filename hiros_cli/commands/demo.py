@@ -138,9 +138,9 @@ def _print_summary(  # noqa: PLR0917 - the four results of the demo and where th
         )
     for stage, figures in evaluation.stages.items():
         table.add_row(
-            f"{stage}: MPJPE / angle RMSE / ID switches",
+            f"{stage}: MPJPE / angle RMSE / ID switches / lag",
             f"{figures.mpjpe * 100:.1f} cm / {figures.angle_rmse.get('mean', float('nan')):.1f}° / "
-            f"{figures.identity.id_switches}",
+            f"{figures.identity.id_switches} / {figures.lag * 1000:.0f} ms",
         )
     _add_chain_rows(table, evaluation)
     frames = summary.frames_total

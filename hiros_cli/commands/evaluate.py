@@ -1,7 +1,9 @@
 """Accuracy of a `hiros run` output against the simulator's truth.
 
 Per stage: MPJPE (overall and per joint), limb-length variation, joint-angle RMSE (knee, hip,
-elbow, shoulder), identity figures (IDF1, switches, fragments); per camera alone: MPJPE; and the
+elbow, shoulder), identity figures (IDF1, switches, fragments), lag (how far the output trails
+the truth: the delay of the truth that fits it best; negative when it runs ahead); per camera
+alone: MPJPE; and the
 calibration used against the true one (time, rotation, translation). The output is moved into
 the truth's world with the reference camera's true pose and clock, so calibration error counts.
 `--report DIR` writes report.html with figures.

@@ -13,7 +13,7 @@ from hiros_core.geometry import RigidTransform
 from hiros_core.model import Skeleton, SkeletonGroup
 from hiros_eval.export import person_series, write_angles_csv, write_positions_csv, write_trc
 from hiros_eval.report import write_report
-from hiros_eval.run import align_to_truth, evaluate_run, read_run
+from hiros_eval.run import align_to_truth, evaluate_run, read_run, series_lag
 from hiros_pipeline import run_recording
 from hiros_sim import SimParams, simulate, write_recording
 
@@ -126,3 +126,30 @@ def test_read_run_hands_on_what_it_could_not_read(run, tmp_path: Path) -> None:
     whole, _ = read_run(path)
     assert 0 < len(outputs["filter"]) < len(whole["filter"])
     assert "is damaged" in problems[0]
+
+
+class _SwayingTruth:
+    """Two people whose 32 joints sway sideways (1 Hz and 0.7 Hz) and drift forward."""
+
+    times = np.arange(0.0, 10.0, 1 / 30)
+    positions = np.zeros((2, 1, 32, 3))
+
+    def at(self, times: np.ndarray) -> np.ndarray:
+        out = np.zeros((2, len(times), 32, 3))
+        for p, frequency in enumerate((1.0, 0.7)):
+            out[p, :, :, 0] = 0.3 * np.sin(2 * np.pi * frequency * times)[:, None]
+            out[p, :, :, 1] = 0.5 * times[:, None] + np.arange(32) * 0.01
+        return out
+
+
+@pytest.mark.parametrize("delay", [0.06, 0.0, -0.03])
+def test_series_lag_finds_how_late_a_stage_is(delay: float) -> None:
+    truth = _SwayingTruth()
+    rng = np.random.default_rng(4)
+    series = {}
+    for person in (0, 1):
+        times = np.sort(rng.uniform(1.0, 9.0, 400))
+        late = truth.at(times - delay)[person] + rng.normal(0, 0.02, (len(times), 32, 3))
+        series[person] = (times, late, truth.at(times)[person])
+    assert series_lag(series, truth) == pytest.approx(delay, abs=0.003)
+    assert np.isnan(series_lag({}, truth))
