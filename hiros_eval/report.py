@@ -140,35 +140,128 @@ def _table(headers: list[str], rows: list[list[str]]) -> str:
     return f"<table><tr>{head}</tr>{body}</table>"
 
 
+FIGURES = (
+    ("error_per_stage", _error_per_stage,
+     "Mean joint error (MPJPE) of each camera alone (grey: its own skeletons put in the world "
+     "with the true calibration, no tracking) and of each stage of the chain (blue). Lower is "
+     "better; the merger is where the cameras' views are combined."),
+    ("error_per_joint", _error_per_joint,
+     "The same error joint by joint, per stage: small, fast or often hidden joints (hand "
+     "tips, thumbs) usually err most."),
+    ("angle_error", _angle_per_stage,
+     "Error of the joint angles biomechanics reads (knee, hip, elbow, shoulder), per stage."),
+    ("joint_angles", _angle_curves,
+     "Four joint angles of the first person over time: the merger's and the filter's against "
+     "the truth (dashed)."),
+    ("error_timeline", _error_timeline,
+     "Each person's joint error over time, per stage: where and when the chain helps (the "
+     "tracker's line jumps where a camera flips or loses the person)."),
+)  # fmt: skip
+"""Each figure's file name, drawing function and caption, in page order."""
+
+GLOSSARY = (
+    ("MPJPE", "mean per-joint position error: the mean distance from each joint to the "
+     "truth, over every joint of every matched person and frame"),
+    ("limb CV", "how much each limb's length varies over time (coefficient of variation, "
+     "median over limbs): a real limb does not change length"),
+    ("angle RMSE", "root-mean-square error of the knee, hip, elbow and shoulder angles"),
+    ("IDF1", "share of frames where each person keeps one identity (1 = perfect)"),
+    ("ID switches", "times a true person changes output id"),
+    ("fragments", "times a person's output track breaks; the tracker keeps one track per "
+     "camera, so its count is high by design and only the merged stages' matter"),
+    ("lag", "how far the output trails the truth (the delay of the truth that fits it "
+     "best); negative: it runs slightly ahead"),
+)  # fmt: skip
+"""Terms of the stage table, explained under it."""
+
+
+def _headline(evaluation: RunEvaluation) -> str:
+    """One paragraph with the figures a reader looks for first."""
+    stages = evaluation.stages
+    final = stages.get("filter") or (list(stages.values())[-1] if stages else None)
+    if final is None:
+        return "<p>No output stage could be matched to the truth.</p>"
+    parts = [
+        f"The final stage ({final.stage}) puts joints {final.mpjpe * 100:.1f} cm from the truth "
+        f"on average, with joint angles {final.angle_rmse.get('mean', float('nan')):.1f}° off "
+        f"(RMSE) and {final.identity.id_switches} identity switches."
+    ]
+    if evaluation.cameras:
+        camera = min(evaluation.cameras, key=evaluation.cameras.get)
+        best = evaluation.cameras[camera]
+        parts.append(
+            f"The best single camera ({camera}) alone errs {best * 100:.1f} cm: the chain "
+            f"gives {final.mpjpe / best:.2f} of that."
+        )
+    tracker = stages.get("tracker")
+    if tracker is not None and final is not tracker:
+        before = tracker.angle_rmse.get("mean", float("nan"))
+        after = final.angle_rmse.get("mean", float("nan"))
+        parts.append(f"Joint-angle error changes by {100 * (after / before - 1):+.0f} % from the "
+                     "tracker (each camera's skeletons) to the final output.")  # fmt: skip
+    if evaluation.calibration:
+        worst = [
+            max(getattr(a, name) for a in evaluation.calibration.values())
+            for name in ("time_error_ms", "rotation_error_deg", "translation_error_cm")
+        ]
+        parts.append(
+            f"The calibration used is within {worst[0]:.1f} ms, {worst[1]:.2f}° and "
+            f"{worst[2]:.1f} cm of the truth for every camera."
+        )
+    return f"<p class=lead>{html.escape(' '.join(parts))}</p>"
+
+
+def _glossary() -> str:
+    items = "".join(
+        f"<dt>{html.escape(term)}</dt><dd>{html.escape(text)}</dd>" for term, text in GLOSSARY
+    )
+    return f"<dl>{items}</dl>"
+
+
 def write_report(
-    evaluation: RunEvaluation, directory: str | Path, title: str = "hiros evaluation"
+    evaluation: RunEvaluation,
+    directory: str | Path,
+    title: str = "hiros evaluation",
+    facts: list[tuple[str, str]] | None = None,
 ) -> Path:
-    """``directory/report.html`` with its PNG figures beside it."""
+    """``directory/report.html`` with its PNG figures beside it.
+
+    ``facts``: (what, value) rows about the run itself (frames, speed), shown first.
+    """
     directory = Path(directory)
     directory.mkdir(parents=True, exist_ok=True)
-    images = [
-        _figure(directory / "error_per_stage.png", lambda plt: _error_per_stage(plt, evaluation)),
-        _figure(directory / "error_per_joint.png", lambda plt: _error_per_joint(plt, evaluation)),
-        _figure(directory / "angle_error.png", lambda plt: _angle_per_stage(plt, evaluation)),
-        _figure(directory / "joint_angles.png", lambda plt: _angle_curves(plt, evaluation)),
-        _figure(directory / "error_timeline.png", lambda plt: _error_timeline(plt, evaluation)),
-    ]
+    figures = "".join(
+        f"<figure>{_figure(directory / f'{name}.png', lambda plt, d=draw: d(plt, evaluation))}"
+        f"<figcaption>{html.escape(caption)}</figcaption></figure>"
+        for name, draw, caption in FIGURES
+    )
+    tables = list(evaluation.tables().items())
     sections = "".join(
-        f"<h2>{html.escape(title)}</h2>{_table(headers, rows)}"
-        for title, (headers, rows) in evaluation.tables().items()
+        f"<h2>{html.escape(heading)}</h2>{_table(headers, rows)}" + (_glossary() if k == 0 else "")
+        for k, (heading, (headers, rows)) in enumerate(tables)
+    )
+    run = (
+        "<h2>the run</h2>" + _table(["what", "value"], [list(row) for row in facts])
+        if facts
+        else ""
     )
     style = (
         "body{font-family:sans-serif;max-width:1100px;margin:2em auto;color:#222}"
         "table{border-collapse:collapse;margin:1em 0}"
         "td,th{border:1px solid #ccc;padding:4px 10px;text-align:right}"
-        "th{background:#f0f3f8}img{max-width:100%;margin:1em 0}"
+        "th{background:#f0f3f8}img{max-width:100%;margin:0.5em 0 0}"
+        ".lead{font-size:1.1em;line-height:1.5}figure{margin:1.5em 0}"
+        "figcaption{color:#555;font-size:0.9em}dl{font-size:0.9em;color:#444}"
+        "dt{font-weight:bold;float:left;clear:left;width:8em}dd{margin-left:9em}"
     )
     page = f"""<!doctype html><html><head><meta charset="utf-8"><title>{html.escape(title)}</title>
 <style>{style}</style></head><body>
 <h1>{html.escape(title)}</h1>
+{_headline(evaluation)}
+{run}
 {sections}
 <h2>Figures</h2>
-{"".join(images)}
+{figures}
 </body></html>"""
     path = directory / "report.html"
     path.write_text(page)

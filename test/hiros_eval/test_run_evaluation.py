@@ -85,9 +85,14 @@ def test_alignment_moves_estimates_into_the_truth_world() -> None:
 def test_report_and_exports_are_written(run, tmp_path: Path) -> None:
     _, result, summary = run
     evaluation = evaluate_run(summary.outputs, result.calibration, result.calibration, result.truth)
-    report = write_report(evaluation, tmp_path / "report")
+    report = write_report(evaluation, tmp_path / "report", facts=[("frames in", "123")])
     page = report.read_text()
     assert "pipeline stages against the truth" in page
+    filter_mpjpe = f"{evaluation.stages['filter'].mpjpe * 100:.1f} cm from the truth"
+    assert filter_mpjpe in page  # the headline says it in words
+    assert page.count("<figcaption>") == 5
+    assert "<dt>lag</dt>" in page
+    assert "<td>frames in</td><td>123</td>" in page
     assert all(
         (tmp_path / "report" / name).stat().st_size > 1000
         for name in (
