@@ -7,6 +7,7 @@ empty one; what the stages leave out of processed frames is counted apart.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -18,15 +19,14 @@ from hiros_core.calibration import load_calibration
 from hiros_core.codec import MarkerArrayData
 from hiros_core.recording import iter_groups
 from hiros_pipeline import Pipeline
-from hiros_sim import SimParams, simulate, write_recording
 
 
 @pytest.fixture(scope="module")
-def scene(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    folder = tmp_path_factory.mktemp("accounting")
-    params = SimParams(n_cameras=2, n_people=2, duration=4.0, seed=8, enter_leave=False)
-    write_recording(simulate(params), folder)
-    return folder
+def scene(simulated_scene: Callable[..., Path]) -> Path:
+    return simulated_scene(
+        "accounting", n_cameras=2, n_people=2, duration=4.0, seed=8,
+        enter_leave=False,
+    )  # fmt: skip
 
 
 def _bad_stream(groups: list) -> list:

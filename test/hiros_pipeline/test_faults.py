@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -11,15 +12,14 @@ from hiros_core.calibration import load_calibration
 from hiros_core.recording import RecordingReader, iter_groups
 from hiros_eval.tracking import identity_metrics
 from hiros_pipeline import Pipeline, run_recording
-from hiros_sim import SimParams, simulate, write_recording
 
 
 @pytest.fixture(scope="module")
-def scene(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    folder = tmp_path_factory.mktemp("faults")
-    params = SimParams(n_cameras=3, n_people=2, duration=16.0, seed=5, enter_leave=False)
-    write_recording(simulate(params), folder)
-    return folder
+def scene(simulated_scene: Callable[..., Path]) -> Path:
+    return simulated_scene(
+        "faults", n_cameras=3, n_people=2, duration=16.0, seed=5,
+        enter_leave=False,
+    )  # fmt: skip
 
 
 def test_a_camera_silent_for_five_seconds_keeps_ids_and_calibration(scene: Path) -> None:

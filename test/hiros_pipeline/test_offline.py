@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from pathlib import Path
 
 import pytest
@@ -10,15 +11,11 @@ from hiros_core.calibration import Calibration, load_calibration
 from hiros_core.errors import ConfigError, RecordingError
 from hiros_core.recording import RecordingReader
 from hiros_pipeline import STAGES, PipelineParams, run_recording
-from hiros_sim import SimParams, simulate, write_recording
 
 
 @pytest.fixture(scope="module")
-def short_recording(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    folder = tmp_path_factory.mktemp("sim")
-    result = simulate(SimParams(n_cameras=2, n_people=2, duration=8.0, seed=3))
-    write_recording(result, folder)
-    return folder
+def short_recording(simulated_scene: Callable[..., Path]) -> Path:
+    return simulated_scene("sim", n_cameras=2, n_people=2, duration=8.0, seed=3)
 
 
 def test_every_stage_writes_and_every_frame_is_accounted_for(
