@@ -144,7 +144,7 @@ def _print_summary(  # noqa: PLR0917 - the four results of the demo and where th
         )
     for stage, figures in evaluation.stages.items():
         table.add_row(
-            f"{stage}: MPJPE / angles / ID switches / lag",
+            f"{stage}: MPJPE / angles / switches / lag",
             f"{figures.mpjpe * 100:.1f} cm / {figures.angle_rmse.get('mean', float('nan')):.1f}° / "
             f"{figures.identity.id_switches} / {figures.lag * 1000:.0f} ms",
         )
