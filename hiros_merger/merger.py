@@ -58,7 +58,10 @@ from hiros_core.model import (
 from hiros_merger import kernels
 from hiros_merger.latest import LatestDetections
 
-__all__ = ["Merger", "MergerParams"]
+__all__ = ["OTHER_FRAME", "Merger", "MergerParams"]
+
+OTHER_FRAME = "not in the world frame"
+"""Drop reason of the detections of an input group in another frame than the world's."""
 
 
 @dataclass
@@ -284,13 +287,18 @@ class Merger(Accounted):
         self._last_out_ns: int | None = None
         self._newest_in_ns: int | None = None
         self._world_frame = "world"
+        self._world_frame_set = False  # by the calibration, or else the first framed input
         self._constants: dict[str, tuple] = {}  # layout name -> ``_kernel_constants``
         if calibration is not None:
             self.set_calibration(calibration)
 
     # ----------------------------------------------------------------------------- calibration
     def set_calibration(self, calibration: Calibration) -> None:
-        """Camera positions for the depth, view and occlusion weights (optional)."""
+        """Camera positions (depth, view and occlusion weights) and the input's world frame.
+
+        Optional: without a calibration, the first input's frame is the world.
+        """
+        self._world_frame, self._world_frame_set = calibration.world_frame, True
         self._camera_positions[:] = np.nan
         self._frame_names = {}
         self._frame_cameras = {}
@@ -325,8 +333,10 @@ class Merger(Accounted):
     # ----------------------------------------------------------------------------------- flow
     def update(self, group: SkeletonGroup) -> SkeletonGroup:
         """Take one tracker output; return the fused people (empty when no output is due)."""
-        if group.frame_id:
-            self._world_frame = group.frame_id
+        if not self._in_world_frame(group):
+            self.drops.detections(OTHER_FRAME, len(group.skeletons))
+            self.processed += 1
+            return SkeletonGroup(group.stamp_ns, self._world_frame, [])
         if group.skeletons and self._went_back(group.stamp_ns):
             self.drops.detections("stamps went back (restarted)")  # the held ones forgotten
             self._latest = LatestDetections()
@@ -340,6 +350,18 @@ class Merger(Accounted):
         merged = SkeletonGroup(out_ns, self._world_frame, self.merge(out_ns))
         self.processed += 1  # (once it went through: a frame whose merge raised is not)
         return merged
+
+    def _in_world_frame(self, group: SkeletonGroup) -> bool:
+        """Whether ``group`` is in the world frame (a frame-less group is taken as it is).
+
+        The tracker's output is; a camera topic wired to the merger by mistake is not, and
+        its detections, in a camera's frame, would be fused with the world's.
+        """
+        if not group.frame_id:
+            return True
+        if not self._world_frame_set:
+            self._world_frame, self._world_frame_set = group.frame_id, True
+        return group.frame_id == self._world_frame
 
     def _went_back(self, stamp_ns: int) -> bool:
         """Whether input stamped ``stamp_ns`` lies ``max_jump`` before the newest so far."""

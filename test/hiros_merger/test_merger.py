@@ -6,6 +6,7 @@ from hiros_core.calibration import Calibration, CameraCalibration
 from hiros_core.layouts import AZURE_KINECT
 from hiros_core.model import Skeleton, SkeletonGroup
 from hiros_merger import Merger, MergerParams
+from hiros_merger.merger import OTHER_FRAME
 
 J = AZURE_KINECT.n_joints
 T0 = 1_000_000_000_000  # ns
@@ -416,3 +417,23 @@ def test_one_group_stamped_far_ahead_does_not_stop_the_output():
     assert all(out.skeletons for out in outputs[6:])
     assert merger.drops["stamps went back (restarted)"] == 1
     assert merger.drops["older than the camera's last detection"] == 0
+
+
+def test_input_in_another_frame_than_the_world_is_left_out():
+    """A camera topic wired to the merger: its camera-frame detections are not fused."""
+    pose = _person()
+    merger = Merger()
+    merger.update(_group([_detection(pose, "k01", t_ns=T0)], T0))  # the world: "world"
+    t = T0 + 40_000_000
+    stray = SkeletonGroup(t, "k02_depth_camera_link", [_detection(pose + 5.0, "k02", t_ns=t)])
+    out = merger.update(stray)
+    assert out.skeletons == []
+    assert out.frame_id == "world"
+    assert merger.drops[OTHER_FRAME] == 1
+    calibrated = Merger(calibration=Calibration("k01", world_frame="map"))
+    out = calibrated.update(_group([_detection(pose, "k01", t_ns=T0)], T0))  # in "world"
+    assert out.skeletons == []
+    assert calibrated.drops[OTHER_FRAME] == 1
+    out = calibrated.update(SkeletonGroup(t, "map", [_detection(pose, "k01", t_ns=t)]))
+    assert out.frame_id == "map"
+    assert out.skeletons
