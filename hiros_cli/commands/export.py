@@ -13,6 +13,7 @@ from pathlib import Path
 from rich.console import Console
 
 from hiros_cli.progress import print_warnings
+from hiros_core.errors import RecordingError
 
 HELP = "per-person joint positions (CSV, OpenSim .trc) and joint angles (CSV)"
 
@@ -38,6 +39,14 @@ def run(args: argparse.Namespace) -> int:
     problems: list[str] = []
     outputs, _ = read_run(args.output, problems)
     print_warnings(console, problems)
+    if not outputs[args.stage]:
+        held = [stage for stage, groups in outputs.items() if groups]
+        msg = (
+            f"{args.output} holds no /hiros/{args.stage} output"
+            + (f"; it holds {', '.join(held)}: choose one with --stage" if held else "")
+            + " (`hiros run --write` picks what a run writes)"
+        )
+        raise RecordingError(msg)
     people = person_series(outputs[args.stage])
     args.out.mkdir(parents=True, exist_ok=True)
     written = 0

@@ -85,6 +85,8 @@ def test_write_picks_the_outputs_and_refuses_unknown_ones(
     assert "merger (not written)" in capsys.readouterr().out
     with RecordingReader(out) as reader:
         assert set(reader.topics) == {"/hiros/calibration", "/hiros/filter"}
+    assert main(["export", str(out), "--out", str(tmp_path / "x"), "--stage", "merger"]) == 1
+    assert "holds no /hiros/merger output; it holds filter" in capsys.readouterr().err
     with pytest.raises(SystemExit) as exit_:
         _run(sim, sim / "recording.mcap", tmp_path / "x.mcap", "--write", "filter,tracks")
     assert exit_.value.code == 2
