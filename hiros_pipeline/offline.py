@@ -250,8 +250,13 @@ def _tracked_frames(
     )
 
 
-_BATCH = 32
-"""Camera frames per message from the reading process (fewer, larger pipe writes)."""
+_BATCH = 8
+"""Camera frames per message from the reading process (~330 kB for 4 people)."""
+_PIPE_BYTES = 1 << 20
+"""Pipe buffer asked for (Linux's largest by default): a few batches fit in it, so the
+child can track ahead while this process is busy instead of waiting in lockstep. With the
+64 kB default not one batch fitted, and each side waited for the other's slow batches (0.2-0.3
+s each per 20 s of 4 people; 8 frames in 1 MB: 14 % faster, 11 alternating rounds)."""
 
 
 @contextmanager
@@ -270,6 +275,7 @@ def _tracking(
         return
     context = mp.get_context("fork")
     receiver, sender = context.Pipe(duplex=False)
+    _enlarge(sender)
     child = context.Process(target=_track_and_send, args=(recording, tracker, sender))
     child.daemon = True
     child.start()
@@ -282,6 +288,16 @@ def _tracking(
     finally:
         receiver.close()
         child.join()
+
+
+def _enlarge(pipe: Connection) -> None:
+    """Ask for a ``_PIPE_BYTES`` pipe buffer where the system allows (Linux ``F_SETPIPE_SZ``)."""
+    try:
+        import fcntl
+
+        fcntl.fcntl(pipe.fileno(), getattr(fcntl, "F_SETPIPE_SZ", 1031), _PIPE_BYTES)
+    except (ImportError, OSError):  # not Linux, or a lower pipe-max-size: the default stays
+        pass
 
 
 def _received(
