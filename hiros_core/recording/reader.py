@@ -327,16 +327,14 @@ class _McapSource(_Source):
         """
         self.stream.seek(start)
         data = self.stream.read()
-        if len(data) < _RECORD_HEAD.size + _CHUNK_FIELDS.size + 4:
+        if len(data) < _CHUNK_HEAD.size or data[0] != _CHUNK_OPCODE:
             return b""
-        opcode, length = _RECORD_HEAD.unpack_from(data)
-        if opcode != _CHUNK_OPCODE or _RECORD_HEAD.size + length <= len(data):
+        _, length, _, _, _, _, name_length = _CHUNK_HEAD.unpack_from(data)
+        if _RECORD_HEAD.size + length <= len(data):  # whole: not cut by the file's end
             return b""
-        at = _RECORD_HEAD.size + _CHUNK_FIELDS.size
-        (name_length,) = struct.unpack_from("<I", data, at)
-        compression = bytes(data[at + 4 : at + 4 + name_length]).decode(errors="replace")
-        records_at = at + 4 + name_length + 8
-        return _readable_prefix(compression, data[records_at:])
+        name_end = _CHUNK_HEAD.size + name_length
+        compression = data[_CHUNK_HEAD.size : name_end].decode("utf-8", "replace")
+        return _readable_prefix(compression, data[name_end + _U64.size :])
 
     def messages(self, topics: set[str] | None) -> Iterator[RecordedMessage]:
         if self.summary is None or not self.summary.chunk_indexes:
@@ -525,13 +523,6 @@ class _McapSource(_Source):
 
     def close(self) -> None:
         self.stream.close()
-
-
-_RECORD_HEAD = struct.Struct("<BQ")  # an MCAP record's opcode and content length
-
-
-_CHUNK_OPCODE = 0x06
-_CHUNK_FIELDS = struct.Struct("<QQQI")  # start and end time, uncompressed size and CRC
 
 
 def _readable_prefix(compression: str, data: bytes) -> bytes:
