@@ -41,6 +41,7 @@ def offline_throughput(
     """
     from hiros_cli.commands.run import OFFLINE_MERGE_RATE, load_pipeline_params
     from hiros_pipeline import run_recording
+    from hiros_pipeline.offline import OUTPUTS
     from hiros_sim import SimParams, simulate, write_recording
 
     params = load_pipeline_params(None)  # what `hiros run` uses: config/ and its defaults
@@ -55,7 +56,7 @@ def offline_throughput(
         for k, (count, write) in enumerate(runs):
             summary = run_recording(
                 sim / "recording.mcap", calibration, Path(folder) / f"out{k}.mcap", params,
-                processes=count, **({} if write is None else {"write": write}),
+                processes=count, write=write or OUTPUTS,
             )  # fmt: skip
             cpu = {f"cpu {part}": seconds for part, seconds in summary.cpu.items()}
             results.append((

@@ -31,7 +31,14 @@ from hiros_pipeline.pipeline import STAGES, Pipeline, PipelineParams, StageOutpu
 from hiros_tracker import Tracker
 from hiros_visualizer.markers import encode_skeleton_markers
 
-__all__ = ["OUTPUTS", "RunSummary", "default_processes", "message_count", "run_recording"]
+__all__ = [
+    "OUTPUTS",
+    "RunSummary",
+    "chosen_outputs",
+    "default_processes",
+    "message_count",
+    "run_recording",
+]
 
 DRAWN_STAGES = ("merger", "filter")
 OUTPUTS = (*STAGES, "markers")
@@ -166,7 +173,8 @@ def run_recording(
     Both give the same bytes. Default: :func:`default_processes`.
     """
     summary = RunSummary(
-        outputs={stage: [] for stage in STAGES} if keep_outputs else None, written=_chosen(write)
+        outputs={stage: [] for stage in STAGES} if keep_outputs else None,
+        written=chosen_outputs(write),
     )
     pipeline = Pipeline(params, calibration)
     warm_up()  # like the stages' kernels, loaded before the clock starts (~20 ms)
@@ -341,8 +349,8 @@ def _track_and_send(recording: str | Path, tracker: Tracker, sender: Connection)
         sender.close()
 
 
-def _chosen(write: Iterable[str]) -> frozenset[str]:
-    """The outputs to write, checked against ``OUTPUTS``."""
+def chosen_outputs(write: Iterable[str]) -> frozenset[str]:
+    """The outputs to write, checked against ``OUTPUTS`` (``ConfigError`` names the others)."""
     chosen = frozenset(write)
     unknown = sorted(chosen - set(OUTPUTS))
     if unknown:

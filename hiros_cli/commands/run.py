@@ -53,7 +53,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         metavar="WHAT",
         help="what goes into --out beside the calibration, comma-separated among tracker, "
         "merger, optimizer, filter, markers (default: all; e.g. filter,markers for the final "
-        "stream and its drawing: about a quarter of the bytes)",
+        "stream and its drawing: about a fifth of the bytes)",
     )
     parser.add_argument(
         "--processes",
@@ -64,16 +64,18 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
 
 
-def _outputs(text: str) -> tuple[str, ...]:
-    """``--write``: names among ``OUTPUTS``, comma-separated."""
-    from hiros_pipeline.offline import OUTPUTS
+def _outputs(text: str) -> frozenset[str]:
+    """``--write``: names among ``OUTPUTS``, comma-separated (``chosen_outputs`` checks)."""
+    from hiros_pipeline.offline import OUTPUTS, chosen_outputs
 
-    names = tuple(name.strip() for name in text.split(",") if name.strip())
-    unknown = [name for name in names if name not in OUTPUTS]
-    if not names or unknown:
-        msg = f"{text!r}: give one or more of {', '.join(OUTPUTS)}, comma-separated"
-        raise argparse.ArgumentTypeError(msg)
-    return names
+    names = [name.strip() for name in text.split(",") if name.strip()]
+    try:
+        if names:
+            return chosen_outputs(names)
+    except ConfigError:
+        pass
+    msg = f"{text!r}: give one or more of {', '.join(OUTPUTS)}, comma-separated"
+    raise argparse.ArgumentTypeError(msg)
 
 
 def _rate(text: str) -> float:
@@ -166,7 +168,7 @@ def remove_previous_output(out: Path) -> None:
 def run(args: argparse.Namespace) -> int:
     """Run, then print the accounting table."""
     from hiros_pipeline import run_recording
-    from hiros_pipeline.offline import message_count
+    from hiros_pipeline.offline import OUTPUTS, message_count
 
     console = Console()
     require_camera_topics(args.recording)
@@ -178,7 +180,7 @@ def run(args: argparse.Namespace) -> int:
     with progress_bar(f"hiros run {args.recording.name}", message_count(args.recording)) as advance:
         summary = run_recording(
             args.recording, calibration, args.out, params, advance, processes=args.processes,
-            **({} if args.write is None else {"write": args.write}),
+            write=args.write or OUTPUTS,
         )  # fmt: skip
     print_summary(console, summary, args.out)
     return 0
