@@ -333,9 +333,13 @@ class Merger(Accounted):
     # ----------------------------------------------------------------------------------- flow
     def update(self, group: SkeletonGroup) -> SkeletonGroup:
         """Take one tracker output; return the fused people (empty when no output is due)."""
+        merged = self._merged(group)
+        self.processed += 1  # (once it went through: a frame whose merge raised is not)
+        return merged
+
+    def _merged(self, group: SkeletonGroup) -> SkeletonGroup:
         if not self._in_world_frame(group):
             self.drops.detections(OTHER_FRAME, len(group.skeletons))
-            self.processed += 1
             return SkeletonGroup(group.stamp_ns, self._world_frame, [])
         if group.skeletons and self._went_back(group.stamp_ns):
             self.drops.detections("stamps went back (restarted)")  # the held ones forgotten
@@ -344,12 +348,9 @@ class Merger(Accounted):
         newest = self._store(group.skeletons) if group.skeletons else None
         out_ns = self._output_time(newest, group.stamp_ns)
         if out_ns is None:
-            self.processed += 1
             return SkeletonGroup(group.stamp_ns, self._world_frame, [])
         self._last_out_ns = out_ns
-        merged = SkeletonGroup(out_ns, self._world_frame, self.merge(out_ns))
-        self.processed += 1  # (once it went through: a frame whose merge raised is not)
-        return merged
+        return SkeletonGroup(out_ns, self._world_frame, self.merge(out_ns))
 
     def _in_world_frame(self, group: SkeletonGroup) -> bool:
         """Whether ``group`` is in the world frame (a frame-less group is taken as it is).

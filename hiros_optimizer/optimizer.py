@@ -305,9 +305,13 @@ class Optimizer(Accounted):
     def update(self, group: SkeletonGroup) -> SkeletonGroup:
         """Fit every calibrated person of ``group``; others pass through (module docstring)."""
         self.new_calibrations = []
+        out = self._fitted(group)
+        self.processed += 1  # (once it went through: a frame whose fit raised is not)
+        return out
+
+    def _fitted(self, group: SkeletonGroup) -> SkeletonGroup:
         out = SkeletonGroup(group.stamp_ns, group.frame_id, [])
         if not group.skeletons:
-            self.processed += 1
             return out
         seen: set[int] = set()
         batches: dict[int, tuple[LayoutRows, list[_Item]]] = {}
@@ -334,7 +338,6 @@ class Optimizer(Accounted):
             out.skeletons.append(skeleton)  # replaced by its result below
         for stack, items in batches.values():
             self._update_layout(stack, items, out.skeletons)
-        self.processed += 1  # (once it went through: a frame whose fit raised is not)
         return out
 
     def _track(self, track_id: int, layout: Layout) -> _Track:
