@@ -26,6 +26,7 @@ __all__ = [
     "lag",
     "limb_length_cv",
     "mpjpe",
+    "parabola_vertex",
     "sample_truth",
 ]
 
@@ -139,13 +140,21 @@ def lag(estimate: np.ndarray, truth: np.ndarray, rate: float, max_lag: float = 0
         ]
     )
     peak = int(np.argmax(score))
-    offset = 0.0
-    if 0 < peak < len(score) - 1:
-        left, middle, right = score[peak - 1 : peak + 2]
-        curvature = left - 2 * middle + right
-        if curvature < 0:
-            offset = 0.5 * (left - right) / curvature
+    offset = parabola_vertex(*score[peak - 1 : peak + 2]) if 0 < peak < len(score) - 1 else 0.0
     return float((shifts[peak] + offset) / rate)
+
+
+def parabola_vertex(left: float, middle: float, right: float) -> float:
+    """Where the parabola through three evenly spaced samples turns, in steps from ``middle``.
+
+    For refining the best of sampled values to a fraction of a step: with ``middle`` the
+    largest (or smallest) of the three, the vertex lies within half a step of it. 0 when the
+    three lie on a line or one is not finite.
+    """
+    curvature = left - 2 * middle + right
+    if not (np.isfinite(curvature) and curvature != 0):
+        return 0.0
+    return float(0.5 * (left - right) / curvature)
 
 
 def jitter(positions: np.ndarray, truth: np.ndarray | None = None) -> float:

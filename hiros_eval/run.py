@@ -22,7 +22,7 @@ from hiros_core.errors import RecordingError
 from hiros_core.geometry import RigidTransform
 from hiros_core.model import Skeleton, SkeletonGroup, camera_from_frame
 from hiros_core.recording import RecordingReader
-from hiros_eval.body import joint_angle_rmse, limb_length_cv, mpjpe
+from hiros_eval.body import joint_angle_rmse, limb_length_cv, mpjpe, parabola_vertex
 from hiros_eval.calibration import CameraAccuracy, compare_calibration
 from hiros_eval.tracking import IdentityMetrics, TruthLike, identity_metrics, match_to_truth
 
@@ -49,8 +49,8 @@ class StageEvaluation:
     identity: IdentityMetrics
     matched: int
     lag: float
-    """Seconds the stage's people trail the truth (cross-correlation of their motion, ``nan``
-    when too short): what smoothing costs in time."""
+    """Seconds the stage's people trail the truth (``series_lag``; ``nan`` when nobody was
+    matched): what smoothing costs in time."""
     person_series: dict[int, tuple[np.ndarray, np.ndarray, np.ndarray]] = field(repr=False)
     """true person -> (times (N,), estimate (N, J, 3), truth (N, J, 3)) for plots."""
 
@@ -247,18 +247,15 @@ def series_lag(
             return float(np.nanmean(np.linalg.norm(estimate - earlier, axis=-1)))
 
     coarse = np.arange(LAG_RANGE[0], LAG_RANGE[1] + 1e-9, 0.02)
-    first = coarse[int(np.nanargmin([error(d) for d in coarse]))]
+    errors = np.array([error(d) for d in coarse])
+    if not np.isfinite(errors).any():  # no estimate beside a finite truth
+        return float("nan")
+    first = coarse[int(np.nanargmin(errors))]
     shifts = np.arange(first - 0.02, first + 0.02 + 1e-9, 0.005)
     mean = np.array([error(d) for d in shifts])
-    if not np.isfinite(mean).any():
-        return float("nan")
-    best = int(np.nanargmin(mean))
-    if 0 < best < len(mean) - 1:
-        left, middle, right = mean[best - 1 : best + 2]
-        curvature = left - 2 * middle + right
-        if curvature > 0:
-            return float(shifts[best] + 0.5 * (left - right) / curvature * 0.005)
-    return float(shifts[best])
+    best = int(np.nanargmin(mean))  # (finite: ``first`` is among the shifts)
+    offset = parabola_vertex(*mean[best - 1 : best + 2]) if 0 < best < len(mean) - 1 else 0.0
+    return float(shifts[best] + offset * 0.005)
 
 
 def evaluate_run(
