@@ -186,18 +186,15 @@ def _headline(evaluation: RunEvaluation) -> str:
         f"on average, with joint angles {final.angle_rmse.get('mean', float('nan')):.1f}° off "
         f"(RMSE) and {final.identity.id_switches} identity switches."
     ]
-    if evaluation.cameras:
-        camera = min(evaluation.cameras, key=evaluation.cameras.get)
-        best = evaluation.cameras[camera]
+    camera = evaluation.best_camera
+    if camera is not None:
         parts.append(
-            f"The best single camera ({camera}) alone errs {best * 100:.1f} cm: the chain "
-            f"gives {final.mpjpe / best:.2f} of that."
+            f"The best single camera ({camera}) alone errs {evaluation.cameras[camera] * 100:.1f}"
+            f" cm: the chain gives {evaluation.to_best_camera(final.stage):.2f} of that."
         )
-    tracker = stages.get("tracker")
-    if tracker is not None and final is not tracker:
-        before = tracker.angle_rmse.get("mean", float("nan"))
-        after = final.angle_rmse.get("mean", float("nan"))
-        parts.append(f"Joint-angle error changes by {100 * (after / before - 1):+.0f} % from the "
+    if "tracker" in stages and final.stage != "tracker":
+        change = evaluation.angle_change(final.stage)
+        parts.append(f"Joint-angle error changes by {100 * change:+.0f} % from the "
                      "tracker (each camera's skeletons) to the final output.")  # fmt: skip
     if evaluation.calibration:
         worst = [

@@ -63,6 +63,28 @@ class RunEvaluation:
     cameras: dict[str, float]
     calibration: dict[str, CameraAccuracy]
 
+    @property
+    def best_camera(self) -> str | None:
+        """The single camera with the smallest MPJPE (None without single-camera figures)."""
+        return min(self.cameras, key=self.cameras.__getitem__) if self.cameras else None
+
+    def to_best_camera(self, stage: str) -> float:
+        """``stage``'s MPJPE as a fraction of the best single camera's (NaN without either)."""
+        best = self.best_camera
+        if best is None or stage not in self.stages:
+            return float("nan")
+        return self.stages[stage].mpjpe / self.cameras[best]
+
+    def angle_change(self, stage: str) -> float:
+        """Change of the mean joint-angle RMSE from the tracker's to ``stage``'s (-0.3: 30 % less).
+
+        NaN without either stage.
+        """
+        if "tracker" not in self.stages or stage not in self.stages:
+            return float("nan")
+        before = self.stages["tracker"].angle_rmse.get("mean", float("nan"))
+        return self.stages[stage].angle_rmse.get("mean", float("nan")) / before - 1.0
+
     def tables(self) -> dict[str, tuple[list[str], list[list[str]]]]:
         """The figures as text tables (headers, rows), one per kind, for terminal and HTML."""
         stages = [

@@ -108,15 +108,13 @@ def run(args: argparse.Namespace) -> int:
 
 def _add_chain_rows(table: Table, evaluation: RunEvaluation) -> None:
     """What the whole chain gains over the tracker alone and the best camera (issue targets)."""
-    stages = evaluation.stages
-    if "tracker" not in stages or "filter" not in stages:
+    if "tracker" not in evaluation.stages or "filter" not in evaluation.stages:
         return
-    before = stages["tracker"].angle_rmse.get("mean", float("nan"))
-    after = stages["filter"].angle_rmse.get("mean", float("nan"))
-    table.add_row("joint-angle RMSE, filter vs tracker", f"{100.0 * (after / before - 1.0):+.1f} %")
+    change = evaluation.angle_change("filter")
+    table.add_row("joint-angle RMSE, filter vs tracker", f"{100.0 * change:+.1f} %")
     if evaluation.cameras:
-        best = min(evaluation.cameras.values())
-        table.add_row("MPJPE, filter / best single camera", f"{stages['filter'].mpjpe / best:.2f}")
+        ratio = evaluation.to_best_camera("filter")
+        table.add_row("MPJPE, filter / best single camera", f"{ratio:.2f}")
 
 
 def _print_summary(  # noqa: PLR0917 - the four results of the demo and where they went
@@ -136,8 +134,8 @@ def _print_summary(  # noqa: PLR0917 - the four results of the demo and where th
             f"{accuracy.time_error_ms:.1f} ms / {accuracy.rotation_error_deg:.2f}° / "
             f"{accuracy.translation_error_cm:.1f} cm",
         )
-    if evaluation.cameras:
-        best_camera = min(evaluation.cameras, key=evaluation.cameras.get)
+    best_camera = evaluation.best_camera
+    if best_camera is not None:
         table.add_row(
             f"best single camera ({best_camera}) MPJPE",
             f"{evaluation.cameras[best_camera] * 100:.1f} cm",

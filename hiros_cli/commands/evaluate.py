@@ -65,10 +65,9 @@ def print_evaluation(console: Console, evaluation) -> None:  # noqa: ANN001 - Ru
             table.add_row(*row)
         console.print(table)
     if evaluation.cameras:
-        best = min(evaluation.cameras.values())
         for stage in ("merger", "filter"):
             if stage in evaluation.stages:
-                ratio = evaluation.stages[stage].mpjpe / best
+                ratio = evaluation.to_best_camera(stage)
                 console.print(f"{stage} MPJPE / best single camera: {ratio:.2f}")
 
 
