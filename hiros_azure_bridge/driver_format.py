@@ -187,8 +187,9 @@ def warm_up() -> None:
     people = Skeleton.many_from_positions(positions, AZURE_KINECT, skeleton_ids=[1])
     markers = group_to_driver_markers(SkeletonGroup(1, "warm_up", people))
     DriverBridge().update(markers)
-    raw = encode_marker_array(markers)  # the batch kernel of recordings
-    DriverBridge().update_batch(raw, np.array([0]), np.array([len(raw)]))
+    raw = encode_marker_array(markers)  # the batch kernels of recordings
+    for buffer in (raw, bytearray(raw)):  # a message's bytes; a reader's (writable) buffer
+        DriverBridge().update_batch(buffer, np.array([0]), np.array([len(raw)]))
 
 
 @cache

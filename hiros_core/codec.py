@@ -56,6 +56,7 @@ __all__ = [
     "encode_group_into",
     "encode_marker_array",
     "marker_array_plan",
+    "warm_up",
 ]
 
 _NS = 1_000_000_000
@@ -460,6 +461,21 @@ def encode_group(group: SkeletonGroup) -> bytes:
 
     encode_group_into(group, space)
     return out.tobytes()  # type: ignore[union-attr]
+
+
+def warm_up() -> None:
+    """Load the compiled encoder now (numba's disk cache, ~15 ms), not on the first group.
+
+    Only where numba is loaded already (the stages load it): the encoder takes its compiled
+    path then, and a writer or a node would otherwise load it while its clock runs. Cheap
+    after the first call (numba keeps what it loaded).
+    """
+    if "numba" not in sys.modules:
+        return
+    people = Skeleton.many_from_positions(
+        np.zeros((1, AZURE_KINECT.n_joints, 3)), AZURE_KINECT, skeleton_ids=[1]
+    )
+    encode_group(SkeletonGroup(1, "warm_up", people))  # a stack's rows: the compiled path
 
 
 def encode_group_into(group: SkeletonGroup, space: Callable[[int], tuple[np.ndarray, int]]) -> int:

@@ -32,6 +32,7 @@ from rclpy.node import Node
 from rclpy.qos import QoSProfile, qos_profile_sensor_data
 
 from hiros_core.accounting import Accounted
+from hiros_core.codec import warm_up as codec_warm_up
 from hiros_ros.params import declare_params
 
 T = TypeVar("T")
@@ -109,7 +110,12 @@ class HirosNode(Node):
         return self.create_subscription(msg_type, topic, guarded, qos, raw=True)
 
     def create_raw_publisher(self, msg_type: type, topic: str, qos: QoSProfile) -> Any:
-        """A publisher whose ``publish`` takes CDR bytes (rclpy publishes them as they are)."""
+        """A publisher whose ``publish`` takes CDR bytes (rclpy publishes them as they are).
+
+        Loads the compiled group encoder now if the node's stage loaded numba (made before
+        its publisher), so that the first message does not wait for it (``codec.warm_up``).
+        """
+        codec_warm_up()
         return self.create_publisher(msg_type, topic, qos)
 
     def publish_raw(self, publisher: Any, data: bytes) -> None:

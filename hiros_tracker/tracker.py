@@ -956,7 +956,8 @@ def warm_up() -> None:
     0.3 s from the cache, 10-20 s on the very first run after an install or a kernel change)
     before its first frame rather than on it: a burst of frames arriving during that first
     frame would otherwise overflow the subscription queue. A throwaway tracker follows one
-    standing person seen by a calibrated camera through every code path a frame takes.
+    standing people seen by a calibrated camera through every code path a frame takes (two
+    of them, so that a track is confirmed beside a confirmed one).
     """
     global _WARM  # noqa: PLW0603 - once per process
     if _WARM:
@@ -973,12 +974,13 @@ def warm_up() -> None:
         TrackerParams(max_delay=0.0, min_hits=2, min_cameras=1),
         Calibration("warm_up", "world", {"warm_up": camera}),
     )
+    apart = np.array([[0.0, 0.0, 0.0], [1.5, 0.0, 0.0]])  # two people 1.5 m apart
     for index in range(3):
         stamp = 1_000_000_000 + index * 33_333_333
-        skeleton = Skeleton.from_positions(
-            offsets + np.array([0.01 * index, 0.0, 0.0]),
+        people = Skeleton.many_from_positions(
+            offsets + apart[:, None] + np.array([0.01 * index, 0.0, 0.0]),
             AZURE_KINECT,
-            skeleton_id=1,
+            skeleton_ids=[1, 2],
             src_time_ns=stamp,
         )
-        tracker.update(SkeletonGroup(stamp, "warm_up", [skeleton]))
+        tracker.update(SkeletonGroup(stamp, "warm_up", people))

@@ -20,10 +20,16 @@ import numpy as np
 
 from hiros_core.cdr import LEAD
 from hiros_core.codec import MarkerArrayData, encode_marker_array, marker_array_plan
-from hiros_core.layouts import Layout
-from hiros_core.model import SkeletonGroup, shared_stack
+from hiros_core.layouts import AZURE_KINECT, Layout
+from hiros_core.model import Skeleton, SkeletonGroup, shared_stack
 
-__all__ = ["VisualizerParams", "encode_skeleton_markers", "id_color", "skeleton_markers"]
+__all__ = [
+    "VisualizerParams",
+    "encode_skeleton_markers",
+    "id_color",
+    "skeleton_markers",
+    "warm_up",
+]
 
 SPHERE_LIST, LINE_LIST, TEXT_VIEW_FACING = 7, 5, 9
 _KINDS = [SPHERE_LIST, LINE_LIST, TEXT_VIEW_FACING]
@@ -156,6 +162,20 @@ _DRAW_PLANS: dict[tuple, _DrawPlan] = {}
 _DRAW_PLAN_CAPACITY = 256
 _INT32_SECONDS = (-(2**31), 2**31)
 _DRAWING_FIELDS = tuple(f.name for f in fields(VisualizerParams))  # not a subclass's topics
+
+
+def warm_up() -> None:
+    """Load the compiled drawing now (numba's disk cache, ~30 ms), not on the first frame.
+
+    Only where numba is loaded already, as ``encode_skeleton_markers`` takes its compiled
+    path only then.
+    """
+    if "numba" not in sys.modules:
+        return
+    people = Skeleton.many_from_positions(
+        np.zeros((1, AZURE_KINECT.n_joints, 3)), AZURE_KINECT, skeleton_ids=[1]
+    )
+    encode_skeleton_markers(SkeletonGroup(1, "warm_up", people), "warm_up")
 
 
 def encode_skeleton_markers(
