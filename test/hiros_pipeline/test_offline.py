@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import itertools
 from collections.abc import Callable
 from pathlib import Path
 
@@ -9,8 +10,10 @@ import pytest
 
 from hiros_core.calibration import Calibration, load_calibration
 from hiros_core.errors import ConfigError, RecordingError
+from hiros_core.model import SkeletonGroup
 from hiros_core.recording import RecordingReader
 from hiros_pipeline import STAGES, PipelineParams, run_recording
+from hiros_tracker import Tracker
 
 
 @pytest.fixture(scope="module")
@@ -93,6 +96,26 @@ def test_an_unreadable_recording_raises_from_the_reading_process(tmp_path: Path)
     broken.write_bytes(b"not a recording at all")
     with pytest.raises(RecordingError):
         run_recording(broken, Calibration("k01"), tmp_path / "out.mcap", processes=2)
+
+
+def test_an_error_in_the_reading_process_mid_run_is_raised_here(
+    short_recording: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    # The 30th frame is in the 4th batch: it comes through another pipe than the first.
+    frames = itertools.count()
+    track = Tracker.update
+
+    def failing_update(tracker: Tracker, group: SkeletonGroup) -> SkeletonGroup:
+        if next(frames) == 30:
+            raise ValueError("the tracker failed on frame 30")
+        return track(tracker, group)
+
+    monkeypatch.setattr(Tracker, "update", failing_update)  # before the fork: the child's too
+    calibration = load_calibration(short_recording / "calibration.yaml")
+    out = tmp_path / "out.mcap"
+    with pytest.raises(ValueError, match="frame 30"):
+        run_recording(short_recording / "recording.mcap", calibration, out, processes=2)
+    assert not out.exists()
 
 
 def test_a_damaged_chunk_is_accounted_for_and_described(
