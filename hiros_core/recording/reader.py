@@ -103,6 +103,16 @@ class MessageBatch:
         """The CDR bytes of message ``index`` (a copy)."""
         return bytes(self.buffer[self.starts[index] : self.ends[index]])
 
+    def split(self, at: int) -> tuple[MessageBatch, MessageBatch]:
+        """The first ``at`` messages and the rest, as two batches sharing this one's buffer."""
+        return self._rows(slice(None, at)), self._rows(slice(at, None))
+
+    def _rows(self, rows: slice) -> MessageBatch:
+        return MessageBatch(
+            self.topics, self.msgtypes, self.channels[rows], self.log_times_ns[rows],
+            self.buffer, self.starts[rows], self.ends[rows],
+        )  # fmt: skip
+
     def messages(self) -> Iterator[RecordedMessage]:
         """The batch as ``RecordedMessage``s."""
         topics, msgtypes, buffer = self.topics, self.msgtypes, self.buffer

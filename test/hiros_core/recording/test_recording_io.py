@@ -183,6 +183,23 @@ def test_logged_groups_and_a_reader_watched_message_by_message(tmp_path, driver_
             assert seen[-1] == log_time
 
 
+def test_the_first_batch_read_in_growing_pieces_gives_every_group_once(tmp_path, driver_frames):
+    path = tmp_path / "take.mcap"
+    _write(path, driver_frames)  # one chunk of 200 messages: pieces of 8, 16, 32, 64, 80
+    with RecordingReader(path) as reader:
+        assert len(next(reader.batches())) > 8 + 16 + 32 + 64
+        head, tail = next(reader.batches()).split(8)
+        whole = list(next(reader.batches()).messages())
+        assert [m for batch in (head, tail) for m in batch.messages()] == whole
+    in_pieces = list(iter_logged_groups(path))
+    reader = RecordingReader(path)
+    reader.messages = reader.messages  # read one message at a time: no pieces
+    with reader:
+        one_by_one = list(iter_logged_groups(reader))
+    assert [(s, t) for s, _, t in in_pieces] == [(s, t) for s, _, t in one_by_one]
+    assert all(a[1].same_as(b[1]) for a, b in zip(in_pieces, one_by_one, strict=True))
+
+
 def test_truncated_mcap_reads_what_it_can(tmp_path, driver_frames):
     path = tmp_path / "cut.mcap"
     _write(path, driver_frames, chunk_size=20_000)
