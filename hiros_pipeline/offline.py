@@ -242,13 +242,16 @@ def _frozen_heap() -> Iterator[None]:
     walks them all: the first run of a process made one, ~0.1 s of a 20 s recording's
     0.8 s. Frozen before the fork, they also stay out of the child's collections, which
     would write to the pages it shares with this process (copy on write). The run's own
-    objects are collected as usual; the frozen ones are handed back at the end.
+    objects are collected as usual; the frozen ones are handed back at the end, unless the
+    caller had frozen objects of its own (``gc`` cannot hand back only some).
     """
+    callers = gc.get_freeze_count()
     gc.freeze()
     try:
         yield
     finally:
-        gc.unfreeze()
+        if not callers:
+            gc.unfreeze()
 
 
 def _children_cpu() -> float:

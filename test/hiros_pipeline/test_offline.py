@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import gc
 import itertools
 from collections.abc import Callable
 from pathlib import Path
@@ -116,6 +117,22 @@ def test_an_error_in_the_reading_process_mid_run_is_raised_here(
     with pytest.raises(ValueError, match="frame 30"):
         run_recording(short_recording / "recording.mcap", calibration, out, processes=2)
     assert not out.exists()
+
+
+def test_the_objects_frozen_for_the_run_are_handed_back(
+    short_recording: Path, tmp_path: Path
+) -> None:
+    calibration = load_calibration(short_recording / "calibration.yaml")
+    recording = short_recording / "recording.mcap"
+    gc.unfreeze()
+    run_recording(recording, calibration, tmp_path / "a.mcap", processes=2)
+    assert gc.get_freeze_count() == 0
+    gc.freeze()  # a caller's own frozen objects stay frozen
+    try:
+        run_recording(recording, calibration, tmp_path / "b.mcap", processes=1)
+        assert gc.get_freeze_count() > 0  # (fewer: frozen objects that died are freed)
+    finally:
+        gc.unfreeze()
 
 
 def test_a_damaged_chunk_is_accounted_for_and_described(
