@@ -327,7 +327,7 @@ def _tracking(
     receivers, senders = zip(*(context.Pipe(duplex=False) for _ in range(_PIPES)), strict=True)
     for sender in senders:
         _enlarge(sender)
-    child = context.Process(target=_track_and_send, args=(recording, tracker, senders))
+    child = context.Process(target=_track_and_send, args=(recording, tracker, senders, receivers))
     child.daemon = True
     child.start()
     for sender in senders:
@@ -380,11 +380,21 @@ def _received(
         yield from batch
 
 
-def _track_and_send(recording: str | Path, tracker: Tracker, senders: Sequence[Connection]) -> None:
+def _track_and_send(
+    recording: str | Path,
+    tracker: Tracker,
+    senders: Sequence[Connection],
+    receivers: Sequence[Connection],
+) -> None:
     """Child process: read and track ``recording``, send the items in batches.
 
     The batches, and an error, go through ``senders`` in turn: the parent reads them so.
+    The child first closes its copies of the parent's ``receivers``: a parent killed
+    outright then leaves it a broken pipe, and it ends, instead of a full pipe that no one
+    reads, where it would wait forever.
     """
+    for receiver in receivers:
+        receiver.close()
     batch: list = []
     turns = itertools.cycle(senders)
     try:
