@@ -19,7 +19,6 @@ from __future__ import annotations
 from functools import lru_cache
 
 import numpy as np
-from scipy.signal import butter, sosfilt, sosfilt_zi
 
 __all__ = ["ButterworthBank", "KalmanBank", "rotation_vectors", "slerp"]
 
@@ -37,6 +36,11 @@ class ButterworthBank:
     def __init__(
         self, order: int, cutoff_frequency: float, sample_frequency: float, shape: tuple[int, int]
     ) -> None:
+        # Imported here: scipy.signal takes ~0.5 s to import, which every process of the
+        # pipeline paid at its start while the default filter is the Kalman one.
+        from scipy.signal import butter, sosfilt, sosfilt_zi
+
+        self._sosfilt = sosfilt
         self.sample_frequency = sample_frequency
         cutoff = min(cutoff_frequency, 0.45 * sample_frequency)  # must stay below Nyquist
         self.sos = butter(order, cutoff, fs=sample_frequency, output="sos")
@@ -58,7 +62,8 @@ class ButterworthBank:
         """Filter ``(n, channels, k)`` consecutive samples of ``slots``; the last outputs."""
         n, channels, k = samples.shape
         state = self.state[:, slots].reshape(self.state.shape[0], n * channels, 2)
-        filtered, state = sosfilt(self.sos, samples.reshape(n * channels, k), axis=-1, zi=state)
+        flat = samples.reshape(n * channels, k)
+        filtered, state = self._sosfilt(self.sos, flat, axis=-1, zi=state)
         self.state[:, slots] = state.reshape(self.state.shape[0], n, channels, 2)
         return filtered[:, -1].reshape(n, channels)
 
