@@ -176,8 +176,9 @@ def _moved(
         return _moved_apart(skeletons, transform, times_ns, frame_id), None
     stack = stack_rows(skeletons)
     if np.may_share_memory(stack.markers, skeletons[0].markers):  # the input's own stack
-        stack = SkeletonRows(*(field.copy() for field in stack))
-    kernels.move_frame(stack.markers, stack.links, stack.bounding_boxes, *transform)
+        stack = SkeletonRows(*kernels.moved_frame(*stack, *transform))
+    else:  # new arrays already
+        kernels.move_frame(stack.markers, stack.links, stack.bounding_boxes, *transform)
     moved = stack.skeletons(
         [skeleton.id for skeleton in skeletons],
         times_ns,
