@@ -26,6 +26,7 @@ import yaml
 from hiros_azure_bridge.driver_format import warm_up as bridge_warm_up
 from hiros_core.accounting import Drops
 from hiros_core.calibration import Calibration
+from hiros_core.cdr import PlanBuilder
 from hiros_core.codec import warm_up as codec_warm_up
 from hiros_core.errors import ConfigError, RecordingError
 from hiros_core.model import SkeletonGroup
@@ -140,12 +141,14 @@ def message_count(path: str | Path) -> int | None:
 
 
 def _calibration_message(calibration: Calibration) -> bytes:
-    from rosbags.typesys import Stores, get_typestore
+    """The calibration file's YAML as a ``std_msgs/msg/String`` (CDR).
 
-    store = get_typestore(Stores.ROS2_JAZZY)
-    text = yaml.safe_dump(calibration.to_dict(), sort_keys=False)
-    string = store.types["std_msgs/msg/String"](data=text)
-    return bytes(store.serialize_cdr(string, "std_msgs/msg/String"))
+    Written with the codec's own CDR writer: building a rosbags type store for it took
+    ~0.1 s of a run's clock.
+    """
+    message = PlanBuilder()
+    message.string(yaml.safe_dump(calibration.to_dict(), sort_keys=False))
+    return bytes(message.buf)
 
 
 def default_processes() -> int:
