@@ -56,19 +56,31 @@ def evaluate_output(  # noqa: ANN201 - RunEvaluation
 def print_evaluation(console: Console, evaluation) -> None:  # noqa: ANN001 - RunEvaluation
     """The evaluation's tables, then the merged-vs-best-camera ratio."""
     for title, (headers, rows) in evaluation.tables().items():
-        if not rows:
-            continue
-        table = Table(title=title)
-        for header in headers:
-            table.add_column(header, justify="right")
-        for row in rows:
-            table.add_row(*row)
-        console.print(table)
+        if rows:
+            console.print(_table(title, headers, rows, console.width))
     if evaluation.cameras:
         for stage in ("merger", "filter"):
             if stage in evaluation.stages:
                 ratio = evaluation.to_best_camera(stage)
                 console.print(f"{stage} MPJPE / best single camera: {ratio:.2f}")
+
+
+def _table(title: str, headers: list[str], rows: list[list[str]], width: int) -> Table:
+    """A right-aligned table that keeps every word whole in ``width`` columns where it can.
+
+    Too wide for the terminal, rich shrinks columns below their longest word and cuts it
+    ("optimi…"); each column then gets the width of its longest word or value instead,
+    and the headers wrap between words.
+    """
+    fits = [max([1, *map(len, header.split()), *(len(row[i]) for row in rows)])
+            for i, header in enumerate(headers)]  # fmt: skip
+    natural = sum(max(len(h), fit) + 3 for h, fit in zip(headers, fits, strict=True)) + 1
+    table = Table(title=title)
+    for header, fit in zip(headers, fits, strict=True):
+        table.add_column(header, justify="right", width=None if natural <= width else fit)
+    for row in rows:
+        table.add_row(*row)
+    return table
 
 
 def run(args: argparse.Namespace) -> int:
