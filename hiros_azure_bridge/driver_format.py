@@ -52,6 +52,7 @@ from hiros_core.model import (
     SkeletonGroup,
     SkeletonRows,
     link_rows,
+    warm_up_group,
 )
 
 __all__ = [
@@ -183,9 +184,7 @@ def warm_up() -> None:
     """
     if not _compiled_available():
         return
-    positions = np.zeros((1, AZURE_KINECT.n_joints, 3))
-    people = Skeleton.many_from_positions(positions, AZURE_KINECT, skeleton_ids=[1])
-    markers = group_to_driver_markers(SkeletonGroup(1, "warm_up", people))
+    markers = group_to_driver_markers(warm_up_group())
     DriverBridge().update(markers)
     raw = encode_marker_array(markers)  # the batch kernels of recordings
     for buffer in (raw, bytearray(raw)):  # a message's bytes; a reader's (writable) buffer

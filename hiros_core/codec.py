@@ -42,6 +42,7 @@ from hiros_core.model import (
     SkeletonGroup,
     SkeletonRows,
     shared_stack,
+    warm_up_group,
 )
 
 __all__ = [
@@ -472,10 +473,7 @@ def warm_up() -> None:
     """
     if "numba" not in sys.modules:
         return
-    people = Skeleton.many_from_positions(
-        np.zeros((1, AZURE_KINECT.n_joints, 3)), AZURE_KINECT, skeleton_ids=[1]
-    )
-    encode_group(SkeletonGroup(1, "warm_up", people))  # a stack's rows: the compiled path
+    encode_group(warm_up_group())
 
 
 def encode_group_into(group: SkeletonGroup, space: Callable[[int], tuple[np.ndarray, int]]) -> int:

@@ -37,6 +37,7 @@ __all__ = [
     "sec_to_ns",
     "shared_stack",
     "stack_rows",
+    "warm_up_group",
 ]
 
 STATE_WIDTH = 20
@@ -594,3 +595,15 @@ def _unpickle_group(stamp_ns: int, frame_id: str, stacked: tuple | list[Skeleton
         confidences, max_sizes=list(zip(max_markers, max_links, strict=True)),
     )  # fmt: skip
     return SkeletonGroup(stamp_ns, frame_id, skeletons)
+
+
+def warm_up_group() -> SkeletonGroup:
+    """One Azure Kinect person at the origin: what the warm-ups push through compiled paths.
+
+    The skeleton's rows are one stack's, as the stages make them, so the encoder and the
+    drawing take their stacked paths with it.
+    """
+    people = Skeleton.many_from_positions(
+        np.zeros((1, AZURE_KINECT.n_joints, 3)), AZURE_KINECT, skeleton_ids=[1]
+    )
+    return SkeletonGroup(1, "warm_up", people)

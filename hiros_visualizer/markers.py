@@ -20,8 +20,8 @@ import numpy as np
 
 from hiros_core.cdr import LEAD
 from hiros_core.codec import MarkerArrayData, encode_marker_array, marker_array_plan
-from hiros_core.layouts import AZURE_KINECT, Layout
-from hiros_core.model import Skeleton, SkeletonGroup, shared_stack
+from hiros_core.layouts import Layout
+from hiros_core.model import SkeletonGroup, shared_stack, warm_up_group
 
 __all__ = [
     "VisualizerParams",
@@ -172,10 +172,7 @@ def warm_up() -> None:
     """
     if "numba" not in sys.modules:
         return
-    people = Skeleton.many_from_positions(
-        np.zeros((1, AZURE_KINECT.n_joints, 3)), AZURE_KINECT, skeleton_ids=[1]
-    )
-    encode_skeleton_markers(SkeletonGroup(1, "warm_up", people), "warm_up")
+    encode_skeleton_markers(warm_up_group(), "warm_up")
 
 
 def encode_skeleton_markers(
