@@ -119,6 +119,9 @@ class Calibrator:
             progress: optional progress callback.
             arrival_ns: per camera, when each of its frames (same order) reached the
                 receiver; default: those given to :meth:`update`, if any.
+                They narrow each clock search to the lag they suggest; without them every
+                lag is searched, and a pair whose people repeat one motion (another lag
+                correlating nearly as well) is refused as ambiguous rather than guessed.
 
         Raises:
             CalibrationError: fewer than two cameras, or (with ``require_all``) a camera

@@ -52,6 +52,17 @@ Per-frame body scale, offsets per side seen (front, left, back, right) in the bo
 leaving out the most drawn-in joints (spine, clavicles, face, hands), weighting frames by how
 alike the two cameras see the body, and a per-frame shrink along the kinematic chains did not
 reduce it (0.36-0.51 deg); fewer joints cost more than the bias they remove.
+
+Where the rotation comes from (30 seeds, each camera with the reference): the bodies' shapes
+alone (every frame's shift left free) give 1.4 deg, their positions alone (frame centroids)
+0.47 deg, both 0.41 deg for the pair alone and 0.37 deg after the joint solve. On clean data the
+shapes alone give 0.10 deg, but each SDK imperfection of the simulator costs them 0.15-1 deg
+(mistakes most, then the fixed offsets), so a partly free shift gains nothing at default
+realism, even with the offsets solved jointly and joints screened by their shape residual. The
+translation given the true rotation is 1.4-1.7 cm (``hiros bench calib`` prints it): the
+cameras' skeletons disagree that much on where each person is. Also tried without gain:
+adding b's skeletons flipped back front to back to the per-frame choice, and frame weights
+smoothed over a second.
 """
 
 from __future__ import annotations

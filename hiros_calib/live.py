@@ -4,8 +4,10 @@
 (cheap, thread-safe); :meth:`step` does the work when it is due:
 
 - every ``update_period`` seconds, a full :class:`~hiros_calib.calibrator.Calibrator` run
-  over the window; a camera's new estimate that agrees with the current one is blended in
-  (``blend``), so the calibration keeps refining as data accumulate;
+  over the window; a camera's new estimate that agrees with the current one replaces it while
+  the window still holds all the data the current one rests on (after the start or a
+  recalibration), and is blended in (``blend``) once frames slide out, so the calibration
+  keeps refining as data accumulate;
 - every ``check_period`` seconds, a cheap check of the last ``check_length`` seconds: with the
   current calibration, the same people seen by two cameras should land on the same points.
   When every pair a camera belongs to disagrees by more than ``moved_ratio`` times its usual
@@ -52,7 +54,8 @@ class LiveCalibratorParams(CalibratorParams):
     update_period: float = 10.0
     """Seconds between full re-estimates."""
     blend: float = 0.3
-    """Weight of a new estimate that agrees with the current one (1: replace)."""
+    """Weight of a new estimate that agrees with the current one once the window slides (1:
+    replace); while the window is still filling, a new estimate replaces the current one."""
     agree_time: float = 0.02
     """A new clock estimate within this (s) of the current one agrees with it."""
     agree_rotation: float = 2.0
@@ -136,6 +139,7 @@ class LiveCalibrator(Accounted):
         self.events: list[tuple[int, str]] = []
         self._frames: dict[str, deque[tuple[SkeletonGroup, int]]] = {}
         self._since: dict[str, int] = {}  # per camera: frames stamped earlier are ignored
+        self._support: dict[str, int] = {}  # per camera: first stamp its estimate rests on
         self._changed: set[str] = set()  # cameras waiting for recalibration
         self._baseline: dict[tuple[str, str], float] = {}
         self._first_arrival: int | None = None
@@ -249,13 +253,23 @@ class LiveCalibrator(Accounted):
             self.calibration.reference = estimate.reference
         for camera, new in estimate.cameras.items():
             old = self.calibration.cameras.get(camera)
+            first = groups[camera][0].stamp_ns
             if old is None or camera in self._changed:
                 self.calibration.cameras[camera] = new
                 self._changed.discard(camera)
+                self._support[camera] = first
                 self.events.append((now_ns, f"{camera}: calibrated"))
                 changed = True
             elif _agrees(old, new, self.params):
-                self.calibration.cameras[camera] = _blend(old, new, self.params.blend)
+                # while the window still holds every frame the current estimate rests on (it
+                # is refilling after a start or a recalibration) the new estimate, on more
+                # of the same data, supersedes it; once frames slide out, or for a pose
+                # loaded from a file, blend
+                grown = camera in self._support and first <= self._support[camera]
+                self.calibration.cameras[camera] = (
+                    new if grown else _blend(old, new, self.params.blend)
+                )
+                self._support[camera] = first
                 changed = True
             else:
                 self.drops["estimate_disagrees"] += 1

@@ -82,6 +82,12 @@ class SyncParams:
     the sharpness is the stronger test)."""
     min_sharpness: float = 4.0
     """Lowest robust z-score of a usable peak over its correlation curve."""
+    max_ambiguity: float = 0.5
+    """Refuse a camera pair when a lag away from the chosen one correlates this nearly as well
+    (second-best significance over the best, for the least ambiguous body pair used). A walk
+    repeated along one path correlates about as well at every repetition (0.8-0.98 on the
+    simulator without arrival times, against 0.02-0.08 with them or on motion that does not
+    repeat); the lag is then a guess, and a wrong lag by whole seconds ruins the poses too."""
     best_fraction: float = 0.1
     """Fraction of the sharpest body pairs that choose the consensus lag (Eichler: 10 %)."""
     consensus_tolerance: float = 0.05
@@ -563,7 +569,7 @@ def estimate_pair_offset(
             pairs_considered=len(candidates),
         )
     used = _consensus(good, params)
-    return _finish(
+    return _refuse_ambiguous(camera_a, camera_b, used, len(candidates), params) or _finish(
         camera_a,
         camera_b,
         used=used,
@@ -572,6 +578,27 @@ def estimate_pair_offset(
         sig_b=sig_b,
         params=params,
         work=work,
+    )
+
+
+def _refuse_ambiguous(
+    camera_a: str, camera_b: str, used: list[_Candidate], considered: int, params: SyncParams
+) -> PairOffset | None:
+    """A refusal when another lag correlates nearly as well as the consensus, else None."""
+    ambiguity = min(c.ambiguity for c in used)
+    if ambiguity < params.max_ambiguity:
+        return None
+    return _refused(
+        camera_a,
+        camera_b,
+        f"the lag is ambiguous: another lag correlates {ambiguity:.0%} as well as the best "
+        f"({used[0].lag_index * params.grid_step:+.2f} s), as when people repeat the same "
+        "motion; give the frames' arrival times (a recording's log times) or a max_offset "
+        "that leaves the other lag out",
+        peak=max(c.peak for c in used),
+        sharpness=max(c.sharpness for c in used),
+        ambiguity=round(ambiguity, 3),
+        pairs_considered=considered,
     )
 
 

@@ -49,7 +49,7 @@ from hiros_sim.noise import (
 )
 from hiros_sim.people import Clip, PersonPath, body_forward, prepare_clip
 
-__all__ = ["SimParams", "SimResult", "Truth", "default_bvh_files", "simulate"]
+__all__ = ["SimParams", "SimResult", "Truth", "bumped_pose", "default_bvh_files", "simulate"]
 
 _DATA = DATA_DIR
 _IDX = AZURE_KINECT.index
@@ -169,6 +169,17 @@ class SimParams:
     """A person unseen for longer than this (s) comes back with a new SDK id."""
     truth_rate: float = 0.0
     """Truth sampling rate, Hz; 0 = the highest clip rate."""
+
+    # a camera knocked mid-recording (for the live calibration's change detection)
+    bump_camera: str = ""
+    """Camera moved during the recording ("" = none); ``calibration`` keeps its first pose,
+    :func:`bumped_pose` gives the second."""
+    bump_time: float = 0.0
+    """Seconds after the recording starts (reference clock) when it moves."""
+    bump_rotation: float = 0.0
+    """Degrees it turns about the vertical through its own position."""
+    bump_shift: float = 0.0
+    """Metres it slides along the world x axis."""
 
     def check(self) -> None:
         """Raise ConfigError for values the simulator cannot honour."""
@@ -312,12 +323,34 @@ class _Stream:
     ghosts: list[tuple[int, int, int, np.ndarray, np.ndarray]]  # start, stop, id, pos, levels
 
 
+def bumped_pose(cam: CameraCalibration, params: SimParams) -> CameraCalibration:
+    """The pose of ``cam`` after ``params``' bump (same clock).
+
+    Turned about the vertical through its position by ``bump_rotation`` degrees, then slid
+    ``bump_shift`` m along world x.
+    """
+    turn = Rotation.from_euler("z", params.bump_rotation, degrees=True)
+    rotation = (turn * Rotation.from_quat(cam.rotation)).as_quat()
+    translation = np.asarray(cam.translation, float) + np.array([params.bump_shift, 0.0, 0.0])
+    return replace(cam, translation=translation, rotation=rotation)
+
+
+def _in_camera(
+    cam: CameraCalibration, world: np.ndarray, forward: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """World points ``(P, N, 32, 3)`` and facing directions ``(P, N, 3)`` in ``cam``'s frame."""
+    rotation = Rotation.from_quat(cam.rotation).as_matrix()
+    return (world - cam.translation) @ rotation, forward @ rotation  # R^T (p - t)
+
+
 def _observe(
     cam: CameraCalibration,
     truth: Truth,
     clips: list[Clip],
     params: SimParams,
     rng: np.random.Generator,
+    *,
+    bump: CameraCalibration | None = None,
 ) -> _Stream:
     """Everything one camera reports, as arrays over its frames."""
     noisy = params.noise
@@ -334,8 +367,13 @@ def _observe(
     receive_ns = np.round((t_ref + params.latency) * 1e9).astype(np.int64)
 
     world = truth.at(t_ref)  # (P, N, 32, 3)
-    rotation = Rotation.from_quat(cam.rotation).as_matrix()
-    positions = (world - cam.translation) @ rotation  # R^T (p - t)
+    facing = body_forward(world)  # (P, N, 3) world frame
+    positions, forward = _in_camera(cam, world, facing)
+    if bump is not None:
+        moved = t_ref >= params.clock_start + params.bump_time
+        after, forward_after = _in_camera(bump, world, facing)
+        positions = np.where(moved[None, :, None, None], after, positions)
+        forward = np.where(moved[None, :, None], forward_after, forward)
     present = np.isfinite(world).all(axis=(2, 3))
     joint_in = in_view(positions, params.fov, params.depth_range)
     hidden = occluded(positions)
@@ -343,7 +381,6 @@ def _observe(
     detected = present & (joint_in.mean(axis=-1) >= 0.5)
     if noisy:
         detected &= rng.random(detected.shape) >= params.miss_rate
-        forward = body_forward(world) @ rotation  # (P, N, 3) camera frame
         positions = _joint_noise(positions, forward, joint_in, hidden, params=params, rng=rng)
         _sdk_mistakes(positions, levels, forward, detected, params=params, rng=rng)
     ghosts_spec = []
@@ -607,11 +644,18 @@ def simulate(params: SimParams | None = None, progress: object = None) -> SimRes
         drift_ppm=params.drift_ppm,
         clock_start=params.clock_start,
     )
+    if params.bump_camera and params.bump_camera not in calibration.cameras:
+        names = sorted(calibration.cameras)
+        msg = f"bump_camera must be one of {names}, not {params.bump_camera!r}"
+        raise ConfigError(msg)
     clips = [person.clip for person in people]
     camera_groups, labels, receive = {}, {}, {}
     camera_seeds = np.random.SeedSequence([params.seed, 1]).spawn(len(calibration.cameras))
     for k, (name, cam) in enumerate(calibration.cameras.items()):
-        stream = _observe(cam, truth, clips, params, np.random.default_rng(camera_seeds[k]))
+        bump = bumped_pose(cam, params) if name == params.bump_camera else None
+        stream = _observe(
+            cam, truth, clips, params, np.random.default_rng(camera_seeds[k]), bump=bump
+        )
         camera_groups[name], labels[name] = _groups(cam.frame_id, stream, truth.person_ids)
         receive[name] = stream.receive_ns[stream.kept]
         report(name, 2 + k, len(calibration.cameras) + 2)

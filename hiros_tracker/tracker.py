@@ -955,9 +955,9 @@ def warm_up() -> None:
     The first ``Tracker`` of a process calls it, so that a live node pays the cost (about
     0.3 s from the cache, 10-20 s on the very first run after an install or a kernel change)
     before its first frame rather than on it: a burst of frames arriving during that first
-    frame would otherwise overflow the subscription queue. A throwaway tracker follows one
-    standing people seen by a calibrated camera through every code path a frame takes (two
-    of them, so that a track is confirmed beside a confirmed one).
+    frame would otherwise overflow the subscription queue. A throwaway tracker follows two
+    standing people seen by a calibrated camera through every code path a frame takes (two,
+    so that a track is confirmed beside a confirmed one).
     """
     global _WARM  # noqa: PLW0603 - once per process
     if _WARM:

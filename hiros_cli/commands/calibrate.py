@@ -7,7 +7,10 @@ reads (DESIGN.md format) with quality figures per camera, and prints a one-scree
 
 The recording's message arrival (log) times narrow the clock search; cameras whose clocks
 differ by more than --prior-window seconds from what the arrival times say need a larger
-window.
+window. A recording whose log times are only the frames' own stamps (converted from files
+that kept no receiver clock) says nothing about the lag: every lag is searched then. People
+repeating one motion correlate about as well at every repetition; such a lag is refused as
+ambiguous, and --max-offset narrows the search to leave the other repetitions out.
 
 Examples:
   hiros calibrate sample/recording.mcap --out calib.yaml
@@ -52,6 +55,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         action="store_true",
         help="ignore the recording's log times (search every lag the data allow)",
     )
+    parser.add_argument(
+        "--max-offset",
+        type=float,
+        help="without arrival times: search lags within this many seconds (default: every "
+        "lag; narrow it when people repeat one motion and the lag is refused as ambiguous)",
+    )
     parser.add_argument("--no-drift", action="store_true", help="do not estimate clock drift")
 
 
@@ -68,6 +77,8 @@ def run(args: argparse.Namespace) -> int:
     params = CalibratorParams(reference=args.reference or "")
     if args.prior_window is not None:
         params.prior_window = args.prior_window
+    if args.max_offset is not None:
+        params.max_offset = args.max_offset
     if args.no_drift:
         params.estimate_drift = False
     calibration, result = calibrate_recording(
@@ -118,6 +129,16 @@ def read_camera_groups(
     return dict(groups), dict(arrivals)
 
 
+def _log_times_are_stamps(
+    groups: dict[str, list[SkeletonGroup]], arrivals: dict[str, list[int]]
+) -> bool:
+    """True when every frame was logged at exactly its own stamp: no arrival information."""
+    return all(
+        all(log == group.stamp_ns for group, log in zip(groups[c], arrivals[c], strict=True))
+        for c in groups
+    )
+
+
 def calibrate_recording(
     recording: Path,
     *,
@@ -161,6 +182,12 @@ def calibrate_recording(
         def progress(stage: str, done: float) -> None:
             bar.update(task, description=stage, completed=10 + 90 * done)
 
+        if use_arrival and _log_times_are_stamps(groups, arrivals):
+            bar.console.print(
+                "the recording's log times are the frames' own stamps (no receiver clock): "
+                "every lag is searched"
+            )
+            use_arrival = False
         progress("body tracks", 0.0)
         calibrator = Calibrator(params)
         calibration = calibrator.calibrate(

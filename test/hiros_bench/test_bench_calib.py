@@ -21,13 +21,20 @@ class _Console:
 
 
 @pytest.mark.slow
-def test_calib_bench_prints_each_setup_beside_its_baselines():
+def test_calib_bench_prints_each_setup_beside_its_baselines_floor_and_live_check():
     console = _Console()
     lines = run(console, seeds=[1], duration=30.0)
     assert lines == console.lines
     rows = [line for line in lines if line.split(" ")[0] in SETUPS]
     baselines = [line for line in lines if "pose baseline" in line]
-    assert len(rows) == len(baselines) == len(SETUPS)
+    floors = [line for line in lines if "given the true rotation" in line]
+    assert len(rows) == len(baselines) == len(floors) == len(SETUPS)
+    (live,) = [line for line in lines if line.startswith("live ")]
+    assert "1 runs" in live
+    assert "0 missed" in live  # a 5° knock is far above the detection threshold
+    for line in floors:
+        median, p95 = (float(x) for x in re.findall(r"\d+\.\d+", line))
+        assert 0.0 <= median <= p95 < 10.0
     for line in baselines:
         figures = [float(x) for x in re.findall(r"-?\d+\.\d+|nan", line)]
         assert "0 unsolved" in line

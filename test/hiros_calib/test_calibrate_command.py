@@ -74,3 +74,22 @@ def test_a_recording_without_camera_topics_names_its_topics(tmp_path, capsys):
         writer.write("/chatter", "std_msgs/msg/String", b"\x00\x01\x00\x00\x01\x00\x00\x00\x00", 1)
     assert main(["calibrate", str(path), "--out", str(tmp_path / "calib.yaml")]) == 1
     assert "holds no camera skeletons" in capsys.readouterr().err
+
+
+def test_log_times_that_are_only_the_stamps_do_not_narrow_the_search(make_scene, tmp_path, capsys):
+    # as converted from files without a receiver clock: each frame logged at its own stamp,
+    # and the two device clocks 5 s apart, outside the window an arrival prior would search
+    scene = make_scene(angles_deg=(0.0, 90.0), duration=15.0, offsets=(0.0, 5.0), seed=4)
+    path = tmp_path / "stamps.mcap"
+    writer = RecordingWriter(path)
+    messages = sorted(
+        (g.stamp_ns, name, g) for name, groups in scene.camera_groups.items() for g in groups
+    )
+    for log_time, name, group in messages:
+        writer.write(f"/{name}/skeletons", SKELETON_GROUP, encode_group(group), log_time)
+    writer.close()
+    out = tmp_path / "calib.yaml"
+    assert main(["calibrate", str(path), "--out", str(out)]) == 0
+    assert "log times are the frames' own stamps" in capsys.readouterr().out
+    truth = scene.truth.cameras["cam1"].time_offset
+    assert load_calibration(out).cameras["cam1"].time_offset == pytest.approx(truth, abs=3e-3)

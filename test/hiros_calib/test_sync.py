@@ -1,10 +1,13 @@
 import numpy as np
 import pytest
 
+from hiros_calib.calibrator import Calibrator, CalibratorParams
 from hiros_calib.signature import pose_signature, select_joints
 from hiros_calib.sync import PairOffset, SyncParams, estimate_pair_offset, solve_clocks, synchronise
 from hiros_calib.tracks import extract_tracks
+from hiros_core.errors import CalibrationError
 from hiros_core.layouts import AZURE_KINECT
+from hiros_sim import SimParams, simulate
 
 
 def _tracks(scene):
@@ -117,3 +120,20 @@ def test_unlinked_camera_is_refused_with_the_pair_reason():
     assert clocks["c1"].time_offset == pytest.approx(0.1)  # o_b - o_a = tau
     assert not clocks["c2"].ok
     assert "no body is seen by both cameras" in clocks["c2"].reason
+
+
+def test_a_repeated_walk_is_refused_as_ambiguous_unless_the_lag_is_pinned():
+    # the simulator's person walks one clip back and forth: every repetition correlates
+    # about as well as the true lag, which only the arrival times tell apart
+    recording = simulate(SimParams(n_cameras=2, n_people=1, duration=30.0, seed=2))
+    with pytest.raises(CalibrationError, match="the lag is ambiguous"):
+        Calibrator(CalibratorParams(reference="k01")).calibrate(recording.camera_groups)
+    truth = recording.calibration.cameras["k02"].time_offset
+    calibrator = Calibrator(CalibratorParams(reference="k01"))
+    estimate = calibrator.calibrate(recording.camera_groups, arrival_ns=recording.receive_ns)
+    assert estimate.cameras["k02"].time_offset == pytest.approx(truth, abs=0.01)
+    assert calibrator.result.sync_pairs[0].quality["ambiguity"] < 0.5
+    # or a search narrow enough to leave the other repetitions out (the offset is 2.46 s)
+    narrow = Calibrator(CalibratorParams(reference="k01", max_offset=3.0))
+    estimate = narrow.calibrate(recording.camera_groups)
+    assert estimate.cameras["k02"].time_offset == pytest.approx(truth, abs=0.01)

@@ -6,6 +6,7 @@ import pytest
 from hiros_core.errors import ConfigError
 from hiros_core.layouts import AZURE_KINECT
 from hiros_sim import CONFIDENCE_OF_LEVEL, SimParams, simulate
+from hiros_sim.simulate import bumped_pose
 
 IDX = AZURE_KINECT.index
 SHORT = SimParams(n_cameras=3, n_people=3, duration=8.0, seed=3)
@@ -37,6 +38,30 @@ def test_truth_in_camera_is_the_clean_stream(clean):
                 np.testing.assert_allclose(skeleton.positions, expected, atol=1e-6)
                 checked += 1
     assert checked > 1000
+
+
+def test_a_bumped_camera_sees_from_its_new_pose_after_the_bump(clean):
+    bump = {"bump_camera": "k03", "bump_time": 4.0, "bump_rotation": 5.0, "bump_shift": 0.1}
+    bumped = simulate(replace(SHORT, noise=False, **bump))
+    cam = clean.calibration.camera("k03")
+    moved = bumped_pose(cam, bumped.params)
+    truth = bumped.calibration.camera("k03")  # the truth keeps the first pose
+    np.testing.assert_array_equal(truth.translation, cam.translation)
+    np.testing.assert_array_equal(truth.rotation, cam.rotation)
+    before = after = 0
+    for old, new in zip(clean.camera_groups["k03"], bumped.camera_groups["k03"], strict=True):
+        t_ref = cam.to_reference_time(new.stamp_ns * 1e-9)
+        pose = moved if t_ref >= SHORT.clock_start + 4.0 else cam
+        before, after = before + (pose is cam), after + (pose is moved)
+        for kept, seen in zip(old.skeletons, new.skeletons, strict=True):
+            world = cam.extrinsics.apply(kept.positions)
+            expected = pose.extrinsics.inverse().apply(world)
+            np.testing.assert_allclose(seen.positions, expected, atol=1e-6)
+    assert before > 50
+    assert after > 50
+    assert clean.camera_groups["k01"][5].skeletons[0].positions == pytest.approx(
+        bumped.camera_groups["k01"][5].skeletons[0].positions
+    )
 
 
 def test_noise_model_with_zero_magnitudes_is_the_truth(clean):
@@ -170,6 +195,7 @@ def test_confidence_levels_match_the_bridge_convention():
         {"rate": float("nan")},
         {"setup": "nowhere"},
         {"noise_body_share": 1.5},
+        {"bump_camera": "k09"},
     ],
 )
 def test_bad_params(bad):
