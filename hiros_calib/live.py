@@ -11,8 +11,14 @@
 - every ``check_period`` seconds, a cheap check of the last ``check_length`` seconds: with the
   current calibration, the same people seen by two cameras should land on the same points.
   When every pair a camera belongs to disagrees by more than ``moved_ratio`` times its usual
-  residual (and ``moved_floor``), the camera was moved or its clock jumped: its older frames
-  are dropped and it is recalibrated from ``recalibrate_after`` seconds of new data.
+  residual (and ``moved_floor``), or its joints are all displaced the same way by more than
+  ``moved_shift``, the camera was moved or its clock jumped: its older frames are dropped and
+  it is recalibrated from ``recalibrate_after`` seconds of new data;
+- an estimate that disagrees with the current one is not thrown away for good: it replaces
+  the current one when it rests on more of the same frames (a recalibration from a few
+  seconds can be wrong, e.g. turned 180° for cameras facing each other), or when
+  ``replace_after`` estimates in a row disagree with the current one and agree with each
+  other (the current one is wrong, or the camera changed in a way the check missed).
 
 All times are nanoseconds on the receiver's clock (``arrival_ns``) except the frames' own
 stamps, which stay on their camera clocks.
@@ -31,9 +37,9 @@ import numpy as np
 from scipy.spatial.transform import Rotation, Slerp
 
 from hiros_calib.calibrator import Calibrator, CalibratorParams
-from hiros_calib.extrinsics import Correspondences, associate, pair_correspondences
+from hiros_calib.extrinsics import Correspondences, pair_correspondences
 from hiros_calib.sync import CameraClock
-from hiros_calib.tracks import extract_tracks
+from hiros_calib.tracks import BodyTrack, extract_tracks
 from hiros_core.accounting import Accounted, Drops
 from hiros_core.calibration import Calibration, CameraCalibration
 from hiros_core.errors import CalibrationError
@@ -70,8 +76,17 @@ class LiveCalibratorParams(CalibratorParams):
     """A pair residual this many times its usual value flags a change ..."""
     moved_floor: float = 0.12
     """... if it also exceeds this (m)."""
+    moved_shift: float = 0.12
+    """A pair whose joints are displaced the same way by more than this (m; the length of the
+    per-axis median of the residual vectors) flags a change too. A knock of 2° moves every
+    joint ~10 cm the same way, which hardly shows in the median distance, set by the SDKs'
+    noise (~12 cm), but stands out of the median displacement (3-6 cm unmoved, on the
+    simulator)."""
     recalibrate_after: float = 5.0
     """Seconds of frames after a change before the camera is recalibrated."""
+    replace_after: int = 2
+    """Estimates in a row that disagree with the current one (and agree with each other)
+    before the newest replaces it."""
     restart_after_backwards: float = 1.0
     """A frame stamped this many seconds before its camera's newest one starts the camera's
     buffer again (its clock restarted, or the newest frame was a glitch); a smaller step back
@@ -96,14 +111,21 @@ def _blend(old: CameraCalibration, new: CameraCalibration, weight: float) -> Cam
     )
 
 
-def _agrees(old: CameraCalibration, new: CameraCalibration, params: LiveCalibratorParams) -> bool:
+def _difference(old: CameraCalibration, new: CameraCalibration) -> tuple[float, float, float]:
+    """Clock (s, at the new estimate's epoch), rotation (deg) and translation (m) apart."""
     at = new.drift_epoch
     old_offset = old.time_offset + old.drift * (at - old.drift_epoch)
     angle = math.degrees((old.extrinsics.rotation.inv() * new.extrinsics.rotation).magnitude())
+    distance = float(np.linalg.norm(old.translation - new.translation))
+    return abs(old_offset - new.time_offset), angle, distance
+
+
+def _agrees(old: CameraCalibration, new: CameraCalibration, params: LiveCalibratorParams) -> bool:
+    clock, angle, distance = _difference(old, new)
     return (
-        abs(old_offset - new.time_offset) <= params.agree_time
+        clock <= params.agree_time
         and angle <= params.agree_rotation
-        and float(np.linalg.norm(old.translation - new.translation)) <= params.agree_translation
+        and distance <= params.agree_translation
     )
 
 
@@ -146,6 +168,7 @@ class LiveCalibrator(Accounted):
         self._last_estimate: int | None = None
         self._last_check: int | None = None
         self._changed_at: dict[str, int] = {}
+        self._rivals: dict[str, list[CameraCalibration]] = {}  # disagreeing estimates in a row
         self._lock = threading.Lock()
 
     # -- input
@@ -252,41 +275,69 @@ class LiveCalibrator(Accounted):
         if not self.calibration.reference:
             self.calibration.reference = estimate.reference
         for camera, new in estimate.cameras.items():
-            old = self.calibration.cameras.get(camera)
-            first = groups[camera][0].stamp_ns
-            if old is None or camera in self._changed:
-                self.calibration.cameras[camera] = new
-                self._changed.discard(camera)
-                self._support[camera] = first
-                self.events.append((now_ns, f"{camera}: calibrated"))
-                changed = True
-            elif _agrees(old, new, self.params):
-                # while the window still holds every frame the current estimate rests on (it
-                # is refilling after a start or a recalibration) the new estimate, on more
-                # of the same data, supersedes it; once frames slide out, or for a pose
-                # loaded from a file, blend
-                grown = camera in self._support and first <= self._support[camera]
-                self.calibration.cameras[camera] = (
-                    new if grown else _blend(old, new, self.params.blend)
-                )
-                self._support[camera] = first
-                changed = True
-            else:
-                self.drops["estimate_disagrees"] += 1
+            changed |= self._merge(camera, new, groups[camera][0].stamp_ns, now_ns)
         for camera, reason in (calibrator.result.refused if calibrator.result else {}).items():
             self.events.append((now_ns, f"{camera}: not calibrated yet ({reason})"))
-        self._baseline = self._residuals(groups)
+        self._baseline = {pair: distance for pair, (distance, _) in self._residuals(groups).items()}
         return changed
+
+    def _merge(self, camera: str, new: CameraCalibration, first: int, now_ns: int) -> bool:
+        """Take a camera's new estimate (resting on frames stamped from ``first``) or not."""
+        old = self.calibration.cameras.get(camera)
+        # while the window still holds every frame the current estimate rests on (it is
+        # refilling after a start or a recalibration) the new estimate, on more of the same
+        # data, supersedes it; once frames slide out, or for a pose loaded from a file, an
+        # agreeing estimate is blended in and a disagreeing one must be confirmed
+        grown = camera in self._support and first <= self._support[camera]
+        if old is None or camera in self._changed:
+            self._changed.discard(camera)
+            self.events.append((now_ns, f"{camera}: calibrated"))
+        elif _agrees(old, new, self.params):
+            if not grown:
+                new = _blend(old, new, self.params.blend)
+        elif grown or self._outvoted(camera, new):
+            clock, angle, distance = _difference(old, new)
+            why = (
+                "an estimate on more of the same frames"
+                if grown
+                else f"{self.params.replace_after} estimates in a row"
+            )
+            self.events.append(
+                (
+                    now_ns,
+                    f"{camera}: replaced, {why} disagreed with it by {angle:.1f} deg, "
+                    f"{100 * distance:.0f} cm, {1e3 * clock:.0f} ms",
+                )
+            )
+        else:
+            self.drops["estimate_disagrees"] += 1
+            return False
+        self._rivals.pop(camera, None)
+        self.calibration.cameras[camera] = new
+        self._support[camera] = first
+        return True
+
+    def _outvoted(self, camera: str, new: CameraCalibration) -> bool:
+        """Whether ``new`` makes ``replace_after`` disagreeing estimates that agree in a row."""
+        rivals = self._rivals.setdefault(camera, [])
+        if rivals and not _agrees(rivals[-1], new, self.params):
+            rivals.clear()
+        rivals.append(new)
+        return len(rivals) >= self.params.replace_after
 
     def check(self, now_ns: int) -> bool:
         """Look for moved cameras or jumped clocks in the newest frames; True if one is found."""
         groups, _ = self._window(self.params.check_length)
+        params = self.params
         residuals = self._residuals(groups)
         suspicious = {
             pair
-            for pair, value in residuals.items()
-            if value > self.params.moved_floor
-            and value > self.params.moved_ratio * self._baseline.get(pair, value)
+            for pair, (distance, shift) in residuals.items()
+            if shift > params.moved_shift
+            or (
+                distance > params.moved_floor
+                and distance > params.moved_ratio * self._baseline.get(pair, distance)
+            )
         }
         flagged = set()
         for camera in self.calibration.cameras:
@@ -314,8 +365,12 @@ class LiveCalibrator(Accounted):
             self.events.append((now_ns, f"{camera}: moved or clock jumped, recalibrating"))
         return True
 
-    def _residuals(self, groups: dict[str, list]) -> dict[tuple[str, str], float]:
-        """Median joint disagreement (m) per calibrated camera pair in these frames."""
+    def _residuals(self, groups: dict[str, list]) -> dict[tuple[str, str], tuple[float, float]]:
+        """Per calibrated camera pair in these frames: median joint distance and displacement (m).
+
+        The displacement is the length of the per-axis median of the residual vectors: the
+        SDKs' noise scatters them, a moved camera shifts them all the same way.
+        """
         cal = self.calibration
         cameras = [c for c in groups if c in cal.cameras and c not in self._changed]
         params = self.params
@@ -325,18 +380,14 @@ class LiveCalibrator(Accounted):
         out = {}
         for k, a in enumerate(cameras):
             for b in cameras[k + 1 :]:
-                clock_a, clock_b = _clock(a, cal.cameras[a]), _clock(b, cal.cameras[b])
-                check = dataclasses.replace(params, min_common_time=1.0)
-                matches = associate(tracks[a], tracks[b], clock_a, clock_b, check)
-                values = []
                 relative = cal.cameras[a].extrinsics.inverse() @ cal.cameras[b].extrinsics
-                for i, j, _ in matches:
-                    c = pair_correspondences(tracks[a][i], tracks[b][j], clock_a, clock_b, params)
-                    if c is None:
-                        continue
-                    values.append(_invariant_residuals(c, relative))
-                if values:
-                    out[a, b] = float(np.median(np.concatenate(values)))
+                clocks = _clock(a, cal.cameras[a]), _clock(b, cal.cameras[b])
+                vectors = _matched_residuals((tracks[a], tracks[b]), clocks, relative, params)
+                if len(vectors):
+                    out[a, b] = (
+                        float(np.median(np.linalg.norm(vectors, axis=1))),
+                        float(np.linalg.norm(np.median(vectors, axis=0))),
+                    )
         return out
 
     def snapshot(self) -> dict[str, Any]:
@@ -346,11 +397,53 @@ class LiveCalibrator(Accounted):
         return {"buffered": buffered, "recalibrating": sorted(self._changed), **self.drops}
 
 
+_MIN_CHECK_OVERLAP = 1.0
+"""Seconds two tracks must be seen together to be compared by the check."""
+
+
+def _matched_residuals(
+    tracks: tuple[list[BodyTrack], list[BodyTrack]],
+    clocks: tuple[CameraClock, CameraClock],
+    relative: RigidTransform,
+    params: LiveCalibratorParams,
+) -> np.ndarray:
+    """``(N, 3)`` residual vectors of the body pairs that the current calibration puts together.
+
+    Every track of a is paired with at most one track of b, nearest pairs first (median
+    distance). With the poses known, where people stand tells them apart; their poses'
+    shapes over a few seconds do not always (two people walking alike were matched wrongly,
+    and the 2 m residual flagged a camera that had not moved). A camera that did move still
+    shows: its nearest pairs are far too.
+    """
+    candidates = []
+    for i, track_a in enumerate(tracks[0]):
+        for j, track_b in enumerate(tracks[1]):
+            c = pair_correspondences(track_a, track_b, *clocks, params)
+            if c is None or np.ptp(c.times) < _MIN_CHECK_OVERLAP:
+                continue
+            vectors = _invariant_residuals(c, relative)
+            if len(vectors):
+                distance = float(np.median(np.linalg.norm(vectors, axis=1)))
+                candidates.append((distance, i, j, vectors))
+    candidates.sort(key=lambda candidate: candidate[0])
+    taken_a, taken_b, matched = set(), set(), []
+    for _, i, j, vectors in candidates:
+        if i not in taken_a and j not in taken_b:
+            taken_a.add(i)
+            taken_b.add(j)
+            matched.append(vectors)
+    return np.concatenate(matched) if matched else np.zeros((0, 3))
+
+
 def _invariant_residuals(c: Correspondences, relative: RigidTransform) -> np.ndarray:
-    """Distances of mirror-proof points (midline joints, left/right midpoints) under a pose."""
+    """Residual vectors (camera a frame) of the mirror-proof points under a pose.
+
+    The midline joints and the midpoints of left/right pairs do not change when an SDK swaps
+    left and right, so its mistakes do not flag a camera.
+    """
     keep = np.flatnonzero(np.arange(len(c.mirror)) <= c.mirror)
     partner = c.mirror[keep]
     points_a = 0.5 * (c.points_a[:, keep] + c.points_a[:, partner])
     points_b = 0.5 * (c.points_b[:, keep] + c.points_b[:, partner])
     valid = np.minimum(c.weights[:, keep], c.weights[:, partner]) > 0
-    return np.linalg.norm(relative.apply(points_b) - points_a, axis=2)[valid]
+    return (relative.apply(points_b) - points_a)[valid]

@@ -32,6 +32,7 @@ def test_calib_bench_prints_each_setup_beside_its_baselines_floor_and_live_check
     (live,) = [line for line in lines if line.startswith("live ")]
     assert "1 runs" in live
     assert "0 missed" in live  # a 5° knock is far above the detection threshold
+    assert "0 false alarms" in live
     for line in floors:
         median, p95 = (float(x) for x in re.findall(r"\d+\.\d+", line))
         assert 0.0 <= median <= p95 < 10.0

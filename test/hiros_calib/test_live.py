@@ -4,6 +4,7 @@ from scipy.spatial.transform import Rotation
 
 from hiros_calib.extrinsics import relative_error
 from hiros_calib.live import LiveCalibrator, LiveCalibratorParams
+from hiros_core.calibration import Calibration, CameraCalibration
 from hiros_core.geometry import RigidTransform
 
 
@@ -80,3 +81,99 @@ def test_stamps_far_back_restart_the_cameras_buffer_small_steps_are_dropped():
     assert live.snapshot()["buffered"] == {"cam0": 3}  # 4, 5, 6
     assert live.drops == {"stamps_went_back": 1, "out_of_order": 1}
     assert "cam0: stamps went back" in live.events[-1][1]
+
+
+def _knock(make_scene, degrees, shift, **options):
+    """A scene whose cam1 turns ``degrees`` about the vertical and slides ``shift`` m at 128 s."""
+    turn = Rotation.from_rotvec([0.0, 0.0, np.radians(degrees)])
+    position = make_scene(angles_deg=(0.0, 100.0), duration=1.0).truth.cameras["cam1"].translation
+    move = RigidTransform(turn, position - turn.apply(position) + np.array([shift, 0.0, 0.0]))
+    scene = make_scene(angles_deg=(0.0, 100.0), moves={1: (100.0 + 28.0, move)}, **options)
+    return scene, move
+
+
+@pytest.mark.slow
+def test_a_small_knock_is_found_by_every_joint_moving_the_same_way(make_scene):
+    """With noisy skeletons a 2.5° knock hardly raises the median joint distance (the noise sets
+    it) but displaces the joints all alike, which ``moved_shift`` catches."""
+    scene, _ = _knock(make_scene, 2.5, 0.03, duration=40.0, noise=0.07)
+    moved_at = scene.truth.cameras["cam0"].to_reference_time(128.0)
+    params = LiveCalibratorParams(buffer_length=20.0, first_estimate_after=12.0, update_period=8.0)
+    found = {}
+    for shift in (params.moved_shift, np.inf):
+        live = LiveCalibrator(LiveCalibratorParams(**{**vars(params), "moved_shift": shift}))
+        _feed(scene, live)
+        found[shift] = [t * 1e-9 for t, m in live.events if m.startswith("cam1: moved")]
+        assert not [m for t, m in live.events if t * 1e-9 < moved_at and "moved" in m]
+    detected = found[params.moved_shift]
+    assert detected
+    assert moved_at < detected[0] < moved_at + 10.0
+    assert not found[np.inf], found  # the median distance alone misses it
+
+
+@pytest.mark.slow
+def test_a_wrong_pose_is_replaced_once_estimates_keep_disagreeing_with_it(make_scene):
+    """A pose that new estimates all contradict (loaded from a stale file, or a recalibration
+    from a few seconds gone wrong) used to stay for good, each estimate dropped as
+    'estimate_disagrees'. With the check off, only the estimates can mend it."""
+    scene = make_scene(angles_deg=(0.0, 100.0), duration=40.0, noise=0.005)
+    truth = scene.truth.cameras
+    true_pose = truth["cam0"].extrinsics.inverse() @ truth["cam1"].extrinsics  # world = cam0
+    turned = Rotation.from_rotvec([0.0, 0.0, np.radians(20.0)]) * true_pose.rotation
+    start = Calibration(reference="cam0", world_frame="world")
+    start.cameras = {
+        "cam0": CameraCalibration(**{**vars(truth["cam0"]), "translation": np.zeros(3),
+                                     "rotation": np.array([0.0, 0.0, 0.0, 1.0])}),
+        "cam1": CameraCalibration(**{**vars(truth["cam1"]), "translation": true_pose.translation,
+                                     "rotation": turned.as_quat()}),
+    }  # fmt: skip
+    params = LiveCalibratorParams(
+        buffer_length=20.0,
+        first_estimate_after=12.0,
+        update_period=8.0,
+        moved_floor=np.inf,
+        moved_shift=np.inf,
+    )
+    live = LiveCalibrator(params, calibration=start)
+    _feed(scene, live)
+    events = " | ".join(f"{t * 1e-9:.1f} {m}" for t, m in live.events)
+    replaced = [m for _, m in live.events if m.startswith("cam1: replaced")]
+    assert replaced, events
+    assert "2 estimates in a row disagreed with it by" in replaced[0]
+    assert float(replaced[0].split(" by ")[1].split(" deg")[0]) == pytest.approx(20.0, abs=0.5)
+    angle, distance = _pose_error(live, true_pose)
+    assert angle < 0.5, events
+    assert distance < 0.02, events
+    assert live.drops["estimate_disagrees"] == 1
+
+
+def test_the_check_pairs_people_by_where_the_current_poses_put_them():
+    """Two people alike in shape and motion, 1 m apart, seen with 2 cm of noise: their pose
+    signatures cannot tell them apart (on this seed the signature association pairs them
+    crosswise, a 1 m residual: what flagged an unmoved camera on the simulator). With the
+    poses known, each is paired with the body at the same place."""
+    from hiros_calib.live import _matched_residuals
+    from hiros_calib.sync import CameraClock
+    from hiros_calib.tracks import BodyTrack
+    from hiros_core.layouts import AZURE_KINECT
+
+    rng = np.random.default_rng(1)
+    times = np.arange(90) / 30.0
+    shape = rng.uniform(-0.3, 0.3, (1, 32, 3))
+    walk = np.stack([np.cos(times), np.sin(times), np.zeros_like(times)], axis=1)[:, None]
+    people = [shape + walk, shape + walk + np.array([1.0, 0.0, 0.0])]
+
+    def tracks():
+        return [
+            BodyTrack(
+                "a", k, AZURE_KINECT, times, p + rng.normal(0, 0.02, p.shape), np.ones((90, 32))
+            )
+            for k, p in enumerate(people)
+        ]
+
+    clock = CameraClock("a", "ok", "", 0.0, 0.0, 0.0)
+    vectors = _matched_residuals(
+        (tracks(), tracks()), (clock, clock), RigidTransform.identity(), LiveCalibratorParams()
+    )
+    assert len(vectors) == 2 * 90 * 19  # both people, every mirror-proof point of every frame
+    assert np.median(np.linalg.norm(vectors, axis=1)) < 0.05
