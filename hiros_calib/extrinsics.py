@@ -77,7 +77,7 @@ from scipy.spatial.transform import Rotation
 from hiros_calib.signature import DEFAULT_JOINTS, pose_signature, select_joints
 from hiros_calib.sync import CameraClock
 from hiros_calib.tracks import BodyTrack
-from hiros_core.geometry import RigidTransform
+from hiros_core.geometry import RigidTransform, kabsch, kabsch_batch
 from hiros_core.layouts import Layout
 
 __all__ = [
@@ -152,40 +152,6 @@ class ExtrinsicsParams:
     """Fewer usable correspondences than this and the pair gives no pose."""
     seed: int = 0
     """Random seed of RANSAC, for repeatable results."""
-
-
-# --------------------------------------------------------------------------- Kabsch
-
-
-def kabsch(
-    target: np.ndarray, source: np.ndarray, weights: np.ndarray | None = None
-) -> RigidTransform:
-    """The rigid transform moving ``source (N, 3)`` onto ``target (N, 3)`` (weighted SVD).
-
-    Kabsch (1976) / Umeyama (1991) without scale: minimises ``sum w |R s + t - p|^2``.
-    """
-    rotation, translation = _kabsch_batch(target[None], source[None], None if weights is None
-                                          else weights[None])  # fmt: skip
-    return RigidTransform(Rotation.from_matrix(rotation[0]), translation[0])
-
-
-def _kabsch_batch(
-    target: np.ndarray, source: np.ndarray, weights: np.ndarray | None
-) -> tuple[np.ndarray, np.ndarray]:
-    """Kabsch for ``H`` problems at once: ``(H, N, 3)`` points -> ``(H, 3, 3)``, ``(H, 3)``."""
-    if weights is None:
-        weights = np.ones(target.shape[:2])
-    w = weights / np.maximum(weights.sum(axis=1, keepdims=True), 1e-12)
-    mean_t = (w[..., None] * target).sum(axis=1)
-    mean_s = (w[..., None] * source).sum(axis=1)
-    cov = np.einsum("hn,hni,hnj->hij", w, target - mean_t[:, None], source - mean_s[:, None])
-    u, _, vt = np.linalg.svd(cov)
-    sign = np.sign(np.linalg.det(u @ vt))
-    sign[sign == 0] = 1.0
-    u[:, :, 2] *= sign[:, None]
-    rotation = u @ vt
-    translation = mean_t - np.einsum("hij,hj->hi", rotation, mean_s)
-    return rotation, translation
 
 
 # --------------------------------------------------------------------------- correspondences
@@ -448,7 +414,7 @@ def _ransac(
     area = np.linalg.norm(
         np.cross(sample_b[:, 1] - sample_b[:, 0], sample_b[:, 2] - sample_b[:, 0]), axis=1
     )
-    rotation, translation = _kabsch_batch(sample_a, sample_b, None)
+    rotation, translation = kabsch_batch(sample_a, sample_b)
     check = rng.choice(n, size=min(n, params.ransac_checks), replace=False)
     moved = np.einsum("hij,nj->hni", rotation, points_b[check]) + translation[:, None]
     residual = np.linalg.norm(moved - points_a[check][None], axis=2)

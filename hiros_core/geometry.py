@@ -13,7 +13,7 @@ from scipy.spatial.transform import Rotation
 
 from hiros_core.model import Skeleton
 
-__all__ = ["RigidTransform", "normalize_quaternions"]
+__all__ = ["RigidTransform", "kabsch", "kabsch_batch", "normalize_quaternions"]
 
 
 def normalize_quaternions(quaternions: np.ndarray) -> np.ndarray:
@@ -110,3 +110,39 @@ class RigidTransform:
         box[0:3] = self.apply(box[0:3])
         box[3:7] = self.rotate_quaternions(box[None, 3:7])[0]
         return out
+
+
+def kabsch(
+    target: np.ndarray, source: np.ndarray, weights: np.ndarray | None = None
+) -> RigidTransform:
+    """The rigid transform moving ``source (N, 3)`` onto ``target (N, 3)`` (weighted SVD).
+
+    Kabsch (1976) / Umeyama (1991) without scale: minimises ``sum w |R s + t - p|^2``.
+    """
+    rotation, translation = kabsch_batch(
+        target[None], source[None], None if weights is None else weights[None]
+    )
+    return RigidTransform(Rotation.from_matrix(rotation[0]), translation[0])
+
+
+def kabsch_batch(
+    target: np.ndarray, source: np.ndarray, weights: np.ndarray | None = None
+) -> tuple[np.ndarray, np.ndarray]:
+    """Kabsch for ``H`` problems at once: ``(H, N, 3)`` points -> ``(H, 3, 3)``, ``(H, 3)``.
+
+    One batched SVD instead of a loop: RANSAC scores hundreds of minimal samples, and the
+    simulator's noise fit one transform per frame. Never returns a reflection.
+    """
+    if weights is None:
+        weights = np.ones(target.shape[:2])
+    w = weights / np.maximum(weights.sum(axis=1, keepdims=True), 1e-12)
+    mean_t = (w[..., None] * target).sum(axis=1)
+    mean_s = (w[..., None] * source).sum(axis=1)
+    cov = np.einsum("hn,hni,hnj->hij", w, target - mean_t[:, None], source - mean_s[:, None])
+    u, _, vt = np.linalg.svd(cov)
+    sign = np.sign(np.linalg.det(u @ vt))
+    sign[sign == 0] = 1.0
+    u[:, :, 2] *= sign[:, None]
+    rotation = u @ vt
+    translation = mean_t - np.einsum("hij,hj->hi", rotation, mean_s)
+    return rotation, translation

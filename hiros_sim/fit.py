@@ -92,6 +92,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from hiros_core.errors import RecordingError
+from hiros_core.geometry import kabsch, kabsch_batch
 from hiros_core.layouts import AZURE_KINECT
 from hiros_data import DATA_DIR
 from hiros_eval.body import limb_length_cv
@@ -149,18 +150,6 @@ def read_kinect_csv(path: str | Path) -> tuple[np.ndarray, np.ndarray]:
     return stamps, positions
 
 
-def _kabsch(source: np.ndarray, target: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
-    """Rotation, translation and RMS of ``target ≈ R source + t`` for ``(M, 3)`` points."""
-    mean_s, mean_t = source.mean(axis=0), target.mean(axis=0)
-    h = (source - mean_s).T @ (target - mean_t)
-    u, _, vt = np.linalg.svd(h)
-    d = np.sign(np.linalg.det(vt.T @ u.T))
-    rotation = vt.T @ np.diag([1.0, 1.0, d]) @ u.T
-    translation = mean_t - rotation @ mean_s
-    residual = target - (source @ rotation.T + translation)
-    return rotation, translation, float(np.sqrt(np.mean(np.sum(residual**2, axis=1))))
-
-
 def _interpolate(times: np.ndarray, rate: float, positions: np.ndarray) -> np.ndarray:
     frame = times * rate
     valid = (frame >= 0) & (frame <= positions.shape[0] - 1)
@@ -171,17 +160,11 @@ def _interpolate(times: np.ndarray, rate: float, positions: np.ndarray) -> np.nd
     return out
 
 
-def _kabsch_batch(source: np.ndarray, target: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Per-frame Kabsch for ``(F, M, 3)`` point sets: rotations ``(F, 3, 3)``, RMS ``(F,)``."""
-    src = source - source.mean(axis=1, keepdims=True)
-    dst = target - target.mean(axis=1, keepdims=True)
-    u, _, vt = np.linalg.svd(np.einsum("fmi,fmj->fij", src, dst))
-    d = np.sign(np.linalg.det(np.einsum("fji,fkj->fik", vt, u)))
-    fix = np.ones((len(d), 3))
-    fix[:, 2] = d
-    rotation = np.einsum("fji,fj,fkj->fik", vt, fix, u)
-    residual = dst - np.einsum("fij,fmj->fmi", rotation, src)
-    return rotation, np.sqrt(np.mean(np.sum(residual**2, axis=2), axis=1))
+def _kabsch_rms(source: np.ndarray, target: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Per-frame ``target ≈ R source + t`` for ``(F, M, 3)`` point sets: ``R (F, 3, 3)``, RMS."""
+    rotations, translations = kabsch_batch(target, source)
+    residual = target - (np.einsum("fij,fmj->fmi", rotations, source) + translations[:, None])
+    return rotations, np.sqrt(np.mean(np.sum(residual**2, axis=2), axis=1))
 
 
 def _core_parents() -> np.ndarray:
@@ -424,7 +407,7 @@ def align(
         ok = np.isfinite(moved[:, 0, 0]) & seen
         if ok.sum() < 0.6 * len(kinect_times):
             return np.inf
-        _, rms = _kabsch_batch(moved[ok][:, _CORE], kinect[ok][:, _CORE])
+        _, rms = _kabsch_rms(moved[ok][:, _CORE], kinect[ok][:, _CORE])
         return float(np.median(rms))
 
     span = reference.shape[0] / reference_rate
@@ -437,14 +420,15 @@ def align(
     ok = np.flatnonzero(np.isfinite(moved[:, 0, 0]) & seen)
     src, dst = moved[ok][:, _CORE], kinect[ok][:, _CORE]
     # each frame's own transform, scored by how many frames it explains
-    rotations, _ = _kabsch_batch(src, dst)
+    rotations, _ = _kabsch_rms(src, dst)
     translations = dst.mean(axis=1) - np.einsum("fij,fj->fi", rotations, src.mean(axis=1))
     candidates = np.einsum("cij,fmj->cfmi", rotations, src) + translations[:, None, None]
     frame_rms = np.sqrt(np.mean(np.sum((candidates - dst[None]) ** 2, axis=3), axis=2))
     best_candidate = int(np.argmax((frame_rms < flip_threshold).sum(axis=1)))
     inliers = frame_rms[best_candidate] < flip_threshold
-    rotation, translation, _ = _kabsch(src[inliers].reshape(-1, 3), dst[inliers].reshape(-1, 3))
-    residual = dst - (src @ rotation.T + translation)
+    pose = kabsch(dst[inliers].reshape(-1, 3), src[inliers].reshape(-1, 3))
+    rotation, translation = pose.rotation.as_matrix(), pose.translation
+    residual = dst - pose.apply(src)
     rms_all = np.sqrt(np.mean(np.sum(residual**2, axis=2), axis=1))
     flipped = np.zeros(len(kinect_times), dtype=bool)
     flipped[ok] = rms_all > flip_threshold

@@ -1,40 +1,16 @@
 import numpy as np
 import pytest
-from scipy.spatial.transform import Rotation
 
 from hiros_calib.extrinsics import (
     ExtrinsicsParams,
     associate,
     baseline_pair_pose,
     estimate_pair_pose,
-    kabsch,
     pair_correspondences,
     relative_error,
 )
 from hiros_calib.sync import CameraClock
 from hiros_calib.tracks import extract_tracks
-from hiros_core.geometry import RigidTransform
-
-
-def test_kabsch_recovers_a_known_transform_with_weights():
-    rng = np.random.default_rng(1)
-    truth = RigidTransform(Rotation.from_rotvec([0.3, -1.2, 2.0]), np.array([1.0, -2.0, 0.5]))
-    source = rng.normal(size=(50, 3))
-    target = truth.apply(source)
-    target[:5] += 3.0  # outliers, weighted out
-    weights = np.ones(50)
-    weights[:5] = 0.0
-    found = kabsch(target, source, weights)
-    angle, distance = relative_error(found, truth)
-    assert angle < 1e-6
-    assert distance < 1e-9
-
-
-def test_kabsch_never_returns_a_reflection():
-    source = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1.0]])
-    target = source * np.array([1, 1, -1.0])  # a mirror image: best proper rotation only
-    found = kabsch(target, source)
-    assert np.linalg.det(found.rotation.as_matrix()) == pytest.approx(1.0)
 
 
 def _clocks(scene, a, b):
