@@ -27,6 +27,23 @@ def _feed(scene, live, until=None, step_every=3):
     return changes
 
 
+def _feed_jumped(scene, live, jump_at, step_every=3):
+    """Like ``_feed``, with arrivals from the capture instant: a camera whose clock jumped
+    still delivers its frames on time."""
+    frames = []
+    for name, groups in scene.camera_groups.items():
+        cam = scene.truth.cameras[name]
+        capture = np.array([cam.to_reference_time(g.stamp) for g in groups])
+        if name == "cam1":  # its stamps moved 0.5 s ahead after the jump; its frames did not
+            capture = np.where(capture >= jump_at + 0.5, capture - 0.5, capture)
+        frames.extend((round((t + 0.02) * 1e9), g) for t, g in zip(capture, groups, strict=True))
+    frames.sort(key=lambda f: f[0])
+    for k, (arrival, group) in enumerate(frames):
+        live.update(group, arrival)
+        if k % step_every == 0:
+            live.step(arrival)
+
+
 def _pose_error(live, truth_pose, camera="cam1"):
     est = live.calibration.cameras[camera].extrinsics
     return relative_error(est, truth_pose)
@@ -177,3 +194,39 @@ def test_the_check_pairs_people_by_where_the_current_poses_put_them():
     )
     assert len(vectors) == 2 * 90 * 19  # both people, every mirror-proof point of every frame
     assert np.median(np.linalg.norm(vectors, axis=1)) < 0.05
+
+
+@pytest.mark.slow
+def test_a_camera_clock_that_jumps_is_found_and_its_new_offset_recovered(make_scene):
+    """cam1's clock jumps 0.5 s ahead (a driver restart, a host clock step): the same people
+    then land in different places, the check flags it and the recalibration finds the new
+    offset."""
+    import dataclasses
+
+    from hiros_core.model import SkeletonGroup
+
+    scene = make_scene(angles_deg=(0.0, 100.0), duration=45.0, noise=0.005)
+    truth = scene.truth.cameras
+    jump_ns, jump_at = 500_000_000, truth["cam0"].to_reference_time(128.0)
+
+    def later(group: SkeletonGroup) -> SkeletonGroup:
+        skeletons = [
+            dataclasses.replace(s, src_time_ns=s.src_time_ns + jump_ns) for s in group.skeletons
+        ]
+        return SkeletonGroup(group.stamp_ns + jump_ns, group.frame_id, skeletons)
+
+    scene.camera_groups["cam1"] = [
+        later(g) if truth["cam1"].to_reference_time(g.stamp) >= jump_at else g
+        for g in scene.camera_groups["cam1"]
+    ]
+    params = LiveCalibratorParams(buffer_length=20.0, first_estimate_after=12.0, update_period=8.0)
+    live = LiveCalibrator(params)
+    _feed_jumped(scene, live, jump_at)
+    events = " | ".join(f"{t * 1e-9 - jump_at:.1f} {m}" for t, m in live.events)
+    detected = [t * 1e-9 for t, m in live.events if m.startswith("cam1: moved or clock jumped")]
+    assert detected, events
+    assert jump_at < detected[0] < jump_at + 10.0, events
+    # t_ref = t_cam + offset: stamps 0.5 s later, so the offset is 0.5 s smaller
+    assert live.calibration.cameras["cam1"].time_offset == pytest.approx(
+        truth["cam1"].time_offset - 0.5, abs=3e-3
+    ), events
