@@ -14,6 +14,8 @@
   residual (and ``moved_floor``), or its joints are all displaced the same way by more than
   ``moved_shift``, the camera was moved or its clock jumped: its older frames are dropped and
   it is recalibrated from ``recalibrate_after`` seconds of new data;
+- a camera that sends nothing for ``silent_after`` seconds is reported (an event, and in
+  :meth:`LiveCalibrator.snapshot`), and so is its return; its calibration is kept;
 - an estimate that disagrees with the current one is not thrown away for good: it replaces
   the current one when it rests on more of the same frames (a recalibration from a few
   seconds can be wrong, e.g. turned 180° for cameras facing each other), or when
@@ -91,6 +93,9 @@ class LiveCalibratorParams(CalibratorParams):
     """A frame stamped this many seconds before its camera's newest one starts the camera's
     buffer again (its clock restarted, or the newest frame was a glitch); a smaller step back
     is dropped as ``out_of_order``."""
+    silent_after: float = 5.0
+    """Seconds without a frame from a camera before it is reported silent (an event, and in
+    :meth:`LiveCalibrator.snapshot`); its calibration is kept, and its return is reported."""
 
 
 def _blend(old: CameraCalibration, new: CameraCalibration, weight: float) -> CameraCalibration:
@@ -169,6 +174,7 @@ class LiveCalibrator(Accounted):
         self._last_check: int | None = None
         self._changed_at: dict[str, int] = {}
         self._rivals: dict[str, list[CameraCalibration]] = {}  # disagreeing estimates in a row
+        self._silent: dict[str, int] = {}  # camera -> arrival of its last frame before silence
         self._lock = threading.Lock()
 
     # -- input
@@ -190,6 +196,9 @@ class LiveCalibrator(Accounted):
                 return group
             frames.append((group, arrival_ns))
             self.processed += 1
+            if camera in self._silent:
+                gap = (arrival_ns - self._silent.pop(camera)) * 1e-9
+                self.events.append((arrival_ns, f"{camera}: frames again after {gap:.1f} s"))
             while frames and frames[0][0].stamp_ns < group.stamp_ns - horizon:
                 frames.popleft()
             if self._first_arrival is None:
@@ -221,9 +230,11 @@ class LiveCalibrator(Accounted):
         if self._first_arrival is None:
             return False
         changed = False
-        if self._due(self._last_check, now_ns, params.check_period) and self.calibration.cameras:
+        if self._due(self._last_check, now_ns, params.check_period):
             self._last_check = now_ns
-            changed |= self.check(now_ns)
+            self._note_silent(now_ns)
+            if self.calibration.cameras:
+                changed |= self.check(now_ns)
         recalibrate = any(
             now_ns - self._changed_at[c] >= params.recalibrate_after * 1e9 for c in self._changed
         )
@@ -232,6 +243,18 @@ class LiveCalibrator(Accounted):
             self._last_estimate = now_ns
             changed |= self.estimate(now_ns)
         return changed
+
+    def _note_silent(self, now_ns: int) -> None:
+        """Report cameras whose newest frame arrived more than ``silent_after`` s ago."""
+        limit = round(self.params.silent_after * 1e9)
+        with self._lock:
+            newest = {c: f[-1][1] for c, f in self._frames.items() if f}
+        for camera, arrival in sorted(newest.items()):
+            if camera not in self._silent and now_ns - arrival > limit:
+                self._silent[camera] = arrival
+                self.events.append(
+                    (now_ns, f"{camera}: no frames for {(now_ns - arrival) * 1e-9:.1f} s")
+                )
 
     @staticmethod
     def _due(last: int | None, now_ns: int, period: float) -> bool:
@@ -391,10 +414,15 @@ class LiveCalibrator(Accounted):
         return out
 
     def snapshot(self) -> dict[str, Any]:
-        """Counts for diagnostics: frames buffered per camera, cameras waiting, drops."""
+        """Counts for diagnostics: frames buffered per camera, cameras waiting or silent, drops."""
         with self._lock:
             buffered = {c: len(f) for c, f in self._frames.items()}
-        return {"buffered": buffered, "recalibrating": sorted(self._changed), **self.drops}
+        return {
+            "buffered": buffered,
+            "recalibrating": sorted(self._changed),
+            "silent": sorted(self._silent),
+            **self.drops,
+        }
 
 
 _MIN_CHECK_OVERLAP = 1.0

@@ -230,3 +230,23 @@ def test_a_camera_clock_that_jumps_is_found_and_its_new_offset_recovered(make_sc
     assert live.calibration.cameras["cam1"].time_offset == pytest.approx(
         truth["cam1"].time_offset - 0.5, abs=3e-3
     ), events
+
+
+def test_a_camera_that_falls_silent_and_comes_back_is_reported():
+    from hiros_core.model import SkeletonGroup
+
+    live = LiveCalibrator(LiveCalibratorParams(first_estimate_after=1e6, silent_after=5.0))
+    second = 1_000_000_000
+    for tenth in range(200):  # 20 s at 10 Hz; cam1 is silent from 4 s to 12 s
+        now = tenth * second // 10
+        for camera in ("cam0", "cam1"):
+            if camera == "cam1" and 40 <= tenth < 120:
+                continue
+            live.update(SkeletonGroup(now, camera), now)
+        live.step(now)
+        if tenth == 110:
+            assert live.snapshot()["silent"] == ["cam1"]
+    messages = [m for _, m in live.events]
+    # its last frame came at 3.9 s; checks run each second
+    assert messages == ["cam1: no frames for 5.1 s", "cam1: frames again after 8.1 s"]
+    assert live.snapshot()["silent"] == []
