@@ -1,4 +1,4 @@
-"""Accuracy of a `hiros run` output against the simulator's truth.
+"""Accuracy of a `hiros run` output, or of a calibration file, against the simulator's truth.
 
 Per stage: MPJPE (overall and per joint), limb-length variation, joint-angle RMSE (knee, hip,
 elbow, shoulder), identity figures (IDF1, switches, fragments), lag (how far the output trails
@@ -7,6 +7,11 @@ alone: MPJPE; and the
 calibration used against the true one (time, rotation, translation). The output is moved into
 the truth's world with the reference camera's true pose and clock, so calibration error counts.
 `--report DIR` writes report.html with figures.
+
+Given a calibration file (`hiros calibrate`'s .yaml, or one the `calib` node saved) instead
+of a run's output, only the calibration is judged: per camera the time error (ms, mean and
+largest over the recording's frames), the rotation error (°) and the translation error (cm),
+relative to the file's reference camera.
 """
 
 from __future__ import annotations
@@ -19,12 +24,20 @@ from rich.table import Table
 
 from hiros_cli.progress import print_warnings
 
-HELP = "accuracy of a run's output against the simulator's truth (tables, --report HTML)"
+HELP = (
+    "accuracy of a run's output (tables, --report HTML) or of a calibration file against the "
+    "simulator's truth"
+)
+CALIBRATION_SUFFIXES = (".yaml", ".yml")
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """``hiros evaluate OUT.mcap --truth DIR [--report DIR]``."""
-    parser.add_argument("output", type=Path, help="the .mcap written by `hiros run`")
+    parser.add_argument(
+        "output",
+        type=Path,
+        help="the .mcap written by `hiros run`, or a calibration file (.yaml) to judge alone",
+    )
     parser.add_argument(
         "--truth",
         type=Path,
@@ -51,6 +64,38 @@ def evaluate_output(  # noqa: ANN201 - RunEvaluation
         for source, group in iter_groups(recording):
             camera_groups.setdefault(source, []).append(group)
     return evaluate_run(outputs, used, true, load_truth(truth_dir), camera_groups)
+
+
+def evaluate_calibration_file(path: Path, truth_dir: Path) -> list[list[str]]:
+    """Rows ``camera, time ms (mean), time ms (max), rotation deg, translation cm``.
+
+    The time error is averaged over the simulated recording's frames (every 15th) when the
+    truth folder holds it, so that a wrong drift counts; else it is taken at each camera's
+    drift epoch.
+    """
+    import numpy as np
+
+    from hiros_core.calibration import load_calibration
+    from hiros_core.recording import iter_groups
+    from hiros_eval.calibration import compare_calibration
+
+    estimate, true = load_calibration(path), load_calibration(truth_dir / "calibration.yaml")
+    stamps: dict[str, list[float]] = {}
+    recording = truth_dir / "recording.mcap"
+    if recording.exists():
+        for _, group in iter_groups(recording):
+            stamps.setdefault(group.camera, []).append(group.stamp)
+    times = {camera: np.asarray(values[::15]) for camera, values in stamps.items()}
+    return [
+        [
+            camera,
+            f"{a.time_error_ms:.2f}",
+            f"{a.time_error_max_ms:.2f}",
+            f"{a.rotation_error_deg:.3f}",
+            f"{a.translation_error_cm:.2f}",
+        ]
+        for camera, a in compare_calibration(estimate, true, times or None).items()
+    ]
 
 
 def print_evaluation(console: Console, evaluation) -> None:  # noqa: ANN001 - RunEvaluation
@@ -86,6 +131,16 @@ def _table(title: str, headers: list[str], rows: list[list[str]], width: int) ->
 def run(args: argparse.Namespace) -> int:
     """Evaluate, print, and optionally write the HTML report."""
     console = Console()
+    if args.output.suffix.lower() in CALIBRATION_SUFFIXES:
+        if args.report:
+            console.print("hiros evaluate: --report needs a run's output, not a calibration file")
+            return 2
+        headers = ["camera", "time error ms", "time max ms", "rotation error deg",
+                   "translation error cm"]  # fmt: skip
+        rows = evaluate_calibration_file(args.output, args.truth)
+        title = f"{args.output.name} against the truth (relative to its reference camera)"
+        console.print(_table(title, headers, rows, console.width))
+        return 0
     problems: list[str] = []
     evaluation = evaluate_output(args.output, args.truth, problems)
     print_warnings(console, problems)  # figures from a damaged output cover only what was read

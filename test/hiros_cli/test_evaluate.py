@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import numpy as np
 from rich.console import Console
+from scipy.spatial.transform import Rotation
 
 from hiros_cli.commands.evaluate import _table
 
@@ -27,3 +29,47 @@ def test_a_table_that_fits_keeps_its_headers_on_one_line() -> None:
     wide = _printed(120)
     assert "angle RMSE deg" in wide
     assert "ID switches" in wide
+
+
+def _camera(translation, rotation, offset=0.0):
+    from hiros_core.calibration import CameraCalibration
+
+    return CameraCalibration(
+        frame_id="f", time_offset=offset, translation=np.asarray(translation, float),
+        rotation=rotation.as_quat(),
+    )  # fmt: skip
+
+
+def test_a_calibration_file_is_judged_alone_relative_to_its_reference(tmp_path, capsys) -> None:
+    """The truth lives in the simulator's world; the estimate in its reference camera's frame,
+    with cam1 turned 1°, moved 2 cm and 5 ms late there."""
+    from hiros_cli.main import main
+    from hiros_core.calibration import Calibration, save_calibration
+
+    base = Rotation.from_euler("z", 30, degrees=True)
+    truth = Calibration(reference="cam0", world_frame="world")
+    truth.cameras = {
+        "cam0": _camera([1.0, 2.0, 1.5], base),
+        "cam1": _camera([4.0, 2.0, 1.5], base * Rotation.from_euler("y", 90, degrees=True), 0.3),
+    }
+    relative = truth.cameras["cam0"].extrinsics.inverse() @ truth.cameras["cam1"].extrinsics
+    estimate = Calibration(reference="cam0", world_frame="world")
+    estimate.cameras = {
+        "cam0": _camera([0.0, 0.0, 0.0], Rotation.identity()),
+        "cam1": _camera(
+            relative.translation + np.array([0.02, 0.0, 0.0]),
+            Rotation.from_euler("x", 1, degrees=True) * relative.rotation,
+            0.305,
+        ),
+    }
+    (tmp_path / "truth").mkdir()
+    save_calibration(truth, tmp_path / "truth" / "calibration.yaml")
+    save_calibration(estimate, tmp_path / "estimate.yaml")
+    args = ["evaluate", str(tmp_path / "estimate.yaml"), "--truth", str(tmp_path / "truth")]
+    assert main(args) == 0
+    row = next(line for line in capsys.readouterr().out.splitlines() if "cam1" in line)
+    assert [cell.strip() for cell in row.strip("│ ").split("│")] == [
+        "cam1", "5.00", "5.00", "1.000", "2.00",
+    ]  # fmt: skip
+    assert main([*args, "--report", str(tmp_path / "report")]) == 2
+    assert "--report needs a run's output" in capsys.readouterr().out
