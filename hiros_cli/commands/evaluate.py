@@ -3,9 +3,9 @@
 Per stage: MPJPE (overall and per joint), limb-length variation, joint-angle RMSE (knee, hip,
 elbow, shoulder), identity figures (IDF1, switches, fragments), lag (how far the output trails
 the truth: the delay of the truth that fits it best; negative when it runs ahead); per camera
-alone: MPJPE; and the
-calibration used against the true one (time, rotation, translation). The output is moved into
-the truth's world with the reference camera's true pose and clock, so calibration error counts.
+alone: MPJPE; and the calibration used against the true one (time, rotation, translation).
+The output is moved into the truth's world with the reference camera's true pose and clock, so
+calibration error counts.
 `--report DIR` writes report.html with figures.
 
 Given a calibration file (`hiros calibrate`'s .yaml, or one the `calib` node saved) instead
@@ -23,6 +23,7 @@ from rich.console import Console
 from rich.table import Table
 
 from hiros_cli.progress import print_warnings
+from hiros_core.errors import ConfigError
 
 HELP = (
     "accuracy of a run's output (tables, --report HTML) or of a calibration file against the "
@@ -133,8 +134,8 @@ def run(args: argparse.Namespace) -> int:
     console = Console()
     if args.output.suffix.lower() in CALIBRATION_SUFFIXES:
         if args.report:
-            console.print("hiros evaluate: --report needs a run's output, not a calibration file")
-            return 2
+            msg = "--report needs a run's output (.mcap), not a calibration file"
+            raise ConfigError(msg)
         headers = ["camera", "time error ms", "time max ms", "rotation error deg",
                    "translation error cm"]  # fmt: skip
         rows = evaluate_calibration_file(args.output, args.truth)

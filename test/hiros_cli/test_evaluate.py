@@ -71,5 +71,5 @@ def test_a_calibration_file_is_judged_alone_relative_to_its_reference(tmp_path, 
     assert [cell.strip() for cell in row.strip("│ ").split("│")] == [
         "cam1", "5.00", "5.00", "1.000", "2.00",
     ]  # fmt: skip
-    assert main([*args, "--report", str(tmp_path / "report")]) == 2
-    assert "--report needs a run's output" in capsys.readouterr().out
+    assert main([*args, "--report", str(tmp_path / "report")]) == 1
+    assert "--report needs a run's output" in capsys.readouterr().err
