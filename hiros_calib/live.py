@@ -20,7 +20,8 @@
   the current one when it rests on more of the same frames (a recalibration from a few
   seconds can be wrong, e.g. turned 180° for cameras facing each other), or when
   ``replace_after`` estimates in a row disagree with the current one and agree with each
-  other (the current one is wrong, or the camera changed in a way the check missed).
+  other and the newest fits its frames clearly better (``replace_margin``): the current one
+  is wrong, or the camera changed in a way the check missed.
 
 All times are nanoseconds on the receiver's clock (``arrival_ns``) except the frames' own
 stamps, which stay on their camera clocks.
@@ -88,7 +89,11 @@ class LiveCalibratorParams(CalibratorParams):
     """Seconds of frames after a change before the camera is recalibrated."""
     replace_after: int = 2
     """Estimates in a row that disagree with the current one (and agree with each other)
-    before the newest replaces it."""
+    before the newest replaces it ..."""
+    replace_margin: float = 0.1
+    """... if it also fits the frames it came from this much better (relative drop of its
+    camera's median joint distance): data that cannot pin a pose down (one person walking on
+    the spot) would otherwise let a consistent but wrong estimate replace a right one."""
     restart_after_backwards: float = 1.0
     """A frame stamped this many seconds before its camera's newest one starts the camera's
     buffer again (its clock restarted, or the newest frame was a glitch); a smaller step back
@@ -298,15 +303,18 @@ class LiveCalibrator(Accounted):
         if not self.calibration.reference:
             self.calibration.reference = estimate.reference
         for camera, new in estimate.cameras.items():
-            changed |= self._merge(camera, new, groups[camera][0].stamp_ns, now_ns)
+            changed |= self._merge(camera, new, groups, now_ns)
         for camera, reason in (calibrator.result.refused if calibrator.result else {}).items():
             self.events.append((now_ns, f"{camera}: not calibrated yet ({reason})"))
         self._baseline = {pair: distance for pair, (distance, _) in self._residuals(groups).items()}
         return changed
 
-    def _merge(self, camera: str, new: CameraCalibration, first: int, now_ns: int) -> bool:
-        """Take a camera's new estimate (resting on frames stamped from ``first``) or not."""
+    def _merge(
+        self, camera: str, new: CameraCalibration, groups: dict[str, list], now_ns: int
+    ) -> bool:
+        """Take a camera's new estimate (made from ``groups``) or not; True if taken."""
         old = self.calibration.cameras.get(camera)
+        first = groups[camera][0].stamp_ns
         # while the window still holds every frame the current estimate rests on (it is
         # refilling after a start or a recalibration) the new estimate, on more of the same
         # data, supersedes it; once frames slide out, or for a pose loaded from a file, an
@@ -318,27 +326,65 @@ class LiveCalibrator(Accounted):
         elif _agrees(old, new, self.params):
             if not grown:
                 new = _blend(old, new, self.params.blend)
-        elif grown or self._outvoted(camera, new):
-            clock, angle, distance = _difference(old, new)
-            why = (
-                "an estimate on more of the same frames"
-                if grown
-                else f"{self.params.replace_after} estimates in a row"
-            )
-            self.events.append(
-                (
-                    now_ns,
-                    f"{camera}: replaced, {why} disagreed with it by {angle:.1f} deg, "
-                    f"{100 * distance:.0f} cm, {1e3 * clock:.0f} ms",
-                )
-            )
-        else:
+        elif not self._replaces(camera, old, new, grown=grown, groups=groups, now_ns=now_ns):
             self.drops["estimate_disagrees"] += 1
             return False
         self._rivals.pop(camera, None)
         self.calibration.cameras[camera] = new
         self._support[camera] = first
         return True
+
+    def _replaces(
+        self,
+        camera: str,
+        old: CameraCalibration,
+        new: CameraCalibration,
+        *,
+        grown: bool,
+        groups: dict[str, list],
+        now_ns: int,
+    ) -> bool:
+        """Whether a disagreeing estimate replaces the current pose (with an event if so)."""
+        fit = "" if grown else self._outvoted(camera, new) and self._better_fit(camera, new, groups)
+        if not (grown or fit):
+            return False
+        who = (
+            "an estimate on more of the same frames"
+            if grown
+            else f"{self.params.replace_after} estimates in a row"
+        )
+        clock, angle, distance = _difference(old, new)
+        self.events.append(
+            (
+                now_ns,
+                f"{camera}: replaced, {who} disagreed with it by {angle:.1f} deg, "
+                f"{100 * distance:.0f} cm, {1e3 * clock:.0f} ms{fit}",
+            )
+        )
+        return True
+
+    def _better_fit(self, camera: str, new: CameraCalibration, groups: dict[str, list]) -> str:
+        """Why ``new`` should replace the camera's pose, or "" if it should not.
+
+        It should when its camera's pairs fit ``groups`` (the frames it came from) clearly
+        better than with the current pose: ``replace_margin`` lower median joint distance.
+        """
+        trial = dataclasses.replace(
+            self.calibration, cameras={**self.calibration.cameras, camera: new}
+        )
+        before = self._residuals(groups, camera=camera)
+        after = self._residuals(groups, trial, camera=camera)
+        pairs = before.keys() & after.keys()
+        if not pairs:
+            return ""
+        old_fit = float(np.median([before[p][0] for p in pairs]))
+        new_fit = float(np.median([after[p][0] for p in pairs]))
+        if new_fit >= (1.0 - self.params.replace_margin) * old_fit:
+            return ""
+        return (
+            f" and fit their frames better (median joint distance {100 * old_fit:.1f} -> "
+            f"{100 * new_fit:.1f} cm)"
+        )
 
     def _outvoted(self, camera: str, new: CameraCalibration) -> bool:
         """Whether ``new`` makes ``replace_after`` disagreeing estimates that agree in a row."""
@@ -388,13 +434,19 @@ class LiveCalibrator(Accounted):
             self.events.append((now_ns, f"{camera}: moved or clock jumped, recalibrating"))
         return True
 
-    def _residuals(self, groups: dict[str, list]) -> dict[tuple[str, str], tuple[float, float]]:
+    def _residuals(
+        self,
+        groups: dict[str, list],
+        calibration: Calibration | None = None,
+        camera: str | None = None,
+    ) -> dict[tuple[str, str], tuple[float, float]]:
         """Per calibrated camera pair in these frames: median joint distance and displacement (m).
 
         The displacement is the length of the per-axis median of the residual vectors: the
-        SDKs' noise scatters them, a moved camera shifts them all the same way.
+        SDKs' noise scatters them, a moved camera shifts them all the same way. With the
+        current calibration unless another is given; only the pairs of ``camera`` if given.
         """
-        cal = self.calibration
+        cal = calibration or self.calibration
         cameras = [c for c in groups if c in cal.cameras and c not in self._changed]
         params = self.params
         tracks = {
@@ -403,6 +455,8 @@ class LiveCalibrator(Accounted):
         out = {}
         for k, a in enumerate(cameras):
             for b in cameras[k + 1 :]:
+                if camera is not None and camera not in (a, b):
+                    continue
                 relative = cal.cameras[a].extrinsics.inverse() @ cal.cameras[b].extrinsics
                 clocks = _clock(a, cal.cameras[a]), _clock(b, cal.cameras[b])
                 vectors = _matched_residuals((tracks[a], tracks[b]), clocks, relative, params)

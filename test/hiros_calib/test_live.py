@@ -129,14 +129,12 @@ def test_a_small_knock_is_found_by_every_joint_moving_the_same_way(make_scene):
 
 
 @pytest.mark.slow
-def test_a_wrong_pose_is_replaced_once_estimates_keep_disagreeing_with_it(make_scene):
-    """A pose that new estimates all contradict (loaded from a stale file, or a recalibration
-    from a few seconds gone wrong) used to stay for good, each estimate dropped as
-    'estimate_disagrees'. With the check off, only the estimates can mend it."""
-    scene = make_scene(angles_deg=(0.0, 100.0), duration=40.0, noise=0.005)
+def _loaded(scene, turn_deg: float) -> tuple[Calibration, RigidTransform]:
+    """A calibration as a file would hold it (world = cam0) with cam1 turned ``turn_deg``,
+    and cam1's true pose."""
     truth = scene.truth.cameras
-    true_pose = truth["cam0"].extrinsics.inverse() @ truth["cam1"].extrinsics  # world = cam0
-    turned = Rotation.from_rotvec([0.0, 0.0, np.radians(20.0)]) * true_pose.rotation
+    true_pose = truth["cam0"].extrinsics.inverse() @ truth["cam1"].extrinsics
+    turned = Rotation.from_rotvec([0.0, 0.0, np.radians(turn_deg)]) * true_pose.rotation
     start = Calibration(reference="cam0", world_frame="world")
     start.cameras = {
         "cam0": CameraCalibration(**{**vars(truth["cam0"]), "translation": np.zeros(3),
@@ -144,24 +142,51 @@ def test_a_wrong_pose_is_replaced_once_estimates_keep_disagreeing_with_it(make_s
         "cam1": CameraCalibration(**{**vars(truth["cam1"]), "translation": true_pose.translation,
                                      "rotation": turned.as_quat()}),
     }  # fmt: skip
-    params = LiveCalibratorParams(
-        buffer_length=20.0,
-        first_estimate_after=12.0,
-        update_period=8.0,
-        moved_floor=np.inf,
-        moved_shift=np.inf,
-    )
-    live = LiveCalibrator(params, calibration=start)
+    return start, true_pose
+
+
+_NO_CHECK = {
+    "buffer_length": 20.0,
+    "first_estimate_after": 12.0,
+    "update_period": 8.0,
+    "moved_floor": np.inf,
+    "moved_shift": np.inf,
+}
+
+
+@pytest.mark.slow
+def test_a_wrong_pose_is_replaced_once_estimates_keep_disagreeing_with_it(make_scene):
+    """A pose that new estimates all contradict (loaded from a stale file, or a recalibration
+    from a few seconds gone wrong) used to stay for good, each estimate dropped as
+    'estimate_disagrees'. With the check off, only the estimates can mend it."""
+    scene = make_scene(angles_deg=(0.0, 100.0), duration=40.0, noise=0.005)
+    start, true_pose = _loaded(scene, 20.0)
+    live = LiveCalibrator(LiveCalibratorParams(**_NO_CHECK), calibration=start)
     _feed(scene, live)
     events = " | ".join(f"{t * 1e-9:.1f} {m}" for t, m in live.events)
     replaced = [m for _, m in live.events if m.startswith("cam1: replaced")]
     assert replaced, events
     assert "2 estimates in a row disagreed with it by" in replaced[0]
     assert float(replaced[0].split(" by ")[1].split(" deg")[0]) == pytest.approx(20.0, abs=0.5)
+    assert "and fit their frames better" in replaced[0]
     angle, distance = _pose_error(live, true_pose)
     assert angle < 0.5, events
     assert distance < 0.02, events
     assert live.drops["estimate_disagrees"] == 1
+
+
+@pytest.mark.slow
+def test_disagreeing_estimates_must_also_fit_better_to_replace_the_pose(make_scene):
+    """Estimates agreeing among themselves are not enough: data that cannot pin a pose down
+    (one person walking on the spot) gives consistent but wrong ones. They must fit their
+    frames ``replace_margin`` better than the current pose; a margin no fit can meet keeps
+    even a pose 20° off."""
+    scene = make_scene(angles_deg=(0.0, 100.0), duration=40.0, noise=0.005)
+    start, _ = _loaded(scene, 20.0)
+    live = LiveCalibrator(LiveCalibratorParams(**_NO_CHECK, replace_margin=1.0), start)
+    _feed(scene, live)
+    assert not [m for _, m in live.events if "replaced" in m]
+    assert live.drops["estimate_disagrees"] >= 3
 
 
 def test_the_check_pairs_people_by_where_the_current_poses_put_them():
