@@ -491,8 +491,8 @@ def _matched_residuals(
 ) -> np.ndarray:
     """``(N, 3)`` residual vectors of the body pairs that the current calibration puts together.
 
-    Every track of a is paired with at most one track of b, nearest pairs first (median
-    distance). With the poses known, where people stand tells them apart; their poses'
+    Every track of a is paired with at most one track of b at a time, nearest pairs first
+    (median distance). With the poses known, where people stand tells them apart; their poses'
     shapes over a few seconds do not always (two people walking alike were matched wrongly,
     and the 2 m residual flagged a camera that had not moved). A camera that did move still
     shows: its nearest pairs are far too.
@@ -506,14 +506,20 @@ def _matched_residuals(
             vectors = _invariant_residuals(c, relative)
             if len(vectors):
                 distance = float(np.median(np.linalg.norm(vectors, axis=1)))
-                candidates.append((distance, i, j, vectors))
+                span = (float(c.times[0]), float(c.times[-1]))
+                candidates.append((distance, i, j, span, vectors))
     candidates.sort(key=lambda candidate: candidate[0])
-    taken_a, taken_b, matched = set(), set(), []
-    for _, i, j, vectors in candidates:
-        if i not in taken_a and j not in taken_b:
-            taken_a.add(i)
-            taken_b.add(j)
-            matched.append(vectors)
+    taken: dict[tuple[int, int], list[tuple[float, float]]] = {}  # (side, track) -> spans
+    matched = []
+    for _, i, j, (start, end), vectors in candidates:
+        # a track may pair with several of the other camera's over disjoint spans (the SDK
+        # gave the person a new id), never with two at once
+        spans = taken.get((0, i), []) + taken.get((1, j), [])
+        if any(s < end and start < e for s, e in spans):
+            continue
+        taken.setdefault((0, i), []).append((start, end))
+        taken.setdefault((1, j), []).append((start, end))
+        matched.append(vectors)
     return np.concatenate(matched) if matched else np.zeros((0, 3))
 
 

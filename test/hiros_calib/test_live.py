@@ -275,3 +275,27 @@ def test_a_camera_that_falls_silent_and_comes_back_is_reported():
     # its last frame came at 3.9 s; checks run each second
     assert messages == ["cam1: no frames for 5.1 s", "cam1: frames again after 8.1 s"]
     assert live.snapshot()["silent"] == []
+
+
+def test_the_check_follows_a_person_whose_id_changed_in_one_camera():
+    """One camera gave the person a new id halfway: both of its tracks pair with the other
+    camera's single track, one after the other, so no frame is left out."""
+    from hiros_calib.live import _matched_residuals
+    from hiros_calib.sync import CameraClock
+    from hiros_calib.tracks import BodyTrack
+    from hiros_core.layouts import AZURE_KINECT
+
+    rng = np.random.default_rng(3)
+    times = np.arange(90) / 30.0
+    person = rng.uniform(-0.3, 0.3, (1, 32, 3)) + times[:, None, None] * np.array([1.0, 0, 0])
+    whole = BodyTrack("a", 1, AZURE_KINECT, times, person, np.ones((90, 32)))
+    halves = [
+        BodyTrack("b", k + 1, AZURE_KINECT, times[part], person[part], np.ones((45, 32)))
+        for k, part in enumerate((slice(0, 45), slice(45, 90)))
+    ]
+    clock = CameraClock("a", "ok", "", 0.0, 0.0, 0.0)
+    vectors = _matched_residuals(
+        ([whole], halves), (clock, clock), RigidTransform.identity(), LiveCalibratorParams()
+    )
+    assert len(vectors) == 90 * 19
+    assert np.abs(vectors).max() < 1e-9
