@@ -302,19 +302,30 @@ class LiveCalibrator(Accounted):
         changed = False
         if not self.calibration.reference:
             self.calibration.reference = estimate.reference
+        tracks = self._tracks(groups)  # for judging disagreeing estimates, then the baseline
         for camera, new in estimate.cameras.items():
-            changed |= self._merge(camera, new, groups, now_ns)
+            first = groups[camera][0].stamp_ns
+            changed |= self._merge(camera, new, first, tracks=tracks, now_ns=now_ns)
         for camera, reason in (calibrator.result.refused if calibrator.result else {}).items():
             self.events.append((now_ns, f"{camera}: not calibrated yet ({reason})"))
-        self._baseline = {pair: distance for pair, (distance, _) in self._residuals(groups).items()}
+        self._baseline = {pair: distance for pair, (distance, _) in self._residuals(tracks).items()}
         return changed
 
     def _merge(
-        self, camera: str, new: CameraCalibration, groups: dict[str, list], now_ns: int
+        self,
+        camera: str,
+        new: CameraCalibration,
+        first: int,
+        *,
+        tracks: dict[str, list[BodyTrack]],
+        now_ns: int,
     ) -> bool:
-        """Take a camera's new estimate (made from ``groups``) or not; True if taken."""
+        """Take a camera's new estimate or not; True if taken.
+
+        ``first`` is the stamp of the camera's first frame the estimate rests on, ``tracks``
+        the body tracks of the frames it was made from.
+        """
         old = self.calibration.cameras.get(camera)
-        first = groups[camera][0].stamp_ns
         # while the window still holds every frame the current estimate rests on (it is
         # refilling after a start or a recalibration) the new estimate, on more of the same
         # data, supersedes it; once frames slide out, or for a pose loaded from a file, an
@@ -326,7 +337,7 @@ class LiveCalibrator(Accounted):
         elif _agrees(old, new, self.params):
             if not grown:
                 new = _blend(old, new, self.params.blend)
-        elif not self._replaces(camera, old, new, grown=grown, groups=groups, now_ns=now_ns):
+        elif not self._replaces(camera, old, new, grown=grown, tracks=tracks, now_ns=now_ns):
             self.drops["estimate_disagrees"] += 1
             return False
         self._rivals.pop(camera, None)
@@ -341,11 +352,11 @@ class LiveCalibrator(Accounted):
         new: CameraCalibration,
         *,
         grown: bool,
-        groups: dict[str, list],
+        tracks: dict[str, list[BodyTrack]],
         now_ns: int,
     ) -> bool:
         """Whether a disagreeing estimate replaces the current pose (with an event if so)."""
-        fit = "" if grown else self._outvoted(camera, new) and self._better_fit(camera, new, groups)
+        fit = "" if grown else self._outvoted(camera, new) and self._better_fit(camera, new, tracks)
         if not (grown or fit):
             return False
         who = (
@@ -363,17 +374,19 @@ class LiveCalibrator(Accounted):
         )
         return True
 
-    def _better_fit(self, camera: str, new: CameraCalibration, groups: dict[str, list]) -> str:
+    def _better_fit(
+        self, camera: str, new: CameraCalibration, tracks: dict[str, list[BodyTrack]]
+    ) -> str:
         """Why ``new`` should replace the camera's pose, or "" if it should not.
 
-        It should when its camera's pairs fit ``groups`` (the frames it came from) clearly
+        It should when its camera's pairs fit ``tracks`` (of the frames it came from) clearly
         better than with the current pose: ``replace_margin`` lower median joint distance.
         """
         trial = dataclasses.replace(
             self.calibration, cameras={**self.calibration.cameras, camera: new}
         )
-        before = self._residuals(groups, camera=camera)
-        after = self._residuals(groups, trial, camera=camera)
+        before = self._residuals(tracks, camera=camera)
+        after = self._residuals(tracks, trial, camera=camera)
         pairs = before.keys() & after.keys()
         if not pairs:
             return ""
@@ -398,7 +411,7 @@ class LiveCalibrator(Accounted):
         """Look for moved cameras or jumped clocks in the newest frames; True if one is found."""
         groups, _ = self._window(self.params.check_length)
         params = self.params
-        residuals = self._residuals(groups)
+        residuals = self._residuals(self._tracks(groups))
         suspicious = {
             pair
             for pair, (distance, shift) in residuals.items()
@@ -434,24 +447,28 @@ class LiveCalibrator(Accounted):
             self.events.append((now_ns, f"{camera}: moved or clock jumped, recalibrating"))
         return True
 
+    def _tracks(self, groups: dict[str, list]) -> dict[str, list[BodyTrack]]:
+        """Per camera the body tracks of these frames, as the check compares them."""
+        return {
+            c: extract_tracks(frames, c, max_gap=self.params.max_gap, min_frames=5)
+            for c, frames in groups.items()
+        }
+
     def _residuals(
         self,
-        groups: dict[str, list],
+        tracks: dict[str, list[BodyTrack]],
         calibration: Calibration | None = None,
         camera: str | None = None,
     ) -> dict[tuple[str, str], tuple[float, float]]:
-        """Per calibrated camera pair in these frames: median joint distance and displacement (m).
+        """Per calibrated camera pair in these tracks: median joint distance and displacement (m).
 
         The displacement is the length of the per-axis median of the residual vectors: the
         SDKs' noise scatters them, a moved camera shifts them all the same way. With the
         current calibration unless another is given; only the pairs of ``camera`` if given.
         """
         cal = calibration or self.calibration
-        cameras = [c for c in groups if c in cal.cameras and c not in self._changed]
+        cameras = [c for c in tracks if c in cal.cameras and c not in self._changed]
         params = self.params
-        tracks = {
-            c: extract_tracks(groups[c], c, max_gap=params.max_gap, min_frames=5) for c in cameras
-        }
         out = {}
         for k, a in enumerate(cameras):
             for b in cameras[k + 1 :]:
