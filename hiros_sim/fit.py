@@ -420,8 +420,7 @@ def align(
     ok = np.flatnonzero(np.isfinite(moved[:, 0, 0]) & seen)
     src, dst = moved[ok][:, _CORE], kinect[ok][:, _CORE]
     # each frame's own transform, scored by how many frames it explains
-    rotations, _ = _kabsch_rms(src, dst)
-    translations = dst.mean(axis=1) - np.einsum("fij,fj->fi", rotations, src.mean(axis=1))
+    rotations, translations = kabsch_batch(dst, src)
     candidates = np.einsum("cij,fmj->cfmi", rotations, src) + translations[:, None, None]
     frame_rms = np.sqrt(np.mean(np.sum((candidates - dst[None]) ** 2, axis=3), axis=2))
     best_candidate = int(np.argmax((frame_rms < flip_threshold).sum(axis=1)))
