@@ -53,18 +53,24 @@ def evaluate_output(  # noqa: ANN201 - RunEvaluation
 ):
     """Read the run and the truth, compute every figure; ``problems``: see ``read_run``."""
     from hiros_core.calibration import load_calibration
-    from hiros_core.recording import iter_groups
     from hiros_eval.run import evaluate_run, read_run
     from hiros_sim import load_truth
 
     outputs, used = read_run(output, problems)
     true = load_calibration(truth_dir / "calibration.yaml")
+    return evaluate_run(outputs, used, true, load_truth(truth_dir), _camera_groups(truth_dir))
+
+
+def _camera_groups(truth_dir: Path) -> dict:
+    """Per camera the simulated recording's frames, if the truth folder holds it, else {}."""
+    from hiros_core.recording import iter_groups
+
     camera_groups: dict = {}
     recording = truth_dir / "recording.mcap"
     if recording.exists():
         for source, group in iter_groups(recording):
             camera_groups.setdefault(source, []).append(group)
-    return evaluate_run(outputs, used, true, load_truth(truth_dir), camera_groups)
+    return camera_groups
 
 
 def evaluate_calibration_file(path: Path, truth_dir: Path) -> list[list[str]]:
@@ -77,16 +83,13 @@ def evaluate_calibration_file(path: Path, truth_dir: Path) -> list[list[str]]:
     import numpy as np
 
     from hiros_core.calibration import load_calibration
-    from hiros_core.recording import iter_groups
     from hiros_eval.calibration import compare_calibration
 
     estimate, true = load_calibration(path), load_calibration(truth_dir / "calibration.yaml")
-    stamps: dict[str, list[float]] = {}
-    recording = truth_dir / "recording.mcap"
-    if recording.exists():
-        for _, group in iter_groups(recording):
-            stamps.setdefault(group.camera, []).append(group.stamp)
-    times = {camera: np.asarray(values[::15]) for camera, values in stamps.items()}
+    times = {
+        camera: np.array([group.stamp for group in groups[::15]])
+        for camera, groups in _camera_groups(truth_dir).items()
+    }
     return [
         [
             camera,
