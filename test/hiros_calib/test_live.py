@@ -1,11 +1,17 @@
+import dataclasses
+
 import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
 from hiros_calib.extrinsics import relative_error
-from hiros_calib.live import LiveCalibrator, LiveCalibratorParams
+from hiros_calib.live import LiveCalibrator, LiveCalibratorParams, _matched_residuals
+from hiros_calib.sync import CameraClock
+from hiros_calib.tracks import BodyTrack
 from hiros_core.calibration import Calibration, CameraCalibration
 from hiros_core.geometry import RigidTransform
+from hiros_core.layouts import AZURE_KINECT
+from hiros_core.model import SkeletonGroup
 
 
 def _feed(scene, live, until=None, step_every=3):
@@ -88,7 +94,6 @@ def test_live_calibrates_then_recalibrates_a_moved_camera(make_scene):
 def test_stamps_far_back_restart_the_cameras_buffer_small_steps_are_dropped():
     """One frame stamped far ahead (or a restarted camera clock) used to make every later
     frame of the camera 'out_of_order', for good."""
-    from hiros_core.model import SkeletonGroup
 
     live = LiveCalibrator(LiveCalibratorParams())
     second = 1_000_000_000
@@ -194,10 +199,6 @@ def test_the_check_pairs_people_by_where_the_current_poses_put_them():
     signatures cannot tell them apart (on this seed the signature association pairs them
     crosswise, a 1 m residual: what flagged an unmoved camera on the simulator). With the
     poses known, each is paired with the body at the same place."""
-    from hiros_calib.live import _matched_residuals
-    from hiros_calib.sync import CameraClock
-    from hiros_calib.tracks import BodyTrack
-    from hiros_core.layouts import AZURE_KINECT
 
     rng = np.random.default_rng(1)
     times = np.arange(90) / 30.0
@@ -226,9 +227,6 @@ def test_a_camera_clock_that_jumps_is_found_and_its_new_offset_recovered(make_sc
     """cam1's clock jumps 0.5 s ahead (a driver restart, a host clock step): the same people
     then land in different places, the check flags it and the recalibration finds the new
     offset."""
-    import dataclasses
-
-    from hiros_core.model import SkeletonGroup
 
     scene = make_scene(angles_deg=(0.0, 100.0), duration=45.0, noise=0.005)
     truth = scene.truth.cameras
@@ -258,7 +256,6 @@ def test_a_camera_clock_that_jumps_is_found_and_its_new_offset_recovered(make_sc
 
 
 def test_a_camera_that_falls_silent_and_comes_back_is_reported():
-    from hiros_core.model import SkeletonGroup
 
     live = LiveCalibrator(LiveCalibratorParams(first_estimate_after=1e6, silent_after=5.0))
     second = 1_000_000_000
@@ -280,10 +277,6 @@ def test_a_camera_that_falls_silent_and_comes_back_is_reported():
 def test_the_check_follows_a_person_whose_id_changed_in_one_camera():
     """One camera gave the person a new id halfway: both of its tracks pair with the other
     camera's single track, one after the other, so no frame is left out."""
-    from hiros_calib.live import _matched_residuals
-    from hiros_calib.sync import CameraClock
-    from hiros_calib.tracks import BodyTrack
-    from hiros_core.layouts import AZURE_KINECT
 
     rng = np.random.default_rng(3)
     times = np.arange(90) / 30.0
