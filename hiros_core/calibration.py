@@ -13,6 +13,7 @@ One loader and one writer, used by ``hiros calibrate``, the ``calib`` node and e
         translation: [0, 0, 0]          # p_world = R p_camera + t
         rotation: [0, 0, 0, 1]          # x, y, z, w
         quality: {}
+        flagged: ""     # empty when trusted; otherwise why the result is doubtful
 """
 
 from __future__ import annotations
@@ -48,6 +49,9 @@ class CameraCalibration:
     translation: np.ndarray = field(default_factory=lambda: np.zeros(3))
     rotation: np.ndarray = field(default_factory=lambda: np.array([0.0, 0.0, 0.0, 1.0]))
     quality: dict[str, Any] = field(default_factory=dict)
+    flagged: str = ""
+    """Empty when the calibration trusts this camera; otherwise why its result is doubtful.
+    A flagged camera is never used silently: stages refuse it unless told to accept it."""
 
     @property
     def extrinsics(self) -> RigidTransform:
@@ -80,6 +84,11 @@ class Calibration:
             msg = f"camera {name!r} is not in the calibration (known: {sorted(self.cameras)})"
             raise CalibrationError(msg) from None
 
+    @property
+    def flagged(self) -> dict[str, str]:
+        """Per flagged camera, why its result is doubtful (empty when all are trusted)."""
+        return {name: cam.flagged for name, cam in self.cameras.items() if cam.flagged}
+
     def to_dict(self) -> dict[str, Any]:
         """Plain data in the file's layout (lists, floats, strings)."""
         return {
@@ -94,6 +103,7 @@ class Calibration:
                     "translation": [float(v) for v in cam.translation],
                     "rotation": [float(v) for v in cam.rotation],
                     "quality": _plain(cam.quality),
+                    "flagged": cam.flagged,
                 }
                 for name, cam in self.cameras.items()
             },
@@ -144,6 +154,7 @@ def _camera_from_dict(entry: Any, where: str) -> CameraCalibration:
         translation=translation,
         rotation=rotation / norm,
         quality=dict(quality),
+        flagged=str(entry.get("flagged") or ""),
         **scalars,
     )
 
