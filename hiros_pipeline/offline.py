@@ -194,8 +194,9 @@ def run_recording(
         _tracking(recording, pipeline.tracker, processes) as tracked,
         RecordingWriter(out, discard_on_error=True) as writer,  # no half-written output
     ):
-        writer.write("/hiros/calibration", "std_msgs/msg/String",
-                     _calibration_message(calibration), 0)  # fmt: skip
+        writer.write_initial(
+            "/hiros/calibration", "std_msgs/msg/String", _calibration_message(calibration)
+        )
         for item in tracked:
             if isinstance(item, _TrackingEnd):
                 break

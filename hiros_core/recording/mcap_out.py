@@ -13,10 +13,11 @@ thread and builds each message record through several small writes; on ``hiros r
   it with its message indexes, then hands the buffer back for a later chunk (reused buffers
   are already mapped: no page faults per chunk). zstd, lz4, crc32 and file writes release
   the GIL, so this runs beside the caller's work on another core;
-* records other than messages (schemas, channels, the summary) use the ``mcap`` library's
-  record classes, so the layout follows the MCAP specification as that library implements it
-  (summary with repeated schemas and channels, statistics, chunk indexes and summary offsets,
-  all CRCs), which ``ros2 bag`` (rosbag2_storage_mcap) and Foxglove read.
+* records other than messages (schemas, channels, metadata, the summary) use the ``mcap``
+  library's record classes, so the layout follows the MCAP specification as that library
+  implements it (summary with repeated schemas and channels, statistics, metadata and chunk
+  indexes and summary offsets, all CRCs), which ``ros2 bag`` (rosbag2_storage_mcap) and
+  Foxglove read.
 
 The file's bytes depend only on the messages written and the settings: deterministic.
 """
@@ -39,6 +40,8 @@ from mcap.records import (
     Footer,
     Header,
     MessageIndex,
+    Metadata,
+    MetadataIndex,
     Schema,
     Statistics,
     SummaryOffset,
@@ -115,6 +118,7 @@ class McapWriter:
         self.start_time = 0
         self.end_time = 0
         self.chunk_indexes: list[ChunkIndex] = []
+        self._metadata: list[Metadata] = []
         self._free: queue.SimpleQueue[bytearray] = queue.SimpleQueue()  # written buffers
         self._reset_chunk()
         self._jobs: queue.Queue[tuple | None] = queue.Queue(maxsize=_PENDING_CHUNKS)
@@ -164,6 +168,13 @@ class McapWriter:
         self.channel_counts[channel.id] = 0
         self._append(_record(channel))
         return channel.id
+
+    def add_metadata(self, name: str, metadata: dict[str, str]) -> None:
+        """A metadata record (name and string pairs), written after the chunks by ``finish``.
+
+        rosbag2 keeps its bag metadata so, in a record named ``rosbag2``; the summary indexes it.
+        """
+        self._metadata.append(Metadata(name=name, metadata=metadata))
 
     def _append(self, record: bytes) -> None:
         """Copy a whole record (schema, channel) into the open chunk."""
@@ -325,6 +336,13 @@ class McapWriter:
         """Write the last chunk, the data end, the summary and the footer (stream left open)."""
         self._close_chunk()
         self._drain()
+        metadata_indexes = []
+        for metadata in self._metadata:
+            record = _record(metadata)
+            metadata_indexes.append(
+                MetadataIndex(offset=self._position, length=len(record), name=metadata.name)
+            )
+            self._write(record)
         self._write(_record(DataEnd(data_section_crc=0)))
         summary_start = self._position
         summary, offsets = bytearray(), []
@@ -332,6 +350,7 @@ class McapWriter:
             (Opcode.SCHEMA, self.schemas),
             (Opcode.CHANNEL, self.channels),
             (Opcode.STATISTICS, [self._statistics()]),
+            (Opcode.METADATA_INDEX, metadata_indexes),
             (Opcode.CHUNK_INDEX, self.chunk_indexes),
         ]
         for opcode, records in groups:
@@ -362,7 +381,7 @@ class McapWriter:
             schema_count=len(self.schemas),
             channel_count=len(self.channels),
             attachment_count=0,
-            metadata_count=0,
+            metadata_count=len(self._metadata),
             chunk_count=len(self.chunk_indexes),
             message_start_time=self.start_time,
             message_end_time=self.end_time,

@@ -1,9 +1,12 @@
-"""Write recordings as MCAP, the ``ros2 bag`` default storage, readable by Foxglove.
+"""Write recordings as MCAP, the ``ros2 bag`` default storage, laid out as rosbag2 Jazzy writes it.
 
 Messages go in as raw CDR bytes, so anything the codec or rclpy serialises can be recorded
 without building message objects. Each type's schema is its complete ``ros2msg`` definition
 (``msgdefs``), which is what ``ros2 bag`` and Foxglove need to decode a topic they have no
-installed package for.
+installed package for. As rosbag2's MCAP storage plugin (``rosbag2_storage_mcap``) does, every
+channel carries ``offered_qos_profiles`` (the QoS a live hiros node offers on that topic, in
+rosbag2's YAML) and ``topic_type_hash`` (REP-2011), and the file ends its data with a
+``rosbag2`` metadata record holding the bag's metadata (``serialized_metadata``, version 9).
 
 A path ending in ``.mcap`` gives a single file; any other path gives a rosbag2 folder holding
 ``<name>_0.mcap`` and the ``metadata.yaml`` that ``ros2 bag info``/``play`` read.
@@ -22,7 +25,7 @@ import yaml
 
 from hiros_core.errors import RecordingError
 from hiros_core.recording.mcap_out import COMPRESSIONS, ZSTD_LEVEL, McapWriter
-from hiros_core.recording.msgdefs import message_definition, normalize_msgtype
+from hiros_core.recording.msgdefs import message_definition, normalize_msgtype, type_hash
 
 __all__ = [
     "MARKER_ARRAY",
@@ -33,15 +36,37 @@ __all__ = [
 SKELETON_GROUP = "hiros_skeleton_msgs/msg/SkeletonGroup"
 MARKER_ARRAY = "visualization_msgs/msg/MarkerArray"
 
-# QoS that ``ros2 bag play`` offers for latched topics, in the rosbag2 metadata layout.
-_LATCHED_QOS = (
-    "- history: 3\n  depth: 0\n  reliability: 1\n  durability: 1\n"
-    "  deadline:\n    sec: 2147483647\n    nsec: 4294967295\n"
-    "  lifespan:\n    sec: 2147483647\n    nsec: 4294967295\n"
-    "  liveliness: 1\n  liveliness_lease_duration:\n    sec: 2147483647\n"
-    "    nsec: 4294967295\n  avoid_ros_namespace_conventions: false\n"
-)
-_LATCHED_TOPICS = frozenset({"/tf_static"})
+_INFINITE = {"sec": 9223372036, "nsec": 854775807}  # RMW_DURATION_INFINITE, as rosbag2 records it
+
+
+def _offered_qos(depth: int, durability: str) -> list[dict[str, object]]:
+    """One publisher's offered QoS in rosbag2's metadata version 9 form (policy names)."""
+    return [
+        {
+            "history": "keep_last",
+            "depth": depth,
+            "reliability": "reliable",
+            "durability": durability,
+            "deadline": dict(_INFINITE),
+            "lifespan": dict(_INFINITE),
+            "liveliness": "automatic",
+            "liveliness_lease_duration": dict(_INFINITE),
+            "avoid_ros_namespace_conventions": False,
+        }
+    ]
+
+
+# What hiros nodes offer: reliable, keep last 10 (``hiros_ros.node.pipeline_qos``); latched
+# topics (a static transform broadcaster's, the calibration published once) keep their last
+# message for late subscribers, so that ``ros2 bag play`` republishes them that way.
+_STREAM_QOS = _offered_qos(10, "volatile")
+_LATCHED_QOS = _offered_qos(1, "transient_local")
+_LATCHED_TOPICS = frozenset({"/tf_static", "/hiros/calibration"})
+
+
+def offered_qos(topic: str) -> list[dict[str, object]]:
+    """The QoS profiles recorded as offered on ``topic``."""
+    return _LATCHED_QOS if topic in _LATCHED_TOPICS else _STREAM_QOS
 
 
 class _Route:
@@ -135,6 +160,7 @@ class RecordingWriter:
         self._schemas: dict[str, int] = {}
         self._channels: dict[tuple[str, str], int] = {}
         self._routes: dict[tuple[str, str], _Route] = {}
+        self._initial: list[tuple[str, str, bytes]] = []
         self.counts: Counter[tuple[str, str]] = Counter()
         self.start_ns: int | None = None
         self.end_ns: int | None = None
@@ -152,7 +178,10 @@ class RecordingWriter:
                     data=message_definition(msgtype).encode(),
                 )
                 self._schemas[msgtype] = schema
-            metadata = {"offered_qos_profiles": _LATCHED_QOS} if topic in _LATCHED_TOPICS else {}
+            metadata = {
+                "offered_qos_profiles": yaml.safe_dump(offered_qos(topic), sort_keys=False),
+                "topic_type_hash": type_hash(msgtype),
+            }
             channel = self._writer.register_channel(
                 topic=topic, message_encoding="cdr", schema_id=schema, metadata=metadata
             )
@@ -171,6 +200,8 @@ class RecordingWriter:
         route = self._route(topic, msgtype)
         log_time_ns = _checked_time(topic, log_time_ns)
         publish = log_time_ns if publish_time_ns is None else _checked_time(topic, publish_time_ns)
+        if self._initial:
+            self._write_initial(log_time_ns)
         route.sequence += 1
         self._writer.add_message(route.channel, log_time_ns, data, publish, route.sequence)
         self._counted(route, log_time_ns)
@@ -186,10 +217,27 @@ class RecordingWriter:
         route = self._route(topic, SKELETON_GROUP)
         stamp = group.stamp_ns if log_time_ns is None else log_time_ns  # type: ignore[attr-defined]
         stamp = _checked_time(topic, stamp)
+        if self._initial:
+            self._write_initial(stamp)
         size = encode_group_into(group, self._space)  # type: ignore[arg-type]
         route.sequence += 1
         self._writer.commit(route.channel, stamp, size, stamp, route.sequence)
         self._counted(route, stamp)
+
+    def write_initial(self, topic: str, msgtype: str, data: bytes) -> None:
+        """Append a message that belongs at the start, at the log time of the next one.
+
+        For what describes the whole recording (the calibration a run used): logged at the
+        first data message's time, it keeps the file's timeline within the data (at 0, a
+        player's timeline would span 54 years). Without any later message it is logged at 0.
+        """
+        self._route(topic, msgtype)  # a bad type is refused now, not with the next message
+        self._initial.append((topic, msgtype, bytes(data)))
+
+    def _write_initial(self, log_time_ns: int) -> None:
+        initial, self._initial = self._initial, []
+        for topic, msgtype, data in initial:
+            self.write(topic, msgtype, data, log_time_ns)
 
     def _space(self, size: int) -> tuple[np.ndarray, int]:
         at = self._writer.reserve(size)  # may move the chunk to a larger buffer: first
@@ -231,8 +279,15 @@ class RecordingWriter:
         """Finish the file (summary, indexes) and, for a folder, write ``metadata.yaml``."""
         if self.closed:
             return
+        if self._initial:
+            self._write_initial(0)
         self.closed = True
         try:
+            self._writer.add_metadata(
+                "rosbag2",
+                {"serialized_metadata": yaml.safe_dump(self._bag_info(), sort_keys=False),
+                 "ROS_DISTRO": "jazzy"},
+            )  # fmt: skip
             self._writer.finish()
         except BaseException:
             self._writer.abort()
@@ -240,7 +295,8 @@ class RecordingWriter:
         finally:
             self._stream.close()
         if self.folder is not None:
-            (self.folder / "metadata.yaml").write_text(self._metadata())
+            info = {"rosbag2_bagfile_information": self._bag_info()}
+            (self.folder / "metadata.yaml").write_text(yaml.safe_dump(info, sort_keys=False))
 
     def discard(self) -> None:
         """Close and delete the recording: the output of a failed run must not pass for one.
@@ -256,12 +312,12 @@ class RecordingWriter:
             with contextlib.suppress(OSError):  # not empty: something else was put there
                 self.folder.rmdir()
 
-    def _metadata(self) -> str:
-        """rosbag2 ``metadata.yaml`` (version 9) describing the folder's one MCAP file."""
+    def _bag_info(self) -> dict[str, object]:
+        """rosbag2's bag metadata (version 9) of the one MCAP file: ``metadata.yaml``'s content."""
         start = self.start_ns or 0
         duration = (self.end_ns or 0) - start
         total = sum(self.counts.values())
-        info = {
+        return {
             "version": 9,
             "storage_identifier": "mcap",
             "duration": {"nanoseconds": duration},
@@ -273,8 +329,8 @@ class RecordingWriter:
                         "name": topic,
                         "type": msgtype,
                         "serialization_format": "cdr",
-                        "offered_qos_profiles": _LATCHED_QOS if topic in _LATCHED_TOPICS else "",
-                        "type_description_hash": "",
+                        "offered_qos_profiles": offered_qos(topic),
+                        "type_description_hash": type_hash(msgtype),
                     },
                     "message_count": count,
                 }
@@ -294,7 +350,6 @@ class RecordingWriter:
             "custom_data": {},
             "ros_distro": "jazzy",
         }
-        return yaml.safe_dump({"rosbag2_bagfile_information": info}, sort_keys=False)
 
     def __enter__(self) -> RecordingWriter:
         return self
