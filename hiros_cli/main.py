@@ -8,6 +8,8 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import os
+import signal
 import sys
 from types import ModuleType
 
@@ -67,8 +69,12 @@ def main(argv: list[str] | None = None) -> int:
     if not getattr(args, "_module", None):
         parser.print_help()
         return 2
+    previous = _terminate_as_interrupt()
     try:
         return int(args._module.run(args) or 0)
+    except Terminated:
+        print(f"hiros {args.command}: terminated (SIGTERM)", file=sys.stderr)
+        return 128 + signal.SIGTERM
     except HirosError as exc:
         print(f"hiros {args.command}: error: {exc}", file=sys.stderr)
         return 1
@@ -78,6 +84,36 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         print(f"hiros {args.command}: interrupted", file=sys.stderr)
         return 130
+    finally:
+        if previous is not None:
+            signal.signal(signal.SIGTERM, previous)
+
+
+class Terminated(BaseException):
+    """SIGTERM met in the command, raised where the command is.
+
+    Its ``finally`` blocks then run: an output being written is removed (``hiros_core.outputs``).
+    """
+
+
+def _terminate_as_interrupt() -> object:
+    """Turn SIGTERM into ``Terminated`` in this process (a forked child just exits).
+
+    Python's default for SIGTERM ends the process at once, without cleanup: a run stopped so
+    left a cut output under its final name. Returns the handler it replaced (None outside
+    the main thread, where no handler can be set).
+    """
+    main_pid = os.getpid()
+
+    def handler(signum: int, frame: object) -> None:
+        if os.getpid() != main_pid:  # a forked worker (hiros run's reader) stops at once
+            os._exit(128 + signum)
+        raise Terminated
+
+    try:
+        return signal.signal(signal.SIGTERM, handler)
+    except ValueError:  # not the main thread (a test calling main from a thread)
+        return None
 
 
 def _os_problem(exc: OSError) -> str:

@@ -28,3 +28,7 @@ class CalibrationError(HirosError):
 
 class ConfigError(HirosError):
     """A parameter file or parameter value is invalid."""
+
+
+class OutputError(HirosError):
+    """An output path would destroy an input or a file the command did not make."""

@@ -39,7 +39,13 @@ HELP = "clock offsets and camera poses from people's motion, written as a calibr
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Options of ``hiros calibrate``."""
     parser.add_argument("recording", type=Path, metavar="REC", help="recording (.mcap, folder)")
-    parser.add_argument("--out", type=Path, required=True, help="calibration file to write")
+    parser.add_argument(
+        "--out",
+        type=Path,
+        required=True,
+        help="calibration file to write; it replaces only an earlier calibration file (any "
+        "other file there, and the recording itself, are refused)",
+    )
     parser.add_argument("--plots", type=Path, metavar="DIR", help="write PNG plots here")
     parser.add_argument(
         "--reference",
@@ -71,8 +77,13 @@ def run(args: argparse.Namespace) -> int:
     from hiros_calib.calibrator import CalibratorParams
     from hiros_cli.commands.run import require_camera_topics
     from hiros_core.calibration import save_calibration
+    from hiros_core.outputs import check_output, is_calibration_file, refuse_inputs, staged_output
 
     console = Console()
+    check_output(args.out, inputs=[args.recording], force=True, ours=is_calibration_file,
+                 what="calibration file")  # fmt: skip
+    if args.plots:
+        refuse_inputs(args.plots, [args.recording, args.out], "--plots")
     require_camera_topics(args.recording)
     params = CalibratorParams(reference=args.reference or "")
     if args.prior_window is not None:
@@ -88,7 +99,8 @@ def run(args: argparse.Namespace) -> int:
         use_arrival=not args.no_arrival_times,
         details=True,
     )
-    save_calibration(calibration, args.out)
+    with staged_output(args.out, replace=True) as staged:
+        save_calibration(calibration, staged)
     print_summary(console, result)
     console.print(f"wrote {args.out}")
     if args.plots:

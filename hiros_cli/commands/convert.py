@@ -35,7 +35,15 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
     parser.add_argument("input", type=Path, metavar="IN", help="file to convert")
     parser.add_argument(
-        "--out", type=Path, required=True, help="new recording: NAME.mcap or a folder"
+        "--out",
+        type=Path,
+        required=True,
+        help="new recording: NAME.mcap or a folder (appears only once it is complete)",
+    )
+    parser.add_argument(
+        "--force",
+        action="store_true",
+        help="replace an existing --out, only if it is a recording hiros wrote (never the input)",
     )
     parser.add_argument("--format", choices=FORMATS, help="input format (default: guessed)")
     parser.add_argument(
@@ -56,12 +64,19 @@ def run(args: argparse.Namespace) -> int:
     from rich.table import Table
 
     from hiros_convert import convert
+    from hiros_core.outputs import check_output, is_hiros_recording, staged_output
 
+    layout = [Path(args.layout)] if args.layout and Path(args.layout).is_file() else []
+    check_output(args.out, inputs=[args.input, *layout], force=args.force,
+                 ours=is_hiros_recording, what="recording")  # fmt: skip
     console = Console()
     drops: Counter[str] = Counter()
-    with Progress(
-        TextColumn("converting"), BarColumn(), MofNCompleteColumn(), console=console
-    ) as bar:
+    with (
+        Progress(
+            TextColumn("converting"), BarColumn(), MofNCompleteColumn(), console=console
+        ) as bar,
+        staged_output(args.out, replace=args.force) as staged,
+    ):
         task = bar.add_task("convert", total=None)
 
         def progress(done: int, total: int) -> None:
@@ -70,7 +85,7 @@ def run(args: argparse.Namespace) -> int:
 
         counts = convert(
             args.input,
-            args.out,
+            staged,
             fmt=args.format,
             skeleton_groups=args.skeleton_groups,
             camera=args.camera,

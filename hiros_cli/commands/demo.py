@@ -12,7 +12,6 @@ report/report.html to the output folder, then prints a one-screen summary.
 from __future__ import annotations
 
 import argparse
-import shutil
 import time
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -33,7 +32,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--out",
         type=Path,
         default=Path("hiros_out"),
-        help="output folder (default: ./hiros_out; replaced if it exists)",
+        help="output folder (default: ./hiros_out); an earlier demo's folder is replaced, "
+        "any other existing path is refused",
     )
     parser.add_argument(
         "--duration",
@@ -45,6 +45,25 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """The four steps with timings, then the summary."""
+    from hiros_core.outputs import check_output, only_holds, staged_output
+
+    console = Console()
+    check_output(args.out, force=True, ours=lambda path: only_holds(path, DEMO_FILES),
+                 what="demo folder")  # fmt: skip
+    with staged_output(args.out, replace=True) as out:
+        out.mkdir()
+        evaluation, summary, timings, report = _demo(args, out, console)
+    report = args.out / report.relative_to(out)
+    _print_summary(console, evaluation, summary, timings, args.out, report)
+    return 0
+
+
+DEMO_FILES = ("sample", "calib.yaml", "out.mcap", "report")
+"""What the demo writes in its folder: all that an earlier demo's folder may hold."""
+
+
+def _demo(args: argparse.Namespace, out: Path, console: Console) -> tuple:
+    """Simulate, calibrate, run and evaluate into ``out``; the figures and the report path."""
     from hiros_cli.commands.calibrate import calibrate_recording
     from hiros_cli.commands.run import OFFLINE_MERGE_RATE, load_pipeline_params
     from hiros_cli.progress import progress_bar
@@ -54,11 +73,6 @@ def run(args: argparse.Namespace) -> int:
     from hiros_pipeline import run_recording
     from hiros_sim import sample_params, simulate, write_recording
 
-    console = Console()
-    out: Path = args.out
-    if out.exists():
-        shutil.rmtree(out)
-    out.mkdir(parents=True)
     timings: dict[str, float] = {}
 
     start = time.perf_counter()
@@ -101,9 +115,7 @@ def run(args: argparse.Namespace) -> int:
     ]  # fmt: skip
     report = write_report(evaluation, out / "report", "hiros demo: the bundled sample", facts)
     timings["evaluate"] = time.perf_counter() - start
-
-    _print_summary(console, evaluation, summary, timings, out, report)
-    return 0
+    return evaluation, summary, timings, report
 
 
 def _add_chain_rows(table: Table, evaluation: RunEvaluation) -> None:

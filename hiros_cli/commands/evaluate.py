@@ -134,6 +134,10 @@ def _table(title: str, headers: list[str], rows: list[list[str]], width: int) ->
 
 def run(args: argparse.Namespace) -> int:
     """Evaluate, print, and optionally write the HTML report."""
+    from hiros_core.outputs import refuse_inputs
+
+    if args.report:
+        refuse_inputs(args.report, [args.output, args.truth], "--report")
     console = Console()
     if args.output.suffix.lower() in CALIBRATION_SUFFIXES:
         if args.report:

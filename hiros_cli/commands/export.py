@@ -32,9 +32,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Read the stage, write three files per person."""
+    from hiros_core.outputs import refuse_inputs
     from hiros_eval.export import person_series, write_angles_csv, write_positions_csv, write_trc
     from hiros_eval.run import read_run
 
+    refuse_inputs(args.out, [args.output])
     console = Console()
     problems: list[str] = []
     outputs, _ = read_run(args.output, problems)

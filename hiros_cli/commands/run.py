@@ -37,9 +37,20 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         required=True,
         help="calibration file (hiros calibrate), or 'auto' to calibrate first",
     )
-    parser.add_argument("--out", type=Path, required=True, help="output .mcap (must not exist)")
+    parser.add_argument(
+        "--out",
+        type=Path,
+        required=True,
+        help="output .mcap (or a rosbag2 folder); never one of the inputs. It appears only "
+        "when the run ends well (written beside it under a hidden name until then)",
+    )
     parser.add_argument("--params", type=Path, help="pipeline parameter file (default: config/)")
-    parser.add_argument("--force", action="store_true", help="overwrite --out if it exists")
+    parser.add_argument(
+        "--force",
+        action="store_true",
+        help="replace an existing --out, only if it is a recording hiros wrote (anything "
+        "else there is refused, --force or not)",
+    )
     parser.add_argument(
         "--merge-rate",
         type=_rate,
@@ -113,15 +124,23 @@ def load_pipeline_params(path: Path | None):  # noqa: ANN201 - PipelineParams, i
 
 
 def resolve_calibration(spec: str, recording: Path, out: Path, console: Console) -> Calibration:
-    """A calibration file, or ``auto``: calibrate the recording and save beside the output."""
+    """A calibration file, or ``auto``: calibrate the recording and save beside the output.
+
+    The file written for ``auto`` (``OUT.calib.yaml``) replaces only an earlier calibration
+    file and never an input.
+    """
     if spec != "auto":
         return load_calibration(spec)
     from hiros_cli.commands.calibrate import calibrate_recording
+    from hiros_core.outputs import check_output, is_calibration_file, staged_output
 
+    path = out.with_suffix(".calib.yaml")
+    check_output(path, inputs=[recording], force=True, ours=is_calibration_file,
+                 what="calibration file", option="--calibration auto: its file")  # fmt: skip
     console.print(f"calibrating {recording} first (--calibration auto)")
     calibration = calibrate_recording(recording, console=console)
-    path = out.with_suffix(".calib.yaml")
-    save_calibration(calibration, path)
+    with staged_output(path, replace=True) as staged:
+        save_calibration(calibration, staged)
     console.print(f"calibration written to {path}")
     return calibration
 
@@ -145,41 +164,26 @@ def require_camera_topics(recording: Path) -> None:
         raise RecordingError(msg)
 
 
-def remove_previous_output(out: Path) -> None:
-    """``--force``: remove an earlier output, a ``.mcap`` file or a rosbag2 folder of one.
-
-    Raises:
-        RecordingError: ``out`` is a folder holding anything else (it is left alone).
-
-    """
-    if not out.is_dir():
-        out.unlink(missing_ok=True)
-        return
-    ours = {f"{out.name}_0.mcap", "metadata.yaml"}
-    others = sorted(p.name for p in out.iterdir() if p.name not in ours)
-    if others:
-        msg = f"--force: {out} is a folder holding more than a recording ({others}); not removed"
-        raise RecordingError(msg)
-    for name in ours:
-        (out / name).unlink(missing_ok=True)
-    out.rmdir()
-
-
 def run(args: argparse.Namespace) -> int:
     """Run, then print the accounting table."""
+    from hiros_core.outputs import check_output, is_hiros_recording, staged_output
     from hiros_pipeline import run_recording
     from hiros_pipeline.offline import OUTPUTS, message_count
 
     console = Console()
+    inputs = [args.recording, args.params, None if args.calibration == "auto" else args.calibration]
+    check_output(args.out, inputs=[p for p in inputs if p is not None], force=args.force,
+                 ours=is_hiros_recording, what="recording")  # fmt: skip
     require_camera_topics(args.recording)
     params = load_pipeline_params(args.params)
     params.merger.output_rate = args.merge_rate
     calibration = resolve_calibration(args.calibration, args.recording, args.out, console)
-    if args.force:
-        remove_previous_output(args.out)
-    with progress_bar(f"hiros run {args.recording.name}", message_count(args.recording)) as advance:
+    with (
+        staged_output(args.out, replace=args.force) as staged,
+        progress_bar(f"hiros run {args.recording.name}", message_count(args.recording)) as advance,
+    ):
         summary = run_recording(
-            args.recording, calibration, args.out, params, advance, processes=args.processes,
+            args.recording, calibration, staged, params, advance, processes=args.processes,
             write=args.write or OUTPUTS,
         )  # fmt: skip
     print_summary(console, summary, args.out)

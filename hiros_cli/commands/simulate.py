@@ -26,13 +26,24 @@ from dataclasses import replace
 from pathlib import Path
 
 from hiros_core.errors import ConfigError
+from hiros_core.outputs import staged_output
 
 HELP = "semi-synthetic multi-camera recording from real mocap, with the truth"
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Options of ``hiros simulate``."""
-    parser.add_argument("--out", type=Path, help="output folder")
+    parser.add_argument(
+        "--out",
+        type=Path,
+        help="output folder: new or empty (it appears only when the simulation is written)",
+    )
+    parser.add_argument(
+        "--force",
+        action="store_true",
+        help="replace an existing --out, only if it holds nothing but an earlier simulation's "
+        "files (recording.mcap, truth.npz, calibration.yaml)",
+    )
     parser.add_argument("--cameras", type=int, default=3, help="number of cameras (default 3)")
     parser.add_argument(
         "--setup",
@@ -151,6 +162,31 @@ def _fit_noise() -> int:
     return 0
 
 
+SIMULATION_FILES = ("recording.mcap", "truth.npz", "calibration.yaml")
+"""What a simulation folder holds: all that ``--force`` may replace."""
+
+
+def _check_out(args: argparse.Namespace) -> bool:
+    """Refuse an --out holding anything but an earlier simulation, or one without --force.
+
+    An empty folder is used as it is; a folder that holds an input (--bvh, --setup) never.
+    Returns whether an existing --out is to be replaced.
+    """
+    from hiros_core.outputs import check_output, only_holds
+
+    out: Path = args.out
+    inputs = [*(args.bvh or ()), *([Path(args.setup)] if Path(args.setup).is_file() else [])]
+    empty = out.is_dir() and not out.is_symlink() and not any(out.iterdir())
+    check_output(
+        out,
+        inputs=inputs,
+        force=args.force or empty,
+        ours=lambda path: only_holds(path, SIMULATION_FILES),
+        what="simulation folder",
+    )
+    return args.force or empty
+
+
 def run(args: argparse.Namespace) -> int:
     """Simulate and write the folder; prints a summary."""
     if args.fit_noise:
@@ -165,6 +201,7 @@ def run(args: argparse.Namespace) -> int:
 
     from hiros_sim import save_truth, simulate, write_recording
 
+    replacing = _check_out(args)
     params = _params(args)
     console = Console(stderr=True)
     with Progress(
@@ -177,10 +214,11 @@ def run(args: argparse.Namespace) -> int:
 
         result = simulate(params, progress=progress)
         bar.update(task, description="writing")
-        if args.truth_only:
-            save_truth(result, args.out)
-        else:
-            write_recording(result, args.out)
+        with staged_output(args.out, replace=replacing) as staged:
+            if args.truth_only:
+                save_truth(result, staged)
+            else:
+                write_recording(result, staged)
         bar.update(task, description="done")
 
     table = Table(title=f"hiros simulate -> {args.out}")

@@ -63,7 +63,7 @@ def test_force_replaces_a_folder_output_but_not_a_folder_of_other_files(
     (out / "notes.txt").write_text("mine")
     capsys.readouterr()
     assert _run(sim, recording, out, "--processes", "1", "--force") == 1
-    assert "holding more than a recording" in capsys.readouterr().err
+    assert "is not a recording this command made" in capsys.readouterr().err
     assert (out / "out_0.mcap").exists()
 
 
