@@ -13,8 +13,6 @@ from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
-import numpy as np
-
 from hiros_calib.extrinsics import (
     CameraPose,
     Correspondences,
@@ -25,9 +23,12 @@ from hiros_calib.extrinsics import (
     pair_correspondences,
     solve_poses,
 )
+from hiros_calib.lags import settle_lag
+from hiros_calib.quality import arrival_offsets_from_delays, flag_cameras
 from hiros_calib.sync import (
     CameraClock,
     PairOffset,
+    Settle,
     SyncParams,
     synchronise,
 )
@@ -75,6 +76,8 @@ class CalibrationResult:
     pose_pairs: list[PairPose]
     tracks: dict[str, list[BodyTrack]]
     refused: dict[str, str] = field(default_factory=dict)
+    notes: list[str] = field(default_factory=list)
+    """What the calibration decided about its input (e.g. log times that carry no clock)."""
 
 
 class Calibrator:
@@ -137,7 +140,7 @@ class Calibrator:
                 for c in groups
                 if arrival_ns and c in arrival_ns
             }
-        arrival_offsets = {c: float(np.median(d)) * 1e-9 for c, d in delays.items() if d}
+        arrival_offsets, notes = arrival_offsets_from_delays(delays)
         report = progress or (lambda _stage, _done: None)
         params = self.params
         if len(groups) < 2:
@@ -161,7 +164,9 @@ class Calibrator:
             for camera in cameras
         }
         report("clock offsets", 0.1)
-        clocks, sync_pairs = synchronise(tracks, reference, params, arrival_offsets)
+        clocks, sync_pairs = synchronise(
+            tracks, reference, params, arrival_offsets, settle=self._settle(tracks)
+        )
         refused = {c: clock.reason for c, clock in clocks.items() if not clock.ok}
         self._check(refused, "clock")
         report("camera poses", 0.6)
@@ -175,11 +180,32 @@ class Calibrator:
         }
         for camera, cal in calibration.cameras.items():
             cal.quality.update(_sync_quality(camera, sync_pairs))
+        if arrival_offsets or notes:
+            for cal in calibration.cameras.values():
+                cal.quality["arrival_times"] = "ignored" if notes else "used"
+        flag_cameras(calibration, sync_pairs, pose_pairs)
         self.result = CalibrationResult(
-            calibration, clocks, sync_pairs, poses, pose_pairs, tracks, refused
+            calibration, clocks, sync_pairs, poses, pose_pairs, tracks, refused, notes
         )
         report("done", 1.0)
         return calibration
+
+    def _settle(self, tracks: dict[str, list[BodyTrack]]) -> Settle:
+        """The poses' check of each pair's lag (see :mod:`~hiros_calib.lags`)."""
+        params = self.params
+
+        def settle(pair: PairOffset, repin: Callable[[float], PairOffset]) -> PairOffset:
+            return settle_lag(
+                pair,
+                tracks[pair.camera_a],
+                tracks[pair.camera_b],
+                params,
+                repin,
+                max_ambiguity=params.max_ambiguity,
+                min_lag_margin=params.min_lag_margin,
+            )
+
+        return settle
 
     def _check(self, refused: dict[str, str], what: str) -> None:
         if refused and self.params.require_all:

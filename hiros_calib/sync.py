@@ -28,8 +28,10 @@ camera b shifted by ``tau`` matches camera a; with the DESIGN.md clock model
 
 from __future__ import annotations
 
+import functools
 import itertools
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from functools import cached_property
 from typing import Any
@@ -37,6 +39,7 @@ from typing import Any
 import numpy as np
 from scipy.fft import irfft, next_fast_len, rfft
 from scipy.interpolate import make_interp_spline
+from scipy.ndimage import maximum_filter1d
 from scipy.optimize import minimize_scalar
 
 from hiros_calib.signature import DEFAULT_JOINTS, PoseSignature, pose_signature, select_joints
@@ -68,11 +71,17 @@ class SyncParams:
     max_offset: float = 0.0
     """Largest |offset| searched (s) without arrival times; 0 searches every lag."""
     prior_window: float = 1.0
-    """With arrival times, lags are searched this far (s) around the arrival-time lag.
+    """How far (s) the true lag may lie from the lag the arrival times suggest.
 
-    Lag aliases of periodic motion (a looped walk) correlate as well as the true lag; the
-    times the messages arrived at one receiver pin the lag to within network latency.
+    Lag aliases of repeated motion correlate nearly as well as the true lag; the times the
+    messages arrived at one receiver pin the lag to within network latency. The prior only
+    chooses among lags the motion supports: it never narrows the search, so a prior the
+    motion contradicts is noticed and ignored (see ``prior_support``).
     """
+    prior_support: float = 0.8
+    """The arrival-time prior is used only when a lag within ``prior_window`` of it
+    correlates at least this fraction as well as the best lag anywhere; otherwise the motion
+    contradicts it and it is ignored (the pair's quality says so)."""
     min_overlap: float = 3.0
     """Seconds two tracks must overlap at a lag for that lag to count."""
     min_motion: float = 0.01
@@ -81,13 +90,25 @@ class SyncParams:
     """Lowest peak correlation of a usable body pair (noisy SDK joints correlate weakly;
     the sharpness is the stronger test)."""
     min_sharpness: float = 4.0
-    """Lowest robust z-score of a usable peak over its correlation curve."""
+    """Lowest robust z-score of a usable peak over its correlation curve (motion that does
+    not repeat)."""
+    min_repeated_peak: float = 0.3
+    """A peak this high is usable even when its curve has other high peaks (motion repeated
+    over the whole recording, where the z-score over the curve is low however clear the
+    peak); the lags it competes with are then decided by the poses (see ``candidates``)."""
+    candidate_ratio: float = 0.6
+    """Local maxima of the pooled correlation at least this fraction of the peak are the
+    pair's candidate lags, for the poses to check."""
+    max_candidates: int = 4
+    """At most this many candidate lags per camera pair (best first)."""
     max_ambiguity: float = 0.5
-    """Refuse a camera pair when a lag away from the chosen one correlates this nearly as well
-    (second-best significance over the best, for the least ambiguous body pair used). A walk
-    repeated along one path correlates about as well at every repetition (0.8-0.98 on the
-    simulator without arrival times, against 0.02-0.08 with them or on motion that does not
-    repeat); the lag is then a guess, and a wrong lag by whole seconds ruins the poses too."""
+    """A camera pair whose runner-up lag correlates this nearly as well as the best (its
+    correlation over the best's) cannot be timed by the motion alone: the poses decide
+    between the candidate lags, and the pair is refused when they cannot either. Motion
+    repeated over the whole recording correlates about as well at every repetition."""
+    min_lag_margin: float = 1.15
+    """The poses decide between candidate lags when the skeletons' rigid-fit residual at one
+    lag is this many times smaller than at every other (see :mod:`~hiros_calib.lags`)."""
     best_fraction: float = 0.1
     """Fraction of the sharpest body pairs that choose the consensus lag (Eichler: 10 %)."""
     consensus_tolerance: float = 0.05
@@ -119,6 +140,9 @@ class PairOffset:
         lags: ``(L,)`` lags (s) of the pooled correlation curve (for plots).
         correlation: ``(L,)`` pooled correlation at those lags.
         body_pairs: ``(track_a, track_b)`` indices of the body pairs in the consensus.
+        candidates: ``(K, 2)`` lags (s) the motion supports and their pooled correlation,
+            best first; the first is ``offset``'s lobe. Other rows are lags one repetition
+            away, or side lobes, for the poses to rule out.
 
     """
 
@@ -132,6 +156,7 @@ class PairOffset:
     lags: np.ndarray = field(default_factory=lambda: np.empty(0))
     correlation: np.ndarray = field(default_factory=lambda: np.empty(0))
     body_pairs: list[tuple[int, int]] = field(default_factory=list)
+    candidates: np.ndarray = field(default_factory=lambda: np.empty((0, 2)))
 
     @property
     def ok(self) -> bool:
@@ -163,6 +188,10 @@ class CameraClock:
     def from_reference(self, t_reference: np.ndarray | float) -> np.ndarray | float:
         """Reference seconds to camera-clock seconds (inverse of :meth:`to_reference`)."""
         return (t_reference - self.time_offset + self.drift * self.drift_epoch) / (1 + self.drift)
+
+
+Settle = Callable[[PairOffset, Callable[[float], PairOffset]], PairOffset]
+"""A check of one pair's lag before the global solve: ``settle(pair, repin) -> pair``."""
 
 
 # --------------------------------------------------------------------------- grid signals
@@ -492,29 +521,98 @@ def estimate_pair_offset(
     camera_a: str = "a",
     camera_b: str = "b",
     prior: float | None = None,
+    around: float | None = None,
     work: _TrackWork | None = None,
 ) -> PairOffset:
     """The clock lag ``tau = t_a - t_b`` between two cameras from their body tracks.
 
-    ``prior`` is the lag the message arrival times suggest (s); the search is then limited to
-    ``prior ± prior_window``, else to ``± max_offset`` (everything when that is 0). ``work``
-    shares per-track results between the pairs of one :func:`synchronise` call.
+    Every lag within ``± max_offset`` (all when 0) is searched. ``prior`` is the lag the
+    message arrival times suggest (s): among the lags the motion supports, those within
+    ``prior_window`` of it are preferred, unless the motion contradicts it. ``around`` pins
+    the search to the lobe of one candidate lag (after the poses chose it). ``work`` shares
+    per-track results between the pairs of one :func:`synchronise` call.
     """
     work = work if work is not None else _TrackWork(params)
-    if prior is not None:
-        search: tuple[float, float] | None = (
-            prior - params.prior_window,
-            prior + params.prior_window,
-        )
+    if around is not None:
+        reach = max(3 * params.grid_step, 2 * params.consensus_tolerance)
+        search: tuple[float, float] | None = (around - reach, around + reach)
     elif params.max_offset > 0:
         search = (-params.max_offset, params.max_offset)
     else:
         search = None
     sig_a, sig_b = work.signatures(tracks_a), work.signatures(tracks_b)
+    refusal = _refuse_unusable(
+        camera_a, camera_b, sig_a=sig_a, sig_b=sig_b, params=params, work=work
+    )
+    if refusal is not None:
+        return refusal
+    candidates = _body_pair_candidates(sig_a, sig_b, params, search, work)
+    if not candidates:
+        return _refused(
+            camera_a,
+            camera_b,
+            f"no body is seen by both cameras for {params.min_overlap:.1f} s at any lag"
+            + (f" in {search[0]:+.2f}..{search[1]:+.2f} s" if search else ""),
+        )
+    good = [c for c in candidates if _clear(c, params)]
+    best_any = max(candidates, key=lambda c: c.score)
+    if not good:
+        return _refused(
+            camera_a,
+            camera_b,
+            f"no body pair correlates clearly (best peak {best_any.peak:.2f}, sharpness "
+            f"{best_any.sharpness:.1f}; need {params.min_peak} and {params.min_sharpness}, "
+            f"or a peak of {params.min_repeated_peak})",
+            peak=best_any.peak,
+            sharpness=best_any.sharpness,
+            pairs_considered=len(candidates),
+        )
+    used = _consensus(good, params)
+    lags, prior_note = _candidate_lags(used, params, search, prior)
+    chosen = round(lags[0, 0] / params.grid_step)
+    tolerance = max(1, round(params.consensus_tolerance / params.grid_step))
+    if abs(chosen - used[0].lag_index) > tolerance:
+        # the prior chose another of the lags the motion supports: redo the consensus there
+        near = [c for c in good if abs(c.lag_index - chosen) <= tolerance]
+        used = _consensus(near, params) if near else []
+        if not used:
+            pinned = estimate_pair_offset(
+                tracks_a, tracks_b, params, camera_a=camera_a, camera_b=camera_b,
+                around=float(lags[0, 0]), work=work,
+            )  # fmt: skip
+            pinned.candidates = lags
+            pinned.quality.update(_lag_quality(lags, prior_note))
+            return pinned
+    result = _finish(
+        camera_a,
+        camera_b,
+        used=used,
+        candidates=candidates,
+        sig_a=sig_a,
+        sig_b=sig_b,
+        params=params,
+        work=work,
+        centre=chosen,
+    )
+    result.candidates = lags
+    result.quality.update(_lag_quality(lags, prior_note))
+    return result
+
+
+def _refuse_unusable(
+    camera_a: str,
+    camera_b: str,
+    *,
+    sig_a: list[PoseSignature],
+    sig_b: list[PoseSignature],
+    params: SyncParams,
+    work: _TrackWork,
+) -> PairOffset | None:
+    """A refusal when a camera saw no moving body for long enough, else None."""
     if not sig_a or not sig_b:
         return _refused(camera_a, camera_b, "a camera saw no body track")
-    moving_a = [i for i, s in enumerate(sig_a) if work.motion(s) >= params.min_motion]
-    moving_b = [j for j, s in enumerate(sig_b) if work.motion(s) >= params.min_motion]
+    moving_a = [s for s in sig_a if work.motion(s) >= params.min_motion]
+    moving_b = [s for s in sig_b if work.motion(s) >= params.min_motion]
     if not moving_a or not moving_b:
         still = camera_a if not moving_a else camera_b
         return _refused(
@@ -523,8 +621,8 @@ def estimate_pair_offset(
             f"the bodies {still} sees hardly move (less than {params.min_motion * 100:.0f} cm "
             "of joint-distance change), so their motion cannot time the cameras",
         )
-    span_a = max(sig_a[i].times[-1] - sig_a[i].times[0] for i in moving_a)
-    span_b = max(sig_b[j].times[-1] - sig_b[j].times[0] for j in moving_b)
+    span_a = max(s.times[-1] - s.times[0] for s in moving_a)
+    span_b = max(s.times[-1] - s.times[0] for s in moving_b)
     if min(span_a, span_b) < params.min_overlap:
         return _refused(
             camera_a,
@@ -532,10 +630,23 @@ def estimate_pair_offset(
             f"too short: the longest moving track lasts {min(span_a, span_b):.1f} s, "
             f"{params.min_overlap:.1f} s are needed",
         )
-    grid_a = {i: work.grid(sig_a[i]) for i in moving_a}
-    grid_b = {j: work.grid(sig_b[j]) for j in moving_b}
+    return None
+
+
+def _body_pair_candidates(
+    sig_a: list[PoseSignature],
+    sig_b: list[PoseSignature],
+    params: SyncParams,
+    search: tuple[float, float] | None,
+    work: _TrackWork,
+) -> list[_Candidate]:
+    """Every moving body pair's correlation curve and peak within ``search``."""
+    grid_a = {i: work.grid(s) for i, s in enumerate(sig_a) if work.motion(s) >= params.min_motion}
+    grid_b = {j: work.grid(s) for j, s in enumerate(sig_b) if work.motion(s) >= params.min_motion}
     grid_a = {i: g for i, g in grid_a.items() if g is not None}
     grid_b = {j: g for j, g in grid_b.items() if g is not None}
+    if not grid_a or not grid_b:
+        return []
     length = max(len(g.present) for g in grid_a.values()) + max(
         len(g.present) for g in grid_b.values()
     )
@@ -547,59 +658,69 @@ def estimate_pair_offset(
             found = _peak(curve, params, search)
             if found is not None:
                 candidates.append(_Candidate(i, j, curve, *found))
-    if not candidates:
-        return _refused(
-            camera_a,
-            camera_b,
-            f"no body is seen by both cameras for {params.min_overlap:.1f} s at any lag"
-            + (f" in {search[0]:+.2f}..{search[1]:+.2f} s" if search else ""),
-        )
-    good = [
-        c for c in candidates if c.peak >= params.min_peak and c.sharpness >= params.min_sharpness
-    ]
-    best_any = max(candidates, key=lambda c: c.score)
-    if not good:
-        return _refused(
-            camera_a,
-            camera_b,
-            f"no body pair correlates clearly (best peak {best_any.peak:.2f}, sharpness "
-            f"{best_any.sharpness:.1f}; need {params.min_peak} and {params.min_sharpness})",
-            peak=best_any.peak,
-            sharpness=best_any.sharpness,
-            pairs_considered=len(candidates),
-        )
-    used = _consensus(good, params)
-    return _refuse_ambiguous(camera_a, camera_b, used, len(candidates), params) or _finish(
-        camera_a,
-        camera_b,
-        used=used,
-        candidates=candidates,
-        sig_a=sig_a,
-        sig_b=sig_b,
-        params=params,
-        work=work,
-    )
+    return candidates
 
 
-def _refuse_ambiguous(
-    camera_a: str, camera_b: str, used: list[_Candidate], considered: int, params: SyncParams
-) -> PairOffset | None:
-    """A refusal when another lag correlates nearly as well as the consensus, else None."""
-    ambiguity = min(c.ambiguity for c in used)
-    if ambiguity < params.max_ambiguity:
-        return None
-    return _refused(
-        camera_a,
-        camera_b,
-        f"the lag is ambiguous: another lag correlates {ambiguity:.0%} as well as the best "
-        f"({used[0].lag_index * params.grid_step:+.2f} s), as when people repeat the same "
-        "motion; give the frames' arrival times (a recording's log times) or a max_offset "
-        "that leaves the other lag out",
-        peak=max(c.peak for c in used),
-        sharpness=max(c.sharpness for c in used),
-        ambiguity=round(ambiguity, 3),
-        pairs_considered=considered,
-    )
+def _clear(candidate: _Candidate, params: SyncParams) -> bool:
+    """A body pair whose peak stands out of its curve, or is high though the motion repeats."""
+    if candidate.peak < params.min_peak:
+        return False
+    return candidate.sharpness >= params.min_sharpness or candidate.peak >= params.min_repeated_peak
+
+
+def _candidate_lags(
+    used: list[_Candidate],
+    params: SyncParams,
+    search: tuple[float, float] | None,
+    prior: float | None,
+) -> tuple[np.ndarray, str]:
+    """``(K, 2)`` candidate lags (s) and pooled correlations, best first, and the prior's fate.
+
+    The candidates are the pooled curve's local maxima of significance at least
+    ``candidate_ratio`` of the best's correlation, plus always the runner-up (so the poses can
+    show how much worse the next lag fits). A prior the motion supports moves the best lag
+    near it to the front and drops the lags far from it; one it contradicts changes nothing.
+    """
+    step = params.grid_step
+    first, pooled, overlap = _pooled_curve(used, step)
+    lags = (first + np.arange(len(pooled))) * step
+    valid = (overlap >= params.min_overlap) & np.isfinite(pooled)
+    if search is not None:
+        valid &= (lags >= search[0] - 1e-9) & (lags <= search[1] + 1e-9)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        significance = np.arctanh(np.clip(pooled, -0.999, 0.999)) * np.sqrt(overlap)
+    significance = np.where(valid, significance, -np.inf)
+    peaks = _local_maxima(significance, max(3, round(0.25 / step)))
+    rows = np.array([(lags[k], pooled[k], significance[k]) for k in peaks]).reshape(-1, 3)
+    keep = rows[:, 1] >= params.candidate_ratio * rows[0, 1]
+    keep[: min(2, len(rows))] = True
+    rows = rows[keep][: max(2, params.max_candidates)]
+    note = "none"
+    if prior is not None:
+        near = np.abs(rows[:, 0] - prior) <= params.prior_window
+        if near.any() and rows[near, 1].max() >= params.prior_support * rows[0, 1]:
+            rows = rows[near]
+            note = "used"
+        else:
+            note = "contradicted"
+    return rows[:, :2], note
+
+
+def _local_maxima(values: np.ndarray, separation: int) -> list[int]:
+    """Indices of finite values that are the largest within ``separation`` samples, best first."""
+    finite = np.where(np.isfinite(values), values, -np.inf)
+    neighbourhood = maximum_filter1d(finite, 2 * separation + 1, mode="constant", cval=-np.inf)
+    peaks = np.flatnonzero(np.isfinite(finite) & (finite >= neighbourhood))
+    return [int(k) for k in peaks[np.argsort(finite[peaks])[::-1]]]
+
+
+def _lag_quality(lags: np.ndarray, prior_note: str) -> dict[str, Any]:
+    """The candidates' figures for the pair's quality: the runner-up and its margin."""
+    quality: dict[str, Any] = {"candidates": len(lags), "arrival_prior": prior_note}
+    if len(lags) > 1:
+        quality["runner_up_lag"] = round(float(lags[1, 0]), 3)
+        quality["runner_up_ratio"] = round(float(lags[1, 1] / lags[0, 1]), 3)
+    return quality
 
 
 def _consensus(good: list[_Candidate], params: SyncParams) -> list[_Candidate]:
@@ -620,17 +741,23 @@ def _consensus(good: list[_Candidate], params: SyncParams) -> list[_Candidate]:
     return used
 
 
-def _pooled_curve(used: list[_Candidate]) -> tuple[int, np.ndarray]:
-    """(first lag index, correlation) of the body pairs' summed correlation sums."""
+def _pooled_curve(used: list[_Candidate], step: float) -> tuple[int, np.ndarray, np.ndarray]:
+    """(first lag index, correlation, overlap s) of the body pairs' summed correlation sums.
+
+    The overlap at a lag is the longest single body pair's there (body pairs of one camera
+    pair overlap each other in time, so their sum would overstate it).
+    """
     first = min(c.curve.first for c in used)
     last = max(c.curve.first + len(c.curve.sab) for c in used)
     sums = np.zeros((3, last - first))
+    overlap = np.zeros(last - first)
     for c in used:
         start = c.curve.first - first
         stop = start + len(c.curve.sab)
         sums[:, start:stop] += np.stack([c.curve.sab, c.curve.saa, c.curve.sbb])
+        overlap[start:stop] = np.maximum(overlap[start:stop], c.curve.count * step)
     with np.errstate(invalid="ignore", divide="ignore"):
-        return first, sums[0] / np.sqrt(sums[1] * sums[2])
+        return first, sums[0] / np.sqrt(sums[1] * sums[2]), overlap
 
 
 def _parabolic(r: np.ndarray, index: int) -> float:
@@ -654,10 +781,12 @@ def _finish(
     sig_b: list[PoseSignature],
     params: SyncParams,
     work: _TrackWork,
+    centre: int,
 ) -> PairOffset:
+    """The refined lag of the lobe at absolute lag index ``centre``, with its windows."""
     step = params.grid_step
-    first, pooled = _pooled_curve(used)
-    centre = used[0].lag_index - first
+    first, pooled, _ = _pooled_curve(used, step)
+    centre -= first
     half = max(3, round(0.1 / step))
     lo, hi = max(0, centre - half), min(len(pooled), centre + half + 1)
     local = int(np.nanargmax(pooled[lo:hi])) + lo
@@ -863,12 +992,15 @@ def synchronise(
     reference: str,
     params: SyncParams,
     arrival_offsets: dict[str, float] | None = None,
+    settle: Settle | None = None,
 ) -> tuple[dict[str, CameraClock], list[PairOffset]]:
     """Clocks of every camera from their body tracks: all pairs, then the global solve.
 
     ``arrival_offsets`` gives per camera the typical ``arrival time - stamp`` (s) of its
     messages at one receiver; an event stamped ``t_a`` and ``t_b`` arrives at about the same
     time, so ``tau = t_a - t_b`` is about ``arrival_b - arrival_a`` (the search prior).
+    ``settle(pair, repin)`` may check each pair's lag before the solve (the calibrator has the
+    poses decide between candidate lags); ``repin(lag)`` re-estimates the pair at that lag.
     """
     cameras = list(tracks)
     arrival = arrival_offsets or {}
@@ -884,12 +1016,24 @@ def synchronise(
     for k, a in enumerate(cameras):
         for b in cameras[k + 1 :]:
             prior = arrival[b] - arrival[a] if a in arrival and b in arrival else None
-            pairs.append(
-                estimate_pair_offset(
-                    tracks[a], tracks[b], params, camera_a=a, camera_b=b, prior=prior, work=work
-                )
+            pair = estimate_pair_offset(
+                tracks[a], tracks[b], params, camera_a=a, camera_b=b, prior=prior, work=work
             )
+            if settle is not None:
+                pair = settle(pair, functools.partial(_repin, tracks[a], tracks[b], pair, work))
+            pairs.append(pair)
     return solve_clocks(cameras, reference, pairs, clock_epochs(tracks), params), pairs
+
+
+def _repin(
+    tracks_a: list[BodyTrack], tracks_b: list[BodyTrack], pair: PairOffset, work: _TrackWork,
+    lag: float,
+) -> PairOffset:  # fmt: skip
+    """The pair re-estimated in the lobe of ``lag``."""
+    return estimate_pair_offset(
+        tracks_a, tracks_b, work.params, camera_a=pair.camera_a, camera_b=pair.camera_b,
+        around=lag, work=work,
+    )  # fmt: skip
 
 
 def clock_epochs(tracks: dict[str, list[BodyTrack]]) -> dict[str, float]:

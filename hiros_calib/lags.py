@@ -1,0 +1,222 @@
+"""Choosing a camera pair's clock lag among the lags the motion supports, by the poses.
+
+People repeating a motion (exercises, waving, walking one loop) correlate nearly as well one
+repetition away as at the true lag, so the correlation alone cannot tell those lags apart
+(:mod:`~hiros_calib.sync` lists them as a pair's ``candidates``). The skeletons can: at the
+true lag the two cameras see the same pose at the same instant, so one rigid transform maps
+one camera's joints onto the other's up to the SDKs' noise; one repetition off, the limbs
+are elsewhere and no transform fits as well.
+
+For every candidate lag this fits a rigid transform to the same-instant joints (a light
+RANSAC fit, no per-joint offsets) and measures the *lag fit residual*: per frame the mean
+distance of the joints after the fit (left and right as the SDKs gave them or swapped,
+whichever fits), then the median over the frames. The decision:
+
+- the lag the motion prefers and the one the poses prefer agree: taken;
+- the motion cannot decide (the runner-up correlates ``max_ambiguity`` as well or more) and
+  the poses prefer one lag by ``min_lag_margin``: the poses' lag is taken;
+- the motion decides but the poses clearly prefer another lag: the motion's lag is kept and
+  the pair is flagged as doubtful;
+- neither can decide: the pair is refused, listing the candidate lags.
+
+The residual at the chosen lag against the best other lag is kept in the pair's quality as
+evidence that the lag is right (``lag_fit_residual_m``, ``lag_fit_runner_up_m``).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from hiros_calib.extrinsics import (
+    Correspondences,
+    ExtrinsicsParams,
+    associate,
+    estimate_pair_pose,
+    pair_correspondences,
+)
+from hiros_calib.sync import CameraClock, PairOffset
+from hiros_calib.tracks import BodyTrack
+from hiros_core.geometry import RigidTransform
+
+__all__ = ["LagFit", "fit_at_lag", "settle_lag"]
+
+
+@dataclass
+class LagFit:
+    """How well the two cameras' skeletons fit one rigid transform at one clock lag."""
+
+    lag: float
+    """``tau = t_a - t_b`` (s)."""
+    correlation: float
+    """The pooled motion correlation at this lag."""
+    residual_m: float
+    """Median over frames of the per-frame mean joint distance after the fit (m); inf when
+    no person could be matched between the cameras at this lag."""
+    frames: int
+    """Frames of same-instant skeletons the fit used."""
+
+
+def _light(params: ExtrinsicsParams) -> ExtrinsicsParams:
+    """The pose parameters of a quick check: fewer RANSAC samples and frames."""
+    return replace(
+        params,
+        ransac_iterations=min(params.ransac_iterations, 120),
+        frames_per_minute=min(params.frames_per_minute, 300.0),
+        max_frames=min(params.max_frames, 1500),
+    )
+
+
+def fit_at_lag(
+    tracks_a: list[BodyTrack],
+    tracks_b: list[BodyTrack],
+    lag: float,
+    correlation: float,
+    params: ExtrinsicsParams,
+) -> LagFit:
+    """The rigid-fit residual of camera b's skeletons onto camera a's at clock lag ``lag``."""
+    clock_a = CameraClock("a", "ok", time_offset=0.0)
+    clock_b = CameraClock("b", "ok", time_offset=lag)  # o_b - o_a = tau
+    matches = associate(tracks_a, tracks_b, clock_a, clock_b, params)
+    found = [
+        pair_correspondences(tracks_a[i], tracks_b[j], clock_a, clock_b, params)
+        for i, j, _ in matches
+    ]
+    usable = [c for c in found if c is not None]
+    if not usable:
+        return LagFit(lag, correlation, math.inf, 0)
+    joined = Correspondences.concatenate(usable)
+    pose = estimate_pair_pose(joined, _light(params))
+    if not pose.ok:
+        return LagFit(lag, correlation, math.inf, 0)
+    residual, frames = _fit_residual(joined, pose.transform)
+    return LagFit(lag, correlation, residual, frames)
+
+
+def _fit_residual(c: Correspondences, transform: RigidTransform) -> tuple[float, int]:
+    """Median over frames of the mean joint distance (m), the better of direct and mirrored."""
+    moved = transform.apply(c.points_b.reshape(-1, 3)).reshape(c.points_b.shape)
+    valid = c.weights > 0
+    counts = valid.sum(axis=1)
+    frames = counts >= max(3, valid.shape[1] // 3)
+    if not frames.any():
+        return math.inf, 0
+    direct = np.linalg.norm(moved - c.points_a, axis=2)
+    swapped = np.linalg.norm(moved[:, c.mirror] - c.points_a, axis=2)
+    both = valid & valid[:, c.mirror]
+    per_frame = np.minimum(
+        np.where(valid, direct, 0.0).sum(axis=1) / np.maximum(counts, 1),
+        np.where(both, swapped, np.inf).sum(axis=1) / np.maximum(both.sum(axis=1), 1),
+    )
+    return float(np.median(per_frame[frames])), int(frames.sum())
+
+
+def settle_lag(
+    pair: PairOffset,
+    tracks_a: list[BodyTrack],
+    tracks_b: list[BodyTrack],
+    params: ExtrinsicsParams,
+    repin: Callable[[float], PairOffset],
+    *,
+    max_ambiguity: float,
+    min_lag_margin: float,
+) -> PairOffset:
+    """The pair with its lag checked (or chosen) by the poses, flagged or refused if need be.
+
+    ``repin(lag)`` re-estimates the pair's offset in the lobe of another candidate lag. The
+    motion is ambiguous when the runner-up lag correlates ``max_ambiguity`` as well as the
+    best or more; the poses decide when one lag's fit residual is ``min_lag_margin`` times
+    smaller than every other's.
+    """
+    if not pair.ok or len(pair.candidates) == 0:
+        return pair
+    fits = [
+        fit_at_lag(tracks_a, tracks_b, float(lag), float(corr), params)
+        for lag, corr in pair.candidates
+    ]
+    by_fit = sorted(range(len(fits)), key=lambda k: fits[k].residual_m)
+    motion_ratio = float(pair.candidates[1, 1] / pair.candidates[0, 1]) if len(fits) > 1 else 0.0
+    ambiguous = motion_ratio >= max_ambiguity
+    best = by_fit[0]
+    margin = _margin(fits, best)
+    chosen, flag = 0, ""
+    if margin >= min_lag_margin:
+        if best == 0 or ambiguous:
+            chosen = best
+        else:
+            flag = (
+                f"the motion times {pair.camera_a}-{pair.camera_b} at {fits[0].lag:+.3f} s, but "
+                f"the skeletons fit {margin:.2f}x better at {fits[best].lag:+.3f} s"
+            )
+    elif ambiguous:
+        return _undecided(pair, fits, max_ambiguity, min_lag_margin)
+    settled = pair if chosen == 0 else repin(fits[chosen].lag)
+    if not settled.ok:
+        return settled
+    settled.candidates = pair.candidates
+    settled.quality.update(_quality(pair, fits, chosen, motion_ratio))
+    if flag:
+        settled.quality["flagged"] = flag
+    return settled
+
+
+def _margin(fits: list[LagFit], chosen: int) -> float:
+    """The best other lag's residual over the chosen lag's (inf when there is no other)."""
+    others = [f.residual_m for k, f in enumerate(fits) if k != chosen]
+    if not others:
+        return math.inf
+    own = fits[chosen].residual_m
+    if not math.isfinite(own):
+        return 0.0
+    return min(others) / own if own > 0 else math.inf
+
+
+def _quality(
+    pair: PairOffset, fits: list[LagFit], chosen: int, motion_ratio: float
+) -> dict[str, object]:
+    others = [f for k, f in enumerate(fits) if k != chosen]
+    runner_up = min(others, key=lambda f: f.residual_m) if others else None
+    quality: dict[str, object] = {
+        "lag_decided_by": "poses" if chosen != 0 else "motion",
+        "lag_fit_residual_m": _rounded(fits[chosen].residual_m),
+    }
+    if runner_up is not None:
+        quality["lag_fit_runner_up_m"] = _rounded(runner_up.residual_m)
+        quality["lag_fit_runner_up_lag"] = round(runner_up.lag, 3)
+        quality["lag_fit_margin"] = _rounded(_margin(fits, chosen))
+        quality["motion_runner_up_ratio"] = round(motion_ratio, 3)
+    return quality
+
+
+def _rounded(value: float) -> float | str:
+    return round(value, 4) if math.isfinite(value) else "inf"
+
+
+def _undecided(
+    pair: PairOffset, fits: list[LagFit], max_ambiguity: float, min_lag_margin: float
+) -> PairOffset:
+    """The pair refused: neither the motion nor the poses single out one lag."""
+    listed = ", ".join(
+        f"{f.lag:+.2f} s (correlation {f.correlation:.2f}, fit {100 * f.residual_m:.1f} cm)"
+        if math.isfinite(f.residual_m)
+        else f"{f.lag:+.2f} s (correlation {f.correlation:.2f}, no fit)"
+        for f in fits
+    )
+    reason = (
+        f"the lag is ambiguous: the motion repeats, so lags {listed} correlate alike "
+        f"(within {max_ambiguity:.0%}), and the skeletons fit none of them "
+        f"{min_lag_margin:.2f}x better than the others. Record a stretch of motion that "
+        "does not repeat (walk across the room, turn, move each arm differently), or give "
+        "--max-offset to leave the other lags out"
+    )
+    return PairOffset(
+        pair.camera_a,
+        pair.camera_b,
+        status="refused",
+        reason=reason,
+        quality={**pair.quality, "candidate_lags": [round(f.lag, 3) for f in fits]},
+        candidates=pair.candidates,
+    )

@@ -1,0 +1,154 @@
+"""Whether a calibration's input and result can be trusted: arrival times and loop checks.
+
+Two questions a calibration must answer before anyone uses it:
+
+- **Do the recording's log times say anything about the clocks?** They do when every frame
+  was logged on one receiver's clock: ``log - stamp`` then differs between cameras by their
+  clock offsets. When each camera has its own recording host, each frame is logged on its own
+  camera's clock, ``log - stamp`` is just the host's latency on every camera, and the lag
+  those log times suggest (about 0) says nothing. Log times are then ignored, and so they are
+  when the motion contradicts them (:mod:`~hiros_calib.sync`).
+- **Is the result consistent?** Every camera pair measures a clock lag and a pose of its
+  own; the solved clocks and poses must reproduce each of them (loops close), and each pair's
+  lag must fit the skeletons better than the runner-up lag (:mod:`~hiros_calib.lags`). A
+  camera that fails is *flagged* with the reason: written, but never used silently.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from hiros_calib.extrinsics import PairPose, relative_error
+from hiros_calib.sync import PairOffset
+from hiros_core.calibration import Calibration, CameraCalibration
+
+__all__ = ["LoopTolerances", "arrival_offsets_from_delays", "flag_cameras"]
+
+OWN_CLOCK_LATENCY = 0.5
+"""Largest |log - stamp| (s) on every camera for which the log times are taken to be each
+camera's own clock: a receiver's clock and independent cameras' clocks differ by far more,
+a host logging its own camera's frames only by its latency (tens of milliseconds)."""
+
+
+@dataclass
+class LoopTolerances:
+    """How far solved clocks and poses may miss a pair's own measurement before flagging."""
+
+    time_s: float = 0.05
+    rotation_deg: float = 2.0
+    translation_m: float = 0.10
+
+
+def arrival_offsets_from_delays(
+    delays: Mapping[str, Sequence[int]],
+) -> tuple[dict[str, float], list[str]]:
+    """Per camera the typical ``log - stamp`` (s), or none with the reason why.
+
+    ``delays`` holds per camera each frame's ``log time - stamp`` (ns). Log times that look
+    like each camera's own clock (``|log - stamp|`` under :data:`OWN_CLOCK_LATENCY` on every
+    camera) are no information about the lag: an empty mapping and a note are returned.
+    """
+    typical = {c: float(np.median(d)) * 1e-9 for c, d in delays.items() if len(d)}
+    if len(typical) < 2:
+        return typical, []
+    if all(abs(v) < OWN_CLOCK_LATENCY for v in typical.values()):
+        shown = ", ".join(f"{c} {1e3 * v:+.0f} ms" for c, v in sorted(typical.items()))
+        note = (
+            f"the log times look like each camera's own clock (log - stamp: {shown}), as when "
+            "each camera has its own recording host: they say nothing about the clock offsets "
+            "and are ignored"
+        )
+        return {}, [note]
+    return typical, []
+
+
+def flag_cameras(
+    calibration: Calibration,
+    sync_pairs: Sequence[PairOffset],
+    pose_pairs: Sequence[PairPose],
+    tolerances: LoopTolerances | None = None,
+) -> None:
+    """Add loop-closure figures to every camera's quality; flag those that fail a check.
+
+    A camera is flagged when one of its pairs' lag is contradicted by the poses, or when the
+    solved clocks or poses miss one of its pairs' own measurements by more than the
+    tolerances (with three or more cameras: a loop that does not close). The reference
+    camera is never flagged on its own: it defines the frame and the clock.
+    """
+    tolerances = tolerances or LoopTolerances()
+    cameras = calibration.cameras
+    reasons: dict[str, list[str]] = {name: [] for name in cameras}
+    for pair in sync_pairs:
+        if not (pair.ok and pair.camera_a in cameras and pair.camera_b in cameras):
+            continue
+        _lag_figures(cameras, pair)
+        if pair.quality.get("flagged"):
+            for name in (pair.camera_a, pair.camera_b):
+                reasons[name].append(str(pair.quality["flagged"]))
+        miss = _clock_miss(cameras[pair.camera_a], cameras[pair.camera_b], pair)
+        _keep_largest(cameras, pair, "loop_time_ms", round(1e3 * abs(miss), 2))
+        if abs(miss) > tolerances.time_s:
+            text = (
+                f"the clocks miss the {pair.camera_a}-{pair.camera_b} lag by {1e3 * miss:+.0f} "
+                f"ms (a loop of camera clocks does not close; tolerance "
+                f"{1e3 * tolerances.time_s:.0f} ms)"
+            )
+            for name in (pair.camera_a, pair.camera_b):
+                reasons[name].append(text)
+    for pose in pose_pairs:
+        if not (pose.ok and pose.camera_a in cameras and pose.camera_b in cameras):
+            continue
+        solved = cameras[pose.camera_a].extrinsics.inverse() @ cameras[pose.camera_b].extrinsics
+        angle, distance = relative_error(pose.transform, solved)
+        _keep_largest(cameras, pose, "loop_rotation_deg", round(angle, 3))
+        _keep_largest(cameras, pose, "loop_translation_cm", round(100 * distance, 2))
+        if angle > tolerances.rotation_deg or distance > tolerances.translation_m:
+            text = (
+                f"the poses miss the {pose.camera_a}-{pose.camera_b} pair's own pose by "
+                f"{angle:.1f} deg and {100 * distance:.1f} cm (a loop of camera poses does not "
+                "close)"
+            )
+            for name in (pose.camera_a, pose.camera_b):
+                reasons[name].append(text)
+    for name, found in reasons.items():
+        if found and name != calibration.reference:
+            cameras[name].flagged = "; ".join(dict.fromkeys(found))
+
+
+def _clock_miss(a: CameraCalibration, b: CameraCalibration, pair: PairOffset) -> float:
+    """The pair's measured lag minus the lag the solved clocks give (s), mid-recording."""
+    t_b = float(np.median(pair.windows[:, 0])) if len(pair.windows) else 0.0
+    t_reference = b.to_reference_time(t_b)
+    # invert a's clock model at that reference time
+    t_a = (t_reference - a.time_offset + a.drift * a.drift_epoch) / (1 + a.drift)
+    return pair.offset - (t_a - t_b)
+
+
+def _lag_figures(cameras: dict[str, CameraCalibration], pair: PairOffset) -> None:
+    """The pair's lag-fit evidence on both cameras (the pair with the larger margin wins)."""
+    keys = ("lag_decided_by", "lag_fit_residual_m", "lag_fit_runner_up_m", "lag_fit_margin")
+    figures = {f"time_{k}": pair.quality[k] for k in keys if k in pair.quality}
+    if not figures:
+        return
+    for name in (pair.camera_a, pair.camera_b):
+        quality = cameras[name].quality
+        current = quality.get("time_lag_fit_margin")
+        margin = figures.get("time_lag_fit_margin")
+        if current is None or (_number(margin) > _number(current)):
+            quality.update(figures)
+
+
+def _number(value: Any) -> float:
+    return float("inf") if value == "inf" else float(value) if value is not None else -1.0
+
+
+def _keep_largest(
+    cameras: dict[str, CameraCalibration], pair: PairOffset | PairPose, key: str, value: float
+) -> None:
+    for name in (pair.camera_a, pair.camera_b):
+        quality = cameras[name].quality
+        quality[key] = max(value, quality.get(key, 0.0))
