@@ -3,8 +3,9 @@
 Every message is published exactly as recorded (raw CDR: header stamps untouched) at its log
 time relative to the first message played, divided by --rate. /clock (rosgraph_msgs/Clock)
 carries the recording's log time, so nodes started with use_sim_time:=true run on the
-recording's clock. Needs the ROS 2 environment (make setup); topics whose message package is
-not installed are skipped with a warning.
+recording's clock. Needs the ROS 2 environment (make setup). Only types of known message
+packages are played (``KNOWN_PACKAGES``: ours, the Azure driver's and standard ROS ones); a
+type name in a recording is never imported as such, other topics are skipped and counted.
 
 Examples:
   hiros play sample.mcap                           # everything, real time, /clock
@@ -18,6 +19,7 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import re
 import time
 from collections import Counter
 from collections.abc import Callable, Iterable, Iterator
@@ -96,13 +98,40 @@ def playback_schedule(
         yield item, (stamp - origin) / 1e9 / rate
 
 
-def message_class(msgtype: str) -> type | None:
-    """The rclpy class of ``package/msg/Type``, None when its package is not installed."""
-    package, _, name = msgtype.split("/")
+KNOWN_PACKAGES = (
+    "hiros_skeleton_msgs",
+    "visualization_msgs",
+    "tf2_msgs",
+    "geometry_msgs",
+    "sensor_msgs",
+    "std_msgs",
+    "diagnostic_msgs",
+    "rosgraph_msgs",
+    "builtin_interfaces",
+)
+"""Message packages whose types ``hiros play`` publishes: ours and the ROS 2 packages that
+camera drivers and hiros record. A recording's type names are looked up among these, never
+imported by name: a schema naming any other module (``os/msg/X``) is skipped, not run."""
+_TYPE_NAME = re.compile(r"[A-Z][A-Za-z0-9]*")
+
+
+def message_class(msgtype: str) -> tuple[type | None, str]:
+    """The rclpy class of ``package/msg/Type`` and, when there is none, why it is skipped.
+
+    Only a package of ``KNOWN_PACKAGES`` is imported (by its name from that table); the
+    type is then an attribute of its ``msg`` module that is a ROS message class.
+    """
+    package, _, name = msgtype.partition("/msg/")
+    if package not in KNOWN_PACKAGES or not _TYPE_NAME.fullmatch(name):
+        return None, "unknown_type"
     try:
-        return getattr(importlib.import_module(f"{package}.msg"), name)
-    except (ImportError, AttributeError):
-        return None
+        module = importlib.import_module(f"{package}.msg")  # a name of the table only
+    except ImportError:
+        return None, "package_not_installed"
+    cls = getattr(module, name, None)
+    if not (isinstance(cls, type) and hasattr(cls, "_TYPE_SUPPORT")):
+        return None, "unknown_type"
+    return cls, ""
 
 
 class Player:
@@ -115,10 +144,12 @@ class Player:
         self.args = args
         self.remaps = parse_remaps(args.remap)
         self.publishers = {}
+        self.skipped: Counter[str] = Counter()
         for topic, msgtype in topics.items():
-            cls = message_class(msgtype)
+            cls, reason = message_class(msgtype)
             if cls is None:
-                node.get_logger().warning(f"skipping {topic}: {msgtype} is not installed")
+                self.skipped[reason] += 1
+                node.get_logger().warning(f"skipping {topic}: {msgtype} ({_SKIPPED[reason]})")
                 continue
             qos = QoSProfile(depth=100)
             if topic == "/tf_static":
@@ -178,6 +209,12 @@ class Player:
             publisher.wait_for_all_acked(Duration(seconds=timeout))
 
 
+_SKIPPED = {
+    "unknown_type": f"not a message type of {', '.join(KNOWN_PACKAGES)}",
+    "package_not_installed": "its package is not installed here",
+}
+
+
 def _log_time(message: RecordedMessage) -> int:
     return message.log_time_ns
 
@@ -220,4 +257,6 @@ def run(args: argparse.Namespace) -> int:
             rclpy.shutdown()
     for topic, count in sorted(player.counts.items()):
         print(f"{topic}: {count} messages")
+    for reason, count in sorted(player.skipped.items()):
+        print(f"topics skipped: {reason}: {count}")
     return 0

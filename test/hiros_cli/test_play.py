@@ -112,3 +112,19 @@ def test_live_replay_keeps_bytes_and_stamps(tmp_path, ros_env):
     _, count, first, last = next(line for line in lines if line.startswith("clock")).split()
     assert int(count) >= 15
     assert T0 + 5 * 50_000_000 <= int(first) <= int(last) <= T0 + 19 * 50_000_000
+
+
+def test_case6_play_imports_no_module_a_schema_names() -> None:
+    """Issue 21 case 6: a schema ``this/msg/X`` printed the Zen of Python."""
+    from hiros_cli.commands.play import message_class
+
+    for msgtype in ("this/msg/X", "antigravity/msg/X", "os/msg/X", "hiros_cli/msg/main"):
+        package = msgtype.split("/")[0]
+        was_imported = package in sys.modules
+        assert message_class(msgtype) == (None, "unknown_type")
+        assert (package in sys.modules) == was_imported
+    assert message_class("std_msgs/msg/__builtins__") == (None, "unknown_type")
+    assert message_class("std_msgs/msg/NoSuchType") == (None, "unknown_type")
+    group, reason = message_class("hiros_skeleton_msgs/msg/SkeletonGroup")
+    assert reason == ""
+    assert group.__name__ == "SkeletonGroup"
