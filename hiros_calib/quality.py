@@ -29,9 +29,12 @@ from hiros_core.calibration import Calibration, CameraCalibration
 __all__ = ["LoopTolerances", "arrival_offsets_from_delays", "flag_cameras"]
 
 OWN_CLOCK_LATENCY = 0.5
-"""Largest |log - stamp| (s) on every camera for which the log times are taken to be each
-camera's own clock: a receiver's clock and independent cameras' clocks differ by far more,
-a host logging its own camera's frames only by its latency (tens of milliseconds)."""
+"""Largest ``log - stamp`` (s) of a host logging its own camera's frames: its latency, tens
+of milliseconds, never negative."""
+OWN_CLOCK_SPREAD = 0.15
+"""Largest difference (s) between the cameras' ``log - stamp`` for log times to be taken as
+each camera's own clock. On one receiver's clock they differ by the cameras' clock offsets;
+where those are this small, the lag the log times suggest is within the spread anyway."""
 
 
 @dataclass
@@ -49,13 +52,16 @@ def arrival_offsets_from_delays(
     """Per camera the typical ``log - stamp`` (s), or none with the reason why.
 
     ``delays`` holds per camera each frame's ``log time - stamp`` (ns). Log times that look
-    like each camera's own clock (``|log - stamp|`` under :data:`OWN_CLOCK_LATENCY` on every
-    camera) are no information about the lag: an empty mapping and a note are returned.
+    like each camera's own clock (``log - stamp`` a latency on every camera: between 0 and
+    :data:`OWN_CLOCK_LATENCY`, and alike within :data:`OWN_CLOCK_SPREAD`) are no information
+    about the lag: an empty mapping and a note are returned.
     """
     typical = {c: float(np.median(d)) * 1e-9 for c, d in delays.items() if len(d)}
     if len(typical) < 2:
         return typical, []
-    if all(abs(v) < OWN_CLOCK_LATENCY for v in typical.values()):
+    values = list(typical.values())
+    latencies = all(-0.005 <= v < OWN_CLOCK_LATENCY for v in values)
+    if latencies and max(values) - min(values) < OWN_CLOCK_SPREAD:
         shown = ", ".join(f"{c} {1e3 * v:+.0f} ms" for c, v in sorted(typical.items()))
         note = (
             f"the log times look like each camera's own clock (log - stamp: {shown}), as when "

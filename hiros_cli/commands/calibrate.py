@@ -5,12 +5,19 @@ the skeletons alone: no cables, no checkerboard. The people should move (walk, s
 for a minute in front of two or more cameras. Writes the calibration file every hiros stage
 reads (DESIGN.md format) with quality figures per camera, and prints a one-screen summary.
 
-The recording's message arrival (log) times narrow the clock search; cameras whose clocks
-differ by more than --prior-window seconds from what the arrival times say need a larger
-window. A recording whose log times are only the frames' own stamps (converted from files
-that kept no receiver clock) says nothing about the lag: every lag is searched then. People
-repeating one motion correlate about as well at every repetition; such a lag is refused as
-ambiguous, and --max-offset narrows the search to leave the other repetitions out.
+Every lag the data allow is searched (--max-offset narrows it). The recording's message
+arrival (log) times, when they were logged on one receiver's clock, choose among the lags the
+motion supports; log times that are each camera's own clock (one recording host per camera),
+or that the motion contradicts, are ignored, and the summary says so. People repeating one
+motion correlate nearly as well one repetition away: the poses then decide, since only at the
+true lag do both cameras' skeletons fit one rigid transform. When neither can decide, the
+pair is refused with the candidate lags listed.
+
+Every camera's quality figures expose a wrong result: the rigid-fit residual at the chosen lag
+against the best other lag, and with three or more cameras how far the solved clocks and poses
+miss each pair's own measurement (loops that do not close). A camera that fails them is
+flagged: the file is written with the reason, the exit status is 3, and `hiros run` refuses
+the file unless given --accept-flagged.
 
 Examples:
   hiros calibrate sample/recording.mcap --out calib.yaml
@@ -33,6 +40,9 @@ if TYPE_CHECKING:
     from hiros_core.calibration import Calibration
     from hiros_core.model import SkeletonGroup
 
+FLAGGED_EXIT = 3
+"""Exit status of a calibration written with a camera flagged as doubtful."""
+
 HELP = "clock offsets and camera poses from people's motion, written as a calibration file"
 
 
@@ -54,7 +64,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--prior-window",
         type=float,
-        help="seconds searched around the lag the arrival times suggest (default 1)",
+        help="how far (s) the true lag may lie from the one the arrival times suggest (default 1)",
     )
     parser.add_argument(
         "--no-arrival-times",
@@ -64,8 +74,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--max-offset",
         type=float,
-        help="without arrival times: search lags within this many seconds (default: every "
-        "lag; narrow it when people repeat one motion and the lag is refused as ambiguous)",
+        help="search lags within this many seconds (default: every lag; narrow it when "
+        "people repeat one motion and the lag is refused as ambiguous)",
     )
     parser.add_argument("--no-drift", action="store_true", help="do not estimate clock drift")
 
@@ -103,6 +113,11 @@ def run(args: argparse.Namespace) -> int:
         save_calibration(calibration, staged)
     print_summary(console, result)
     console.print(f"wrote {args.out}")
+    if calibration.flagged:
+        for camera, why in calibration.flagged.items():
+            console.print(f"[bold yellow]{camera} is flagged as doubtful: {why}[/]")
+        console.print("[yellow]hiros run refuses flagged cameras unless given --accept-flagged[/]")
+        return FLAGGED_EXIT
     if args.plots:
         written = write_plots(result, args.plots)
         console.print(f"wrote {len(written)} plots to {args.plots}")
@@ -245,7 +260,8 @@ def print_summary(console: Console, result: CalibrationResult) -> None:
         )
     console.print(table)
     pairs = Table(title="camera pairs", box=box.SIMPLE, pad_edge=False, collapse_padding=True)
-    for column in ("pair", "lag s", "peak", "sharp", "bodies", "windows", "inliers", "L/R swap"):
+    columns = ("pair", "lag s", "peak", "bodies", "fit cm", "next lag", "inliers", "L/R swap")
+    for column in columns:
         pairs.add_column(column, justify="right", no_wrap=True)
     poses = {(p.camera_a, p.camera_b): p for p in result.pose_pairs}
     for sync in result.sync_pairs:
@@ -255,15 +271,32 @@ def print_summary(console: Console, result: CalibrationResult) -> None:
             f"{label.get(sync.camera_a, sync.camera_a)}-{label.get(sync.camera_b, sync.camera_b)}",
             f"{sync.offset:+.4f}" if sync.ok else sync.reason[:40],
             f"{sync.quality.get('peak', np.nan):.2f}",
-            f"{sync.quality.get('sharpness', np.nan):.1f}",
             str(sync.quality.get("pairs_used", "-")),
-            str(sync.quality.get("windows", "-")),
+            _fit(sync.quality.get("lag_fit_residual_m")),
+            _runner_up(sync.quality),
             f"{100 * pq['inlier_ratio']:.0f}%" if "inlier_ratio" in pq else "-",
             f"{100 * pq['mirrored_fraction']:.0f}%" if "mirrored_fraction" in pq else "-",
         )
     console.print(pairs)
     for camera, reason in result.refused.items():
         console.print(f"[yellow]{camera} left out: {reason}[/]")
+    for note in result.notes:
+        console.print(f"note: {note}", highlight=False)
+
+
+def _fit(residual: float | str | None) -> str:
+    """The rigid-fit residual at the chosen lag, in cm."""
+    return "-" if residual in (None, "inf") else f"{100 * float(residual):.1f}"
+
+
+def _runner_up(quality: dict) -> str:
+    """The best other lag and how many times worse the skeletons fit there."""
+    lag = quality.get("lag_fit_runner_up_lag")
+    margin = quality.get("lag_fit_margin")
+    if lag is None or margin is None:
+        return "-"
+    shown = "inf" if margin == "inf" else f"{float(margin):.1f}"
+    return f"{lag:+.2f} x{shown}"
 
 
 def write_plots(result: CalibrationResult, folder: Path) -> list[Path]:

@@ -21,7 +21,7 @@ from rich.table import Table
 
 from hiros_cli.progress import print_warnings, progress_bar
 from hiros_core.calibration import Calibration, load_calibration, save_calibration
-from hiros_core.errors import ConfigError, RecordingError
+from hiros_core.errors import CalibrationError, ConfigError, RecordingError
 
 HELP = "offline pipeline over a recording -> one MCAP with every stage's output"
 OFFLINE_MERGE_RATE = 30.0
@@ -45,6 +45,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "when the run ends well (written beside it under a hidden name until then)",
     )
     parser.add_argument("--params", type=Path, help="pipeline parameter file (default: config/)")
+    parser.add_argument(
+        "--accept-flagged",
+        action="store_true",
+        help="run even on cameras the calibration flags as doubtful (default: stop, with "
+        "the reason; a flagged camera is never used silently)",
+    )
     parser.add_argument(
         "--force",
         action="store_true",
@@ -123,14 +129,21 @@ def load_pipeline_params(path: Path | None):  # noqa: ANN201 - PipelineParams, i
     return build_params(PipelineParams, values)
 
 
-def resolve_calibration(spec: str, recording: Path, out: Path, console: Console) -> Calibration:
+def resolve_calibration(
+    spec: str, recording: Path, out: Path, console: Console, *, accept_flagged: bool = False
+) -> Calibration:
     """A calibration file, or ``auto``: calibrate the recording and save beside the output.
 
     The file written for ``auto`` (``OUT.calib.yaml``) replaces only an earlier calibration
-    file and never an input.
+    file and never an input. It is written even when a camera is flagged, so the user can
+    read why; the run then stops unless ``accept_flagged``.
+
+    Raises:
+        CalibrationError: a camera is flagged as doubtful (and not ``accept_flagged``).
+
     """
     if spec != "auto":
-        return load_calibration(spec)
+        return refuse_flagged(load_calibration(spec), spec, console, accept=accept_flagged)
     from hiros_cli.commands.calibrate import calibrate_recording
     from hiros_core.outputs import check_output, is_calibration_file, staged_output
 
@@ -142,7 +155,30 @@ def resolve_calibration(spec: str, recording: Path, out: Path, console: Console)
     with staged_output(path, replace=True) as staged:
         save_calibration(calibration, staged)
     console.print(f"calibration written to {path}")
-    return calibration
+    return refuse_flagged(calibration, str(path), console, accept=accept_flagged)
+
+
+def refuse_flagged(
+    calibration: Calibration, source: str, console: Console, *, accept: bool
+) -> Calibration:
+    """The calibration, unless a camera is flagged: then an error (or, accepted, a warning).
+
+    Raises:
+        CalibrationError: naming each flagged camera and why.
+
+    """
+    flagged = calibration.flagged
+    if not flagged:
+        return calibration
+    reasons = "; ".join(f"{camera}: {why}" for camera, why in flagged.items())
+    if accept:
+        console.print(f"[yellow]warning: using flagged cameras (--accept-flagged): {reasons}[/]")
+        return calibration
+    msg = (
+        f"{source}: the calibration flags {', '.join(flagged)} as doubtful ({reasons}). "
+        "Record more varied motion and calibrate again, or pass --accept-flagged to run anyway"
+    )
+    raise CalibrationError(msg)
 
 
 def require_camera_topics(recording: Path) -> None:
@@ -177,7 +213,9 @@ def run(args: argparse.Namespace) -> int:
     require_camera_topics(args.recording)
     params = load_pipeline_params(args.params)
     params.merger.output_rate = args.merge_rate
-    calibration = resolve_calibration(args.calibration, args.recording, args.out, console)
+    calibration = resolve_calibration(
+        args.calibration, args.recording, args.out, console, accept_flagged=args.accept_flagged
+    )
     with (
         staged_output(args.out, replace=args.force) as staged,
         progress_bar(f"hiros run {args.recording.name}", message_count(args.recording)) as advance,
