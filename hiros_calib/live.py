@@ -326,6 +326,12 @@ class LiveCalibrator(Accounted):
         the body tracks of the frames it was made from.
         """
         old = self.calibration.cameras.get(camera)
+        if new.flagged:
+            # a doubtful estimate is never used: the last good calibration (or none) stays
+            self.drops["estimate_flagged"] += 1
+            kept = "keeping the last good calibration" if old is not None else "not calibrated"
+            self.events.append((now_ns, f"{camera}: estimate flagged ({new.flagged}); {kept}"))
+            return False
         # while the window still holds every frame the current estimate rests on (it is
         # refilling after a start or a recalibration) the new estimate, on more of the same
         # data, supersedes it; once frames slide out, or for a pose loaded from a file, an

@@ -1,0 +1,123 @@
+"""A calibration is right, flagged as doubtful, or refused: log times, candidate lags, flags."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from hiros_calib import Calibrator, CalibratorParams, LiveCalibrator, LiveCalibratorParams
+from hiros_calib.extrinsics import PairPose
+from hiros_calib.quality import arrival_offsets_from_delays, flag_cameras
+from hiros_calib.sync import PairOffset
+from hiros_core.calibration import Calibration, CameraCalibration
+
+MS = 1_000_000
+
+
+def _arrivals(scene, latency_ns):
+    """Per camera each frame's log time: its own stamp plus a host's latency."""
+    return {
+        name: [g.stamp_ns + latency_ns(name) for g in groups]
+        for name, groups in scene.camera_groups.items()
+    }
+
+
+def test_log_times_on_each_cameras_own_clock_are_no_information():
+    own = {"k01": [30 * MS] * 50, "k02": [31 * MS] * 50, "k03": [55 * MS] * 50}
+    offsets, notes = arrival_offsets_from_delays(own)
+    assert offsets == {}
+    assert "each camera's own clock" in notes[0]
+    # one receiver's clock: log - stamp differs by the cameras' offsets (seed 0 of simulate)
+    receiver = {"k01": [60 * MS] * 50, "k02": [418 * MS] * 50, "k03": [-331 * MS] * 50}
+    offsets, notes = arrival_offsets_from_delays(receiver)
+    assert offsets == pytest.approx({"k01": 0.06, "k02": 0.418, "k03": -0.331})
+    assert notes == []
+
+
+def test_per_host_log_times_do_not_hide_a_large_offset(make_scene):
+    # each camera logged by its own host 30 ms after its stamp: the log times say "lag 0",
+    # the true lags are 1.4 s and -1.1 s (beyond the prior window of 1 s)
+    scene = make_scene(offsets=(0.0, 1.4, -1.1), noise=0.01, duration=25.0)
+    calibrator = Calibrator(CalibratorParams(reference="cam0"))
+    estimate = calibrator.calibrate(
+        scene.camera_groups, arrival_ns=_arrivals(scene, lambda _name: 30 * MS)
+    )
+    for name in ("cam1", "cam2"):
+        truth = scene.truth.cameras[name].time_offset
+        assert estimate.cameras[name].time_offset == pytest.approx(truth, abs=0.005)
+        assert estimate.cameras[name].quality["arrival_times"] == "ignored"
+        assert not estimate.cameras[name].flagged
+    assert any("own clock" in note for note in calibrator.result.notes)
+
+
+def test_a_prior_the_motion_contradicts_is_ignored(make_scene):
+    # one receiver, but its log times put cam1 2.5 s away from where its motion is
+    scene = make_scene(offsets=(0.0, 0.4, -0.3), noise=0.01, duration=25.0)
+    true = {n: c.time_offset for n, c in scene.truth.cameras.items()}
+    wrong = {"cam0": 0.0, "cam1": 2.5, "cam2": 0.0}
+    arrivals = _arrivals(
+        scene, lambda name: round((true[name] + wrong[name] + 0.02) * 1e9)
+    )  # log = reference time of capture + 20 ms, but cam1's clock said 2.5 s more
+    calibrator = Calibrator(CalibratorParams(reference="cam0"))
+    estimate = calibrator.calibrate(scene.camera_groups, arrival_ns=arrivals)
+    assert estimate.cameras["cam1"].time_offset == pytest.approx(true["cam1"], abs=0.005)
+    priors = {
+        (p.camera_a, p.camera_b): p.quality["arrival_prior"] for p in calibrator.result.sync_pairs
+    }
+    assert priors[("cam0", "cam1")] == "contradicted"
+    assert priors[("cam0", "cam2")] == "used"
+
+
+def _camera(offset: float = 0.0, translation=(0.0, 0.0, 0.0)) -> CameraCalibration:
+    return CameraCalibration(
+        frame_id="f", time_offset=offset, translation=np.array(translation, dtype=float)
+    )
+
+
+def _pair(a: str, b: str, lag: float) -> PairOffset:
+    windows = np.array([[10.0, lag, 1.0, 0.9]])
+    return PairOffset(a, b, status="ok", offset=lag, windows=windows)
+
+
+def test_a_clock_loop_that_does_not_close_flags_its_cameras():
+    calibration = Calibration("k01", cameras={
+        "k01": _camera(), "k02": _camera(0.5), "k03": _camera(-0.2),
+    })  # fmt: skip
+    # k01-k02 and k01-k03 agree with the clocks; k02-k03 says -1.0 s where they give -0.7 s
+    pairs = [_pair("k01", "k02", 0.5), _pair("k01", "k03", -0.2), _pair("k02", "k03", -1.0)]
+    flag_cameras(calibration, pairs, [])
+    assert set(calibration.flagged) == {"k02", "k03"}
+    assert "k02-k03 lag by -300 ms" in calibration.flagged["k03"]
+    assert calibration.cameras["k03"].quality["loop_time_ms"] == pytest.approx(300.0)
+    closing = Calibration("k01", cameras={
+        "k01": _camera(), "k02": _camera(0.5), "k03": _camera(-0.2),
+    })  # fmt: skip
+    pairs[2] = _pair("k02", "k03", -0.7)
+    flag_cameras(closing, pairs, [])
+    assert closing.flagged == {}
+
+
+def test_a_pose_loop_that_does_not_close_flags_its_cameras():
+    from hiros_core.geometry import RigidTransform
+
+    calibration = Calibration("k01", cameras={
+        "k01": _camera(), "k02": _camera(translation=(2.0, 0, 0)),
+    })  # fmt: skip
+    pose = PairPose(
+        "k01", "k02", "ok", transform=RigidTransform.from_quaternion([0, 0, 0, 1], [2.3, 0, 0])
+    )
+    flag_cameras(calibration, [], [pose])
+    assert "30.0 cm" in calibration.flagged["k02"]
+    assert "k01" not in calibration.flagged  # the reference defines the frame
+
+
+def test_the_live_calibration_keeps_its_last_good_pose_when_an_estimate_is_flagged():
+    good = Calibration("k01", cameras={"k01": _camera(), "k02": _camera(0.25)})
+    live = LiveCalibrator(LiveCalibratorParams(reference="k01"), good)
+    doubtful = _camera(1.8)
+    doubtful.flagged = "the clocks miss the k01-k02 lag by +300 ms"
+    taken = live._merge("k02", doubtful, 0, tracks={}, now_ns=5)
+    assert not taken
+    assert live.calibration.cameras["k02"].time_offset == 0.25
+    assert live.drops["estimate_flagged"] == 1
+    assert "keeping the last good calibration" in live.events[-1][1]

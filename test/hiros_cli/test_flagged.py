@@ -1,0 +1,39 @@
+"""A calibration flagged as doubtful is never used silently by ``hiros run``."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from hiros_cli.main import main
+from hiros_core.calibration import load_calibration, save_calibration
+from hiros_sim import SimParams, simulate, write_recording
+
+
+@pytest.fixture(scope="module")
+def sim(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    folder = tmp_path_factory.mktemp("sim")
+    write_recording(simulate(SimParams(n_cameras=2, n_people=1, duration=6.0, seed=3)), folder)
+    return folder
+
+
+def test_run_refuses_a_flagged_camera_unless_told_to_accept_it(
+    sim: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    calibration = load_calibration(sim / "calibration.yaml")
+    calibration.cameras["k02"].flagged = "the clocks miss the k01-k02 lag by +300 ms"
+    flagged = tmp_path / "flagged.yaml"
+    save_calibration(calibration, flagged)
+    assert load_calibration(flagged).flagged == {"k02": calibration.cameras["k02"].flagged}
+    out = tmp_path / "out.mcap"
+    args = ["run", str(sim / "recording.mcap"), "--calibration", str(flagged), "--out", str(out)]
+    assert main(args) == 1
+    err = capsys.readouterr().err
+    assert "flags k02 as doubtful" in err
+    assert "+300 ms" in err
+    assert "--accept-flagged" in err
+    assert not out.exists()
+    assert main([*args, "--accept-flagged"]) == 0
+    assert "using flagged cameras" in capsys.readouterr().out
+    assert out.exists()
