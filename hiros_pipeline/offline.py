@@ -33,7 +33,7 @@ from hiros_core.model import SkeletonGroup
 from hiros_core.recording import MARKER_ARRAY, RecordingWriter, iter_groups
 from hiros_pipeline.pipeline import STAGES, Pipeline, PipelineParams, StageOutputs
 from hiros_tracker import Tracker
-from hiros_visualizer.markers import encode_skeleton_markers
+from hiros_visualizer import Drawing
 from hiros_visualizer.markers import warm_up as markers_warm_up
 
 __all__ = [
@@ -189,6 +189,7 @@ def run_recording(
     cpu_started = time.thread_time(), time.process_time(), _children_cpu()
     processes = default_processes() if processes is None else processes
     clock, parts = time.perf_counter, {"stages": 0.0, "write": 0.0}
+    drawings = {stage: Drawing(stage) for stage in DRAWN_STAGES}
     with (
         _frozen_heap(),
         _tracking(recording, pipeline.tracker, processes) as tracked,
@@ -205,13 +206,13 @@ def run_recording(
             computed = clock()
             outputs = pipeline.downstream(group)
             written = clock()
-            _write(writer, outputs, summary)
+            _write(writer, outputs, summary, drawings)
             if progress is not None:
                 progress(1)
             parts["stages"] += written - computed
             parts["write"] += clock() - written
         finishing = clock()
-        _write(writer, pipeline.downstream(item.flushed), summary)
+        _write(writer, pipeline.downstream(item.flushed), summary, drawings)
     summary.seconds = {**item.seconds, **parts, "finish": clock() - finishing}
     summary.add_drops(item.reader_drops, "reader: ")
     summary.problems.extend(item.reader_problems)
@@ -426,9 +427,17 @@ def chosen_outputs(write: Iterable[str]) -> frozenset[str]:
     return chosen
 
 
-def _write(writer: RecordingWriter, outputs: StageOutputs, summary: RunSummary) -> None:
+def _write(
+    writer: RecordingWriter,
+    outputs: StageOutputs,
+    summary: RunSummary,
+    drawings: dict[str, Drawing],
+) -> None:
     for stage, group in zip(STAGES, outputs, strict=True):
+        drawn = stage in DRAWN_STAGES and "markers" in summary.written
         if not group.skeletons:
+            if drawn and group.stamp_ns > 0:  # the markers of people who left go at once
+                _write_markers(writer, stage, drawings[stage], group)
             continue
         summary.published[stage] += 1
         if summary.outputs is not None:
@@ -440,10 +449,12 @@ def _write(writer: RecordingWriter, outputs: StageOutputs, summary: RunSummary) 
         if stage not in summary.written:
             continue
         writer.write_group(f"/hiros/{stage}", group)
-        if stage in DRAWN_STAGES and "markers" in summary.written:
-            writer.write(
-                f"/hiros/{stage}/markers",
-                MARKER_ARRAY,
-                encode_skeleton_markers(group, stage),
-                group.stamp_ns,
-            )
+        if drawn:
+            _write_markers(writer, stage, drawings[stage], group)
+
+
+def _write_markers(
+    writer: RecordingWriter, stage: str, drawing: Drawing, group: SkeletonGroup
+) -> None:
+    for message in drawing.draw(group):
+        writer.write(f"/hiros/{stage}/markers", MARKER_ARRAY, message, group.stamp_ns)

@@ -1,4 +1,4 @@
-"""hiros_visualizer: coloured skeleton markers for any SkeletonGroup topic."""
+"""hiros_visualizer: coloured skeleton markers for any SkeletonGroup topic, and their overlays."""
 
 from hiros_visualizer.markers import (
     VisualizerParams,
@@ -6,8 +6,18 @@ from hiros_visualizer.markers import (
     id_color,
     skeleton_markers,
 )
+from hiros_visualizer.overlays import Drawing, OverlayParams, joint_transforms
 
-__all__ = ["VisualizerParams", "encode_skeleton_markers", "id_color", "main", "skeleton_markers"]
+__all__ = [
+    "Drawing",
+    "OverlayParams",
+    "VisualizerParams",
+    "encode_skeleton_markers",
+    "id_color",
+    "joint_transforms",
+    "main",
+    "skeleton_markers",
+]
 
 
 def main(args: list[str] | None = None) -> None:
