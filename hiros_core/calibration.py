@@ -28,6 +28,7 @@ import yaml
 
 from hiros_core.errors import CalibrationError
 from hiros_core.geometry import RigidTransform
+from hiros_core.safe_yaml import load_yaml
 
 __all__ = ["Calibration", "CameraCalibration", "load_calibration", "save_calibration"]
 
@@ -184,13 +185,12 @@ def _plain(value: Any) -> Any:
 
 
 def load_calibration(path: str | Path) -> Calibration:
-    """Read a calibration file; raises CalibrationError naming the file on any problem."""
+    """Read a calibration file; raises CalibrationError naming the file on any problem.
+
+    The YAML is read within ``hiros_core.safe_yaml``'s limits (size, nesting, aliases).
+    """
     path = Path(path)
-    try:
-        data = yaml.safe_load(path.read_text())
-    except (OSError, UnicodeDecodeError, yaml.YAMLError) as exc:  # Unicode: a binary file
-        msg = f"cannot read calibration file {path}: {exc}"
-        raise CalibrationError(msg) from exc
+    data = load_yaml(path, what="calibration file", error=CalibrationError)
     return Calibration.from_dict(data, str(path))
 
 

@@ -19,9 +19,9 @@ from functools import cached_property
 from pathlib import Path
 
 import numpy as np
-import yaml
 
 from hiros_core.errors import LayoutError
+from hiros_core.safe_yaml import load_yaml
 
 __all__ = [
     "AZURE_KINECT",
@@ -164,11 +164,7 @@ _BUILTIN = {layout.name: layout for layout in (AZURE_KINECT, KINECT_V2)}
 def load_layout(path: str | Path) -> Layout:
     """Read a layout from a YAML file with ``name``, ``joints`` and ``parents``."""
     path = Path(path)
-    try:
-        spec = yaml.safe_load(path.read_text())
-    except (OSError, yaml.YAMLError) as exc:
-        msg = f"cannot read layout file {path}: {exc}"
-        raise LayoutError(msg) from exc
+    spec = load_yaml(path, what="layout file", error=LayoutError)
     if not isinstance(spec, dict) or not {"joints", "parents"} <= spec.keys():
         msg = f"layout file {path} must be a mapping with 'joints' and 'parents'"
         raise LayoutError(msg)

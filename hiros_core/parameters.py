@@ -9,15 +9,15 @@ Nested dataclasses become dotted names (``gating.max_distance``).
 from __future__ import annotations
 
 import dataclasses
+import math
 import os
 import sys
 import typing
 from pathlib import Path
 from typing import Any, TypeVar
 
-import yaml
-
 from hiros_core.errors import ConfigError
+from hiros_core.safe_yaml import load_yaml
 
 T = TypeVar("T")
 
@@ -59,11 +59,7 @@ def load_config_defaults(node_name: str, path: Path | None = None) -> dict[str, 
     path = path or config_path(node_name)
     if path is None:
         return {}
-    try:
-        document = yaml.safe_load(path.read_text()) or {}
-    except (OSError, UnicodeDecodeError, yaml.YAMLError) as exc:  # Unicode: a binary file
-        msg = f"cannot read parameter file {path}: {exc}"
-        raise ConfigError(msg) from exc
+    document = load_yaml(path, what="parameter file", error=ConfigError) or {}
     keys = ("/**", node_name, f"/{node_name}")
     sections = [document.get(k) for k in keys] if isinstance(document, dict) else []
     if given and not any(isinstance(s, dict) and "ros__parameters" in s for s in sections):
@@ -120,7 +116,30 @@ def build_params(params_type: type[T], values: dict[str, Any], prefix: str = "")
             kwargs[f.name] = build_params(hints[f.name], values, f"{name}.")
         elif name in values:
             kwargs[f.name] = _coerce(values[name], hints[f.name], name)
-    return params_type(**kwargs)
+            _check_number(kwargs[f.name], f.default, name)
+    try:
+        return params_type(**kwargs)
+    except (TypeError, ValueError) as exc:  # the dataclass's own checks
+        msg = f"{params_type.__name__}: {exc}"
+        raise ConfigError(msg) from exc
+
+
+def _check_number(value: Any, default: Any, name: str) -> None:
+    """A number parameter must be finite, and not negative unless its default is.
+
+    Every stage's durations, distances, rates, weights and counts are 0 or more; the few
+    whose default is negative use it as a sentinel ("measure it": ``filter.sample_frequency``).
+    A NaN would pass every ``<`` test as False and silently switch a check off.
+    """
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        return
+    if not math.isfinite(value):
+        msg = f"parameter {name}: {value!r} is not a finite number"
+        raise ConfigError(msg)
+    negative_default = isinstance(default, (int, float)) and default < 0
+    if value < 0 and not negative_default:
+        msg = f"parameter {name}: {value!r} is negative (it must be 0 or more)"
+        raise ConfigError(msg)
 
 
 def _coerce(value: Any, hint: Any, name: str) -> Any:

@@ -14,14 +14,14 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
-import yaml
 
 from hiros_core.calibration import Calibration
 from hiros_core.codec import decode_group
-from hiros_core.errors import RecordingError
+from hiros_core.errors import CalibrationError, RecordingError
 from hiros_core.geometry import RigidTransform
 from hiros_core.model import Skeleton, SkeletonGroup, camera_from_frame
 from hiros_core.recording import RecordingReader
+from hiros_core.safe_yaml import parse_yaml
 from hiros_eval.body import joint_angle_rmse, limb_length_cv, mpjpe, parabola_vertex
 from hiros_eval.calibration import CameraAccuracy, compare_calibration
 from hiros_eval.tracking import IdentityMetrics, TruthLike, identity_metrics, match_to_truth
@@ -145,10 +145,10 @@ def read_run(
     with RecordingReader(path) as reader:
         for message in reader.messages(wanted & set(reader.topics)):
             if message.topic == "/hiros/calibration":
-                text = bytes(message.data[8:]).split(b"\x00", 1)[0].decode()
-                calibration = Calibration.from_dict(
-                    yaml.safe_load(text), f"{path} /hiros/calibration"
-                )
+                source = f"{path} /hiros/calibration"
+                text = bytes(message.data[8:]).split(b"\x00", 1)[0].decode("utf-8", "replace")
+                data = parse_yaml(text, source=source, error=CalibrationError)
+                calibration = Calibration.from_dict(data, source)
             else:
                 outputs[message.topic.rsplit("/", 1)[1]].append(decode_group(message.data))
         if problems is not None:

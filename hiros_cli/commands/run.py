@@ -126,7 +126,12 @@ def load_pipeline_params(path: Path | None):  # noqa: ANN201 - PipelineParams, i
         msg = f"{path}: unknown pipeline parameters {unknown}"
         raise ConfigError(msg)
     values.update({k: v for k, v in file_values.items() if k in values})
-    return build_params(PipelineParams, values)
+    try:
+        return build_params(PipelineParams, values)
+    except ConfigError as exc:
+        where = path or "the stages' parameter files"
+        msg = f"{where}: {exc}"
+        raise ConfigError(msg) from exc
 
 
 def resolve_calibration(
@@ -210,8 +215,8 @@ def run(args: argparse.Namespace) -> int:
     inputs = [args.recording, args.params, None if args.calibration == "auto" else args.calibration]
     check_output(args.out, inputs=[p for p in inputs if p is not None], force=args.force,
                  ours=is_hiros_recording, what="recording")  # fmt: skip
-    require_camera_topics(args.recording)
     params = load_pipeline_params(args.params)
+    require_camera_topics(args.recording)
     params.merger.output_rate = args.merge_rate
     calibration = resolve_calibration(
         args.calibration, args.recording, args.out, console, accept_flagged=args.accept_flagged

@@ -35,11 +35,11 @@ from types import TracebackType
 from typing import Any
 
 import numpy as np
-import yaml
 
 from hiros_core.errors import RecordingError
 from hiros_core.recording.checksum import crc32
 from hiros_core.recording.msgdefs import normalize_msgtype
+from hiros_core.safe_yaml import load_yaml
 
 __all__ = ["UNCOUNTED_DROPS", "MessageBatch", "RecordedMessage", "RecordingReader"]
 
@@ -47,6 +47,8 @@ UNCOUNTED_DROPS = frozenset({"truncated"})
 """Reasons in ``RecordingReader.drops`` counted once per occurrence, not per message: how
 many messages a file's cut end took is unknown. The others count messages."""
 
+_MAX_METADATA_BYTES = 8 << 20
+"""Largest rosbag2 ``metadata.yaml`` read (one of a thousand topics and files is ~1 MB)."""
 _BATCH_SIZE = 256
 """Messages per batch of a recording read one message at a time (not an indexed MCAP)."""
 
@@ -702,13 +704,16 @@ def _folder_sources(path: Path, drops: Counter[str], problems: list[str]) -> lis
     files: list[Path] = []
     storage = ""
     if metadata.is_file():
+        document = load_yaml(
+            metadata, what="rosbag2 metadata", error=RecordingError, max_bytes=_MAX_METADATA_BYTES
+        )
         try:
-            info = yaml.safe_load(metadata.read_text())["rosbag2_bagfile_information"]
+            info = document["rosbag2_bagfile_information"]
             storage = str(info.get("storage_identifier", ""))
             files = [path / Path(p).name for p in info.get("relative_file_paths", [])]
             compressed = str(info.get("compression_mode", "") or "").lower() not in {"", "none"}
-        except (OSError, yaml.YAMLError, KeyError, TypeError, AttributeError) as exc:
-            msg = f"cannot read {metadata}: {exc}"
+        except (KeyError, TypeError, AttributeError) as exc:
+            msg = f"cannot read {metadata}: no rosbag2_bagfile_information ({exc!r})"
             raise RecordingError(msg) from exc
         if compressed or storage not in {"mcap", "sqlite3"}:
             return [_RosbagsSource(path)]
