@@ -4,18 +4,22 @@ from hiros_sim.bvh import BvhMotion, read_bvh
 from hiros_sim.mapping import map_to_azure
 from hiros_sim.noise import CONFIDENCE_OF_LEVEL
 from hiros_sim.output import load_truth, save_truth, write_recording
+from hiros_sim.presets import PRESETS, Preset, preset_params
 from hiros_sim.sample import sample_params
 from hiros_sim.simulate import SimParams, SimResult, Truth, default_bvh_files, simulate
 
 __all__ = [
     "CONFIDENCE_OF_LEVEL",
+    "PRESETS",
     "BvhMotion",
+    "Preset",
     "SimParams",
     "SimResult",
     "Truth",
     "default_bvh_files",
     "load_truth",
     "map_to_azure",
+    "preset_params",
     "read_bvh",
     "sample_params",
     "save_truth",

@@ -7,14 +7,19 @@ channels are Euler angles in degrees applied in the order listed (intrinsic), so
 gives, for every frame, each joint's global rotation and position::
 
     R_j = R_parent @ R_local_j
-    p_j = p_parent + R_parent @ (offset_j + translation_j)
+    p_j = p_parent + R_parent @ local_j
+
+where ``local_j`` is the joint's ``OFFSET`` with each axis that has a position channel replaced by
+that channel's value: a root's channels place it, and files that give every joint position
+channels (Bandai-Namco's, whose channels repeat the offsets) keep their bone lengths.
 
 ``End Site`` entries become joints named ``<parent>_End`` (no channels): they carry the head top,
 finger and toe tips that the Azure Kinect mapping needs.
 
 The reader keeps the file's own axes and unit (the CMU "scaled" files and the Xsens export are
-in metres, Y up, characters facing +Z in the rest pose); ``hiros_sim.mapping`` converts to the
-simulator's world frame.
+in metres, Y up, characters facing +Z in the rest pose; Bandai-Namco's are in centimetres with
+every bone along its joint's local x); ``hiros_sim.mapping`` converts to the simulator's world
+frame and to metres.
 """
 
 from __future__ import annotations
@@ -189,12 +194,12 @@ def _forward_kinematics(joints: list[_Joint], values: np.ndarray) -> tuple[np.nd
     rotations = np.zeros((n_frames, len(joints), 3, 3))
     column = 0
     for j, joint in enumerate(joints):
-        translation = np.zeros((n_frames, 3))
+        local_offset = np.tile(joint.offset, (n_frames, 1))
         order = ""
         angle_columns = []
         for k, channel in enumerate(joint.channels):
             if channel.endswith("position"):
-                translation[:, _AXES[channel[0].upper()]] = values[:, column + k]
+                local_offset[:, _AXES[channel[0].upper()]] = values[:, column + k]
             else:
                 order += channel[0].upper()
                 angle_columns.append(column + k)
@@ -205,11 +210,11 @@ def _forward_kinematics(joints: list[_Joint], values: np.ndarray) -> tuple[np.nd
             local = np.broadcast_to(np.eye(3), (n_frames, 3, 3))
         if joint.parent < 0:
             rotations[:, j] = local
-            positions[:, j] = joint.offset + translation
+            positions[:, j] = local_offset
         else:
             parent_rot = rotations[:, joint.parent]
             rotations[:, j] = parent_rot @ local
             positions[:, j] = positions[:, joint.parent] + np.einsum(
-                "tab,tb->ta", parent_rot, joint.offset + translation
+                "tab,tb->ta", parent_rot, local_offset
             )
     return positions, rotations

@@ -14,6 +14,11 @@ setup        cameras
              spread over one side of the circle between them
 ``facing``   2 cameras 180° apart
 ``ring``     N cameras evenly spaced around the circle
+``pair``     2 cameras side by side at the same height and tilt, both facing the scene:
+             their views ``pair_angle`` degrees apart, ``pair_baseline`` metres between
+             them (each drawn uniformly from its range), so they stand
+             ``baseline / (2 sin(angle / 2))`` from the room centre (about 1.8 m) instead
+             of ``radius``
 a YAML file  the poses of a calibration file (DESIGN.md format); its clock figures are
              kept when non-zero
 ===========  ======================================================================
@@ -58,6 +63,9 @@ def look_at(position: np.ndarray, target: np.ndarray) -> np.ndarray:
     return -quat if quat[3] < 0 else quat
 
 
+_SETUPS = ("room", "facing", "ring", "pair")
+
+
 def _azimuths(setup: str, count: int) -> np.ndarray:
     if setup == "facing":
         return np.array([0.0, np.pi])
@@ -82,20 +90,32 @@ def make_setup(
     max_time_offset: float,
     drift_ppm: float,
     clock_start: float,
+    pair_angle: tuple[float, float] = (40.0, 50.0),
+    pair_baseline: tuple[float, float] = (1.3, 1.5),
 ) -> Calibration:
     """The true calibration of a camera setup (poses camera -> world, clocks)."""
-    if setup in {"room", "facing", "ring"}:
-        if count < 1 or (setup == "facing" and count != 2):
-            count = 2 if setup == "facing" else count
+    if setup in _SETUPS:
+        if count < 1 or (setup in {"facing", "pair"} and count != 2):
+            count = 2 if setup in {"facing", "pair"} else count
         if count < 1:
             msg = "a simulation needs at least one camera"
             raise ConfigError(msg)
+        azimuths = _azimuths(setup, count)
+        if setup == "pair":
+            angle = np.deg2rad(rng.uniform(*pair_angle))
+            radius = rng.uniform(*pair_baseline) / (2.0 * np.sin(0.5 * angle))
+            azimuths = np.array([-0.5 * angle, 0.5 * angle])
+            pair_height = rng.uniform(*height_range)
+            pair_tilt = np.deg2rad(rng.uniform(*tilt_range))
         calibration = Calibration(reference="k01", world_frame="world")
-        for name, azimuth in zip(camera_names(count), _azimuths(setup, count), strict=True):
-            height = rng.uniform(*height_range)
-            position = np.array([radius * np.cos(azimuth), radius * np.sin(azimuth), height])
+        for name, azimuth in zip(camera_names(count), azimuths, strict=True):
+            if setup == "pair":  # a symmetric pair: one height and tilt for both
+                height, tilt = pair_height, pair_tilt
+            else:
+                height = rng.uniform(*height_range)
+                tilt = np.deg2rad(rng.uniform(*tilt_range))
             # aim at 1 m above the centre, then pitch further down by the tilt
-            tilt = np.deg2rad(rng.uniform(*tilt_range))
+            position = np.array([radius * np.cos(azimuth), radius * np.sin(azimuth), height])
             target = np.array([0.0, 0.0, 1.0]) + np.array([0.0, 0.0, -radius * np.tan(tilt)])
             calibration.cameras[name] = CameraCalibration(
                 frame_id=f"{name}_depth_camera_link",
@@ -105,7 +125,7 @@ def make_setup(
     else:
         path = Path(setup)
         if not path.is_file():
-            msg = f"camera setup {setup!r} is neither room, facing, ring nor a calibration file"
+            msg = f"camera setup {setup!r} is neither {', '.join(_SETUPS)} nor a calibration file"
             raise ConfigError(msg)
         calibration = load_calibration(path)
     _draw_clocks(calibration, rng, max_time_offset, drift_ppm, clock_start)

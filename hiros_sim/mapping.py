@@ -66,16 +66,22 @@ _FACE = {
     "EarRight": (-0.083, 0.057, -0.026),
 }
 
+# The last alias of each role is Bandai-Namco's suffix naming ("UpperLeg_L", "Shoulder_L" being
+# the collar bone there too).
 _ALIASES = {
-    "Hip": ("{s}Hip", "{s}UpLeg", "{s}Thigh", "{c}Hip"),
-    "Knee": ("{s}Knee", "{s}Leg", "{s}Shin", "{c}Knee"),
-    "Ankle": ("{s}Ankle", "{s}Foot", "{c}Ankle"),
-    "Foot": ("{s}Toe", "{s}ToeBase", "{s}Toes", "{c}Toe"),
+    "Hip": ("{s}Hip", "{s}UpLeg", "{s}Thigh", "{c}Hip", "UpperLeg_{c}"),
+    "Knee": ("{s}Knee", "{s}Leg", "{s}Shin", "{c}Knee", "LowerLeg_{c}"),
+    "Ankle": ("{s}Ankle", "{s}Foot", "{c}Ankle", "Foot_{c}"),
+    "Foot": ("{s}Toe", "{s}ToeBase", "{s}Toes", "{c}Toe", "Toes_{c}"),
     # "LeftArm" first: in files that have it, "LeftShoulder" names the collar bone.
-    "Shoulder": ("{s}Arm", "{s}UpperArm", "{s}Shoulder", "{c}Shoulder"),
-    "Elbow": ("{s}Elbow", "{s}ForeArm", "{s}LowerArm", "{c}Elbow"),
-    "Wrist": ("{s}Wrist", "{s}Hand", "{c}Wrist"),
+    "Shoulder": ("{s}Arm", "{s}UpperArm", "{s}Shoulder", "{c}Shoulder", "UpperArm_{c}"),
+    "Elbow": ("{s}Elbow", "{s}ForeArm", "{s}LowerArm", "{c}Elbow", "LowerArm_{c}"),
+    "Wrist": ("{s}Wrist", "{s}Hand", "{c}Wrist", "Hand_{c}"),
 }
+_UNITS = (1.0, 0.01, 0.001, 0.0254)
+"""Metres per file unit that a BVH file may use: m, cm, mm, inch."""
+_LEG_LENGTH = 0.85
+"""A typical adult's hip -> knee -> ankle length, metres (tells the file's unit)."""
 
 
 def _find(names: tuple[str, ...], candidates: tuple[str, ...], what: str, source: str) -> int:
@@ -104,7 +110,14 @@ def _ancestors(parents: np.ndarray, joint: int) -> list[int]:
 
 
 class _Roles:
-    """Indices of the BVH joints that play each role, found once per skeleton."""
+    """Indices of the BVH joints that play each role, found once per skeleton.
+
+    Also the file's unit (``metres_per_unit``, from the leg length) and, per joint, the rotation
+    from the body's rest frame (x left, y up, z forward) to the joint's own frame
+    (``rest_frame``): the identity when the rest pose stands upright facing +Z (CMU, Xsens);
+    otherwise (Bandai-Namco's rest pose lays every bone along its joint's local x) the one that
+    makes the joint's frame in the clip's first frame match the body's frame there.
+    """
 
     def __init__(self, motion: BvhMotion) -> None:
         names, src = motion.joint_names, motion.name
@@ -129,6 +142,30 @@ class _Roles:
             reach = np.linalg.norm(rest[fingers] - rest[wrist], axis=1)
             self.finger_end[side] = fingers[int(np.argmax(reach))]
             self.thumb_end[side] = thumbs[-1] if thumbs else None
+        left, right = self.side["Left"], self.side["Right"]
+        leg = np.linalg.norm(rest[left["Knee"]] - rest[left["Hip"]]) + np.linalg.norm(
+            rest[left["Ankle"]] - rest[left["Knee"]]
+        )
+        self.metres_per_unit = min(_UNITS, key=lambda unit: abs(np.log(leg * unit / _LEG_LENGTH)))
+        # the spine starts where the two legs branch off (below it may hang a floor-level root)
+        hips = (_ancestors(motion.parents, left["Hip"]), _ancestors(motion.parents, right["Hip"]))
+        shared = [a for a, b in zip(*hips, strict=False) if a == b]
+        self.spine_base = shared[-1] if shared else 0
+        self.rest_frame = self._rest_frames(motion, rest)
+
+    def _rest_frames(self, motion: BvhMotion, rest: np.ndarray) -> np.ndarray:
+        """``(J, 3, 3)`` rotation from the body's rest frame to each joint's frame."""
+        n_joints = len(motion.joint_names)
+        hip_left, hip_right = self.side["Left"]["Hip"], self.side["Right"]["Hip"]
+        pelvis = 0.5 * (rest[hip_left] + rest[hip_right])
+        up = rest[self.neck] - pelvis
+        if up[1] > 0.9 * np.linalg.norm(up):  # upright rest pose, Y up
+            return np.broadcast_to(np.eye(3), (n_joints, 3, 3))
+        first = motion.positions[0]
+        left = first[hip_left] - first[hip_right]
+        left = np.array([left[0], 0.0, left[2]]) / np.hypot(left[0], left[2])
+        body = np.column_stack([left, [0.0, 1.0, 0.0], np.cross(left, [0.0, 1.0, 0.0])])
+        return np.einsum("jba,bc->jac", motion.rotations[0], body)  # R_j(0)^T @ body
 
 
 def mapping_weights(motion: BvhMotion) -> np.ndarray:
@@ -153,7 +190,8 @@ def mapping_weights(motion: BvhMotion) -> np.ndarray:
     # SpineNaval and SpineChest: fractions of the spine polyline pelvis -> root -> ... -> neck,
     # by rest-pose arc length, so that a bending spine bends them too.
     chain_rows = [pelvis]
-    for joint in _ancestors(motion.parents, roles.neck):
+    spine = _ancestors(motion.parents, roles.neck)
+    for joint in spine[spine.index(roles.spine_base) :]:
         row = np.zeros(len(motion.joint_names))
         row[joint] = 1.0
         chain_rows.append(row)
@@ -176,9 +214,9 @@ def mapping_weights(motion: BvhMotion) -> np.ndarray:
 def map_to_azure(motion: BvhMotion) -> np.ndarray:
     """``(T, 32, 3)`` Azure Kinect joints of every frame, world frame (Z up), metres."""
     roles = _Roles(motion)
-    rest = _rest_positions(motion)
+    rest = _rest_positions(motion) * roles.metres_per_unit
     weights = mapping_weights(motion)
-    bvh = motion.positions  # (T, Jb, 3), BVH axes
+    bvh = motion.positions * roles.metres_per_unit  # (T, Jb, 3), BVH axes, metres
     out = np.einsum("aj,tjc->tac", weights, bvh)
     idx = AZURE_KINECT.index
     for side in ("Left", "Right"):
@@ -198,9 +236,10 @@ def map_to_azure(motion: BvhMotion) -> np.ndarray:
         along = np.einsum("tab,b->ta", wrist_rot, along_rest)
         out[:, idx(f"Hand{side}")] = wrist + _HAND * scale * along
         out[:, idx(f"HandTip{side}")] = wrist + _HAND_TIP * scale * along
-        thumb_rest = _THUMB_ALONG * along_rest + _THUMB_FORWARD * np.array([0.0, 0.0, 1.0])
+        forward = roles.rest_frame[s["Wrist"]] @ np.array([0.0, 0.0, 1.0])
+        thumb_rest = _THUMB_ALONG * along_rest + _THUMB_FORWARD * forward
         out[:, idx(f"Thumb{side}")] = wrist + scale * np.einsum("tab,b->ta", wrist_rot, thumb_rest)
-    head_rot = motion.rotations[:, roles.head]
+    head_rot = motion.rotations[:, roles.head] @ roles.rest_frame[roles.head]
     face = np.array(list(_FACE.values()))  # (5, 3) rest frame: x left, y up, z forward
     face_ids = [idx(n) for n in _FACE]
     out[:, face_ids] = out[:, idx("Head")][:, None] + np.einsum("tab,fb->tfa", head_rot, face)

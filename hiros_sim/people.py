@@ -8,6 +8,13 @@ standing), back, and so on. Paths of different people have different centres and
 that they cross. A person whose clip travels less than 0.5 m (bending, waving) stays on the
 spot and faces the opposite way on each repetition. Extra people beyond the number of clips
 replay a clip mirrored (left and right swapped), with a different phase.
+
+Looped with variation (``Repetitions``): a person doing the same thing again and again never
+repeats it exactly. Each repetition then plays at its own speed and with its own amplitude about
+the clip's mean pose; neighbouring repetitions cross-fade over ``blend`` seconds around their
+seam, and the faded pose is put back on the person's limb lengths (``fit_body_model``), so
+there is no jump where the clip's end meets its start. A person on the spot may then keep
+facing one way (``turn_on_spot=False``), as someone waving at a camera does.
 """
 
 from __future__ import annotations
@@ -19,8 +26,9 @@ import numpy as np
 from hiros_core.layouts import AZURE_KINECT
 from hiros_sim.bvh import BvhMotion
 from hiros_sim.mapping import map_to_azure
+from hiros_sim.noise import fit_body_model
 
-__all__ = ["Clip", "PersonPath", "body_forward", "prepare_clip"]
+__all__ = ["Clip", "PersonPath", "Repetitions", "body_forward", "prepare_clip"]
 
 _FOOT_ABOVE_FLOOR = 0.04
 """Height of the Kinect foot and ankle joints above the floor at rest, metres."""
@@ -49,6 +57,11 @@ class Clip:
     def duration(self) -> float:
         """Seconds the clip plays before it repeats."""
         return self.positions.shape[0] / self.rate
+
+    @property
+    def mean_pose(self) -> np.ndarray:
+        """``(32, 3)`` the clip's mean joint positions relative to the pelvis."""
+        return (self.positions - self.positions[:, :1]).mean(axis=0)
 
     def mirrored(self) -> Clip:
         """The same motion with left and right exchanged (reflect y, swap joint labels)."""
@@ -109,6 +122,37 @@ def prepare_clip(motion: BvhMotion) -> Clip:
     return Clip(motion.name, motion.rate, positions, travel)
 
 
+def _smoothstep(x: np.ndarray) -> np.ndarray:
+    x = np.clip(x, 0.0, 1.0)
+    return x * x * (3.0 - 2.0 * x)
+
+
+@dataclass
+class Repetitions:
+    """How each repetition of a looped clip differs from the recorded one.
+
+    Attributes:
+        speed: ``(R,)`` playback speed of each repetition (1 = as recorded).
+        amplitude: ``(R,)`` scale of each repetition's movement about the clip's mean pose
+            (pelvis-relative; 1 = as recorded).
+        blend: seconds over which a repetition fades into the next around their seam.
+
+    """
+
+    speed: np.ndarray
+    amplitude: np.ndarray
+    blend: float = 0.5
+
+    @classmethod
+    def draw(
+        cls, rng: np.random.Generator, count: int, variation: float, blend: float
+    ) -> Repetitions:
+        """``count`` repetitions: speed uniform in ``1 ± variation``, amplitude in half that."""
+        speed = 1.0 + rng.uniform(-variation, variation, count)
+        amplitude = 1.0 + rng.uniform(-0.5 * variation, 0.5 * variation, count)
+        return cls(speed, amplitude, blend)
+
+
 @dataclass
 class PersonPath:
     """Where and when one person plays a clip.
@@ -121,6 +165,9 @@ class PersonPath:
         enter: simulation time the person appears, seconds.
         leave: simulation time the person disappears, seconds.
         turn_time: seconds the 180° turn between passes takes.
+        repetitions: per-repetition variation; None repeats the clip exactly (with a jump
+            where its end meets its start).
+        turn_on_spot: a clip played on the spot faces the opposite way on each repetition.
 
     """
 
@@ -131,26 +178,85 @@ class PersonPath:
     enter: float
     leave: float
     turn_time: float = 1.0
+    repetitions: Repetitions | None = None
+    turn_on_spot: bool = True
 
     def positions(self, times: np.ndarray) -> np.ndarray:
         """``(N, 32, 3)`` world positions at simulation times (s), NaN when absent."""
         clip = self.clip
-        tau = np.asarray(times, dtype=float) + self.phase
-        repetition = np.floor(tau / clip.duration)
-        clip_time = tau - repetition * clip.duration
-        local = clip.sample(clip_time)
+        times = np.asarray(times, dtype=float)
+        tau = times + self.phase
+        if self.repetitions is None:
+            repetition = np.floor(tau / clip.duration)
+            clip_time = tau - repetition * clip.duration
+            world = self._place(clip.sample(clip_time), repetition, clip_time)
+        else:
+            world = self._looped(tau, self.repetitions)
+        absent = (times < self.enter) | (times > self.leave)
+        world[absent] = np.nan
+        return world
+
+    def _looped(self, tau: np.ndarray, reps: Repetitions) -> np.ndarray:
+        """``(N, 32, 3)`` world positions at clip-sequence times ``tau`` with variation.
+
+        Around each seam (``|tau - seam| < blend / 2``) the pose is the cross-fade of the two
+        repetitions meeting there, each held at its end or start beyond its own span.
+        """
+        clip = self.clip
+        bounds = np.concatenate([[0.0], np.cumsum(clip.duration / reps.speed)])
+        if tau.size and tau.max() >= bounds[-1]:
+            msg = f"{len(reps.speed)} repetitions cover {bounds[-1]:.1f} s, not {tau.max():.1f} s"
+            raise ValueError(msg)
+        current = np.clip(np.searchsorted(bounds, tau, side="right") - 1, 0, len(reps.speed) - 1)
+        seam = np.where(tau - bounds[current] < bounds[current + 1] - tau, current, current + 1)
+        half = 0.5 * reps.blend
+        offset = tau - bounds[seam]
+        near = (seam >= 1) & (np.abs(offset) < half)
+        later = np.where(near, seam, current)
+        earlier = np.where(near, seam - 1, current)
+        weight = np.where(near, _smoothstep((offset + half) / max(reps.blend, 1e-9)), 0.0)
+        first, first_recorded = self._repetition(earlier, tau, bounds, reps)
+        second, _ = self._repetition(later, tau, bounds, reps)
+        blended = (1.0 - weight)[:, None, None] * first + weight[:, None, None] * second
+        # the cross-fade and the amplitude shorten limbs a little: back on the true lengths
+        ones = np.ones(tau.shape)
+        return fit_body_model(blended, first_recorded, ones, np.ones((*tau.shape, 32)))
+
+    def _repetition(
+        self, repetition: np.ndarray, tau: np.ndarray, bounds: np.ndarray, reps: Repetitions
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """World positions of ``repetition`` at ``tau`` (varied) and as recorded (same place)."""
+        clip = self.clip
+        speed, amplitude = reps.speed[repetition], reps.amplitude[repetition]
+        clip_time = np.clip((tau - bounds[repetition]) * speed, 0.0, clip.duration)
+        recorded = clip.sample(clip_time)
+        pelvis = recorded[:, :1]
+        mean = clip.mean_pose
+        varied = pelvis + mean + amplitude[:, None, None] * (recorded - pelvis - mean)
+        place = self._place
+        return place(varied, repetition, clip_time), place(recorded, repetition, clip_time)
+
+    def _place(
+        self, local: np.ndarray, repetition: np.ndarray, clip_time: np.ndarray
+    ) -> np.ndarray:
+        """Clip-frame positions ``(N, 32, 3)`` of the given repetitions into the world."""
+        clip = self.clip
         odd = (repetition % 2).astype(bool)
         direction = np.array([np.cos(self.heading), np.sin(self.heading)])
         start = self.centre - 0.5 * clip.travel * direction
         end = self.centre + 0.5 * clip.travel * direction
         origin = np.where(odd[:, None], end, start)
+        if not self.turn_on_spot and clip.travel == 0.0:
+            return self._turned(local, np.full(repetition.shape, self.heading), self.centre)
         yaw = self.heading + np.pi * repetition
         turning = (repetition > 0) & (clip_time < self.turn_time)
         progress = np.clip(clip_time / self.turn_time, 0.0, 1.0)
         smooth = progress * progress * (3.0 - 2.0 * progress)
         yaw = np.where(turning, yaw - np.pi * (1.0 - smooth), yaw)
+        return self._turned(local, yaw, origin)
+
+    @staticmethod
+    def _turned(local: np.ndarray, yaw: np.ndarray, origin: np.ndarray) -> np.ndarray:
         world = np.einsum("nab,njb->nja", _rotation_z(yaw), local)
-        world[..., :2] += origin[:, None, :]
-        absent = (times < self.enter) | (times > self.leave)
-        world[absent] = np.nan
+        world[..., :2] += np.broadcast_to(origin, (*yaw.shape, 2))[:, None, :]
         return world

@@ -14,6 +14,14 @@ Frame timing: camera frames are ``1 / rate`` apart on the camera's own clock, pl
 ``to_reference_time(stamp)`` is the clean skeleton). Frames are dropped with ``drop_rate``
 (no message at all) and people are missed with ``miss_rate`` (a message without them).
 
+Log times (``SimResult.receive_ns``, the recording's log times): with ``log_clock="receiver"``
+one recorder receives every camera, so a message is logged at its capture instant on the
+reference clock plus ``latency``; with ``log_clock="camera"`` each camera has its own recording
+host on the camera's clock, and a message is logged at its stamp plus that host's constant
+latency (drawn from ``host_latency``) plus ``host_jitter``. The truth is the same either way.
+
+Presets of these knobs for the robustness conditions are in ``hiros_sim.presets``.
+
 ``SimParams(noise=False)`` switches every imperfection off (no joint noise, jitter, drops,
 misses, flips, swaps, ghosts, id changes) but keeps clock offsets, drift, field of view and the
 confidence levels, so a camera's stream is exactly the truth moved into it.
@@ -47,7 +55,8 @@ from hiros_sim.noise import (
     in_view,
     occluded,
 )
-from hiros_sim.people import Clip, PersonPath, body_forward, prepare_clip
+from hiros_sim.people import Clip, PersonPath, Repetitions, body_forward, prepare_clip
+from hiros_sim.shared import bandai_files
 
 __all__ = ["SimParams", "SimResult", "Truth", "bumped_pose", "default_bvh_files", "simulate"]
 
@@ -55,6 +64,17 @@ _DATA = DATA_DIR
 _IDX = AZURE_KINECT.index
 _MAX_PEOPLE = 6
 _THUMBS = np.array([_IDX("ThumbLeft"), _IDX("ThumbRight")])
+_EXTREMITIES = np.array(
+    [
+        _IDX(f"{part}{side}")
+        for part in ("Hand", "HandTip", "Thumb", "Ankle", "Foot", "Eye", "Ear")
+        for side in ("Left", "Right")
+    ]
+    + [_IDX("Nose")]
+)
+"""Hands, feet and face: the joints a noisier SDK gets most wrong (``extremity_gain``)."""
+_MOTIONS = ("bundled", "bandai")
+_LOG_CLOCKS = ("receiver", "camera")
 
 
 def default_bvh_files() -> tuple[str, ...]:
@@ -88,7 +108,17 @@ class SimParams:
     rate: float = 30.0
     """Camera frame rate, Hz (the Azure Kinect offers 30, 15 and 5)."""
     bvh_files: tuple[str, ...] = ()
-    """Mocap clips; empty = the bundled ``hiros_data`` clips."""
+    """Mocap clips; empty = those ``motion`` names."""
+    motion: str = "bundled"
+    """``bundled``: the ``hiros_data`` clips (walks, a bend). ``bandai``: one Bandai-Namco clip
+    per person from the shared data (``hiros_sim.shared``; gestures and walks repeated for the
+    whole recording, a gesturing person keeps facing one way)."""
+    loop_variation: float = 0.0
+    """Per-repetition variation of the looped clips: speed uniform in ``1 ± v``, amplitude in
+    ``1 ± v/2``, seams cross-faded over ``loop_blend``. 0 with ``bundled`` motion repeats the
+    clips exactly (today's recordings)."""
+    loop_blend: float = 0.5
+    """Seconds over which one repetition fades into the next (varied or ``bandai`` loops)."""
     noise: bool = True
     """Master switch: False turns every imperfection off (see module docstring)."""
 
@@ -99,9 +129,17 @@ class SimParams:
     """Degrees of extra downward pitch beyond aiming at 1 m above the room centre."""
     fov: tuple[float, float] = (75.0, 65.0)
     """Horizontal, vertical field of view in degrees (Azure Kinect NFOV depth mode)."""
+    pair_angle: tuple[float, float] = (40.0, 50.0)
+    """``pair`` setup: degrees between the two cameras' views, drawn in this range."""
+    pair_baseline: tuple[float, float] = (1.3, 1.5)
+    """``pair`` setup: metres between the two cameras, drawn in this range."""
     depth_range: tuple[float, float] = (0.5, 5.5)
     walk_area: float = 0.7
     """Path centres lie within this radius of the room centre, metres."""
+    lane_width: float = 0.0
+    """0: paths of random centres (within ``walk_area``) and directions. Otherwise parallel lanes
+    this far apart (metres) across the room centre, neighbours setting off in opposite
+    directions, so that they pass each other this close again and again."""
     enter_leave: bool = True
     """People after the first enter late or leave early."""
 
@@ -117,6 +155,15 @@ class SimParams:
     """Frames never published (fitted: 0.56 %)."""
     latency: float = 0.06
     """Seconds from a frame's capture to its arrival at the recorder (the log time)."""
+    log_clock: str = "receiver"
+    """Clock of the log times: ``receiver`` (one recorder, reference clock, ``latency``) or
+    ``camera`` (one recording host per camera, on that camera's clock: stamp plus the host's
+    latency and jitter)."""
+    host_latency: tuple[float, float] = (0.02, 0.03)
+    """``log_clock="camera"``: each host's constant latency, seconds, drawn in this range."""
+    host_jitter: float = 0.001
+    """``log_clock="camera"``: scale of each message's extra latency, seconds (half-normal:
+    a message is never logged before its host's constant latency)."""
 
     # joint noise (see hiros_sim.noise); figures from hiros_sim.fit on the UNIPD-BPE take
     noise_base: float = 0.012
@@ -126,12 +173,17 @@ class SimParams:
     depth_axis_gain: float = 1.2
     """Sigma along the camera's z axis relative to x, y (fitted: 1.20)."""
     joint_bias: float = 0.026
-    """Sigma of a fixed per camera, person and joint offset, metres (fitted RMS: 25.6 mm)."""
+    """Sigma of a per camera, person and joint offset, metres (fitted RMS: 25.6 mm)."""
+    bias_drift_time: float = 0.0
+    """Seconds for the joint offsets' autocorrelation to fall to 1/e (an Ornstein-Uhlenbeck
+    drift, same sigma); 0 keeps them fixed for the whole recording (the take's)."""
     oblique_gain: float = 1.0
     """Extra sigma, as a fraction, for a body seen from the side (not in the take: a guess)."""
     occluded_gain: float = 2.0
     """Sigma factor of hidden joints (the take's ankles, hidden by the bending torso, err
     1.6-2.2x the median joint)."""
+    extremity_gain: float = 1.0
+    """Sigma factor of hands, feet and face joints (1 = as the rest of the body)."""
     out_of_view_gain: float = 4.0
     noise_correlation_time: float = 0.22
     """Seconds for the joint error's autocorrelation to fall to 1/e (fitted: 220 ms; the
@@ -146,8 +198,9 @@ class SimParams:
     thumb_length_cv: float = 0.048
     """Extra CV of the thumb links' length (fitted: 4.8 %; the SDK fits the thumbs apart)."""
     noise_residual: float = 0.0
-    """Sigma of independent noise on top of the SDK's rigid model, metres (the take shows none:
-    its limb lengths keep exact ratios)."""
+    """Sigma of independent noise on top of the SDK's rigid model, metres, times the joint's
+    occlusion, view and extremity factors (the take shows none: its limb lengths keep exact
+    ratios)."""
 
     # SDK mistakes
     miss_rate: float = 0.0056
@@ -197,6 +250,14 @@ class SimParams:
             problems.append(f"rate must be positive and finite, not {self.rate}")
         if not 0.0 <= self.noise_body_share <= 1.0:
             problems.append(f"noise_body_share must be in 0..1, not {self.noise_body_share}")
+        if self.motion not in _MOTIONS:
+            problems.append(f"motion must be one of {', '.join(_MOTIONS)}, not {self.motion!r}")
+        if self.log_clock not in _LOG_CLOCKS:
+            problems.append(
+                f"log_clock must be one of {', '.join(_LOG_CLOCKS)}, not {self.log_clock!r}"
+            )
+        if not 0.0 <= self.loop_variation < 1.0:
+            problems.append(f"loop_variation must be in [0, 1), not {self.loop_variation}")
         if problems:
             raise ConfigError("; ".join(problems))
 
@@ -265,9 +326,26 @@ def _load_clip(path: str) -> Clip:
     return prepare_clip(read_bvh(path))
 
 
+def _clip_files(params: SimParams) -> tuple[str, ...]:
+    if params.bvh_files:
+        return tuple(params.bvh_files)
+    if params.motion == "bandai":
+        return bandai_files(params.n_people, params.seed)
+    return default_bvh_files()
+
+
+def _repetitions(params: SimParams, clip: Clip, person: int) -> Repetitions | None:
+    """Each repetition's variation, from its own random stream (None: exact repetitions)."""
+    if params.motion != "bandai" and params.loop_variation == 0.0:
+        return None
+    shortest = clip.duration / (1.0 + params.loop_variation)
+    count = int(np.ceil((params.duration + clip.duration) / shortest)) + 2
+    rng = np.random.default_rng(np.random.SeedSequence([params.seed, 3, person]))
+    return Repetitions.draw(rng, count, params.loop_variation, params.loop_blend)
+
+
 def _people(params: SimParams, rng: np.random.Generator) -> list[PersonPath]:
-    files = params.bvh_files or default_bvh_files()
-    clips = [_load_clip(str(f)) for f in files]
+    clips = [_load_clip(f) for f in _clip_files(params)]
     people = []
     duration = params.duration
     for p in range(params.n_people):
@@ -278,6 +356,12 @@ def _people(params: SimParams, rng: np.random.Generator) -> list[PersonPath]:
         radius = params.walk_area * np.sqrt(rng.uniform(0.0, 1.0))
         angle = rng.uniform(0.0, 2.0 * np.pi)
         centre = radius * np.array([np.cos(angle), np.sin(angle)])
+        if params.lane_width > 0.0:
+            lane = params.lane_width * (p - 0.5 * (params.n_people - 1))
+            if p == 0:
+                lanes_heading = heading
+            centre = lane * np.array([-np.sin(lanes_heading), np.cos(lanes_heading)])
+            heading = lanes_heading + np.pi * (p % 2)
         enter, leave = 0.0, duration
         if params.enter_leave and p > 0 and duration >= 20.0:
             if p % 2 == 1:
@@ -285,7 +369,10 @@ def _people(params: SimParams, rng: np.random.Generator) -> list[PersonPath]:
             else:
                 leave = duration - rng.uniform(0.05, 0.25) * duration
         phase = rng.uniform(0.0, clip.duration)
-        people.append(PersonPath(clip, centre, float(heading), float(phase), enter, leave))
+        path = PersonPath(clip, centre, float(heading), float(phase), enter, leave)
+        path.repetitions = _repetitions(params, clip, p)
+        path.turn_on_spot = params.motion != "bandai"
+        people.append(path)
     return people
 
 
@@ -350,9 +437,14 @@ def _observe(
     params: SimParams,
     rng: np.random.Generator,
     *,
+    host_rng: np.random.Generator,
     bump: CameraCalibration | None = None,
 ) -> _Stream:
-    """Everything one camera reports, as arrays over its frames."""
+    """Everything one camera reports, as arrays over its frames.
+
+    ``host_rng`` draws the camera host's log-time latency (``log_clock="camera"``) apart from
+    ``rng``, so that the rest of the stream does not depend on the log clock.
+    """
     noisy = params.noise
     rate = params.rate
     start_ref = params.clock_start + rng.uniform(0.0, params.start_spread)
@@ -364,7 +456,12 @@ def _observe(
     stamps_ns = start_ns + np.round(offsets * 1e9).astype(np.int64)
     kept = rng.random(n_frames) >= params.drop_rate if noisy else np.ones(n_frames, bool)
     t_ref = camera_to_reference(cam, stamps_ns * 1e-9)
-    receive_ns = np.round((t_ref + params.latency) * 1e9).astype(np.int64)
+    if params.log_clock == "camera":
+        latency = host_rng.uniform(*params.host_latency)
+        latency = latency + params.host_jitter * np.abs(host_rng.standard_normal(n_frames))
+        receive_ns = stamps_ns + np.round(latency * 1e9).astype(np.int64)
+    else:
+        receive_ns = np.round((t_ref + params.latency) * 1e9).astype(np.int64)
 
     world = truth.at(t_ref)  # (P, N, 32, 3)
     facing = body_forward(world)  # (P, N, 3) world frame
@@ -425,8 +522,11 @@ def _joint_noise(
     sigma = (params.noise_base + params.noise_per_metre * depth) * (
         1.0 + params.oblique_gain * obliqueness
     )[..., None]
-    sigma = sigma * np.where(hidden, params.occluded_gain, 1.0)
-    sigma = sigma * np.where(joint_in, 1.0, params.out_of_view_gain)
+    gain = np.where(hidden, params.occluded_gain, 1.0)
+    gain = gain * np.where(joint_in, 1.0, params.out_of_view_gain)
+    if params.extremity_gain != 1.0:
+        gain[..., _EXTREMITIES] *= params.extremity_gain
+    sigma = sigma * gain
     rho = float(np.exp(-1.0 / (params.rate * params.noise_correlation_time)))
     n_people, n_frames, n_joints, _ = positions.shape
     share = params.noise_body_share
@@ -434,7 +534,11 @@ def _joint_noise(
     body = ar1_noise(rng, (n_people, n_frames, 1, 3), rho)
     error = (np.sqrt(1.0 - share) * own + np.sqrt(share) * body) * sigma[..., None]
     error[..., 2] *= params.depth_axis_gain
-    bias = rng.normal(0.0, params.joint_bias, (n_people, 1, n_joints, 3))
+    if params.bias_drift_time > 0.0:
+        rho_bias = float(np.exp(-1.0 / (params.rate * params.bias_drift_time)))
+        bias = params.joint_bias * ar1_noise(rng, positions.shape, rho_bias)
+    else:
+        bias = rng.normal(0.0, params.joint_bias, (n_people, 1, n_joints, 3))
     scale = 1.0 + params.body_scale_cv * ar1_noise(rng, (n_people, n_frames), rho)
     length_gain = np.ones((n_people, n_frames, n_joints))
     length_gain[..., _THUMBS] += params.thumb_length_cv * ar1_noise(
@@ -442,7 +546,7 @@ def _joint_noise(
     )
     fitted = fit_body_model(positions + error + bias, positions, scale, length_gain)
     if params.noise_residual > 0.0:
-        fitted += params.noise_residual * ar1_noise(rng, positions.shape, rho)
+        fitted += params.noise_residual * gain[..., None] * ar1_noise(rng, positions.shape, rho)
     return fitted
 
 
@@ -643,6 +747,8 @@ def simulate(params: SimParams | None = None, progress: object = None) -> SimRes
         max_time_offset=params.max_time_offset,
         drift_ppm=params.drift_ppm,
         clock_start=params.clock_start,
+        pair_angle=params.pair_angle,
+        pair_baseline=params.pair_baseline,
     )
     if params.bump_camera and params.bump_camera not in calibration.cameras:
         names = sorted(calibration.cameras)
@@ -653,8 +759,15 @@ def simulate(params: SimParams | None = None, progress: object = None) -> SimRes
     camera_seeds = np.random.SeedSequence([params.seed, 1]).spawn(len(calibration.cameras))
     for k, (name, cam) in enumerate(calibration.cameras.items()):
         bump = bumped_pose(cam, params) if name == params.bump_camera else None
+        host_rng = np.random.default_rng(np.random.SeedSequence([params.seed, 2, k]))
         stream = _observe(
-            cam, truth, clips, params, np.random.default_rng(camera_seeds[k]), bump=bump
+            cam,
+            truth,
+            clips,
+            params,
+            np.random.default_rng(camera_seeds[k]),
+            bump=bump,
+            host_rng=host_rng,
         )
         camera_groups[name], labels[name] = _groups(cam.frame_id, stream, truth.person_ids)
         receive[name] = stream.receive_ns[stream.kept]

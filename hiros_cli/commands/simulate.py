@@ -14,6 +14,7 @@ Examples:
   hiros simulate --out sim --setup facing --people 1 --duration 20 --no-noise
   hiros simulate --out sim --bvh my_take.bvh --cameras 4 --setup ring --rate 15
   hiros simulate --sample --out sample          # the demo's recording
+  hiros simulate --preset noisy-sdk --seed 3 --out sim   # a robustness condition (see --preset)
   hiros simulate --fit-noise                    # fit the noise model to the real take and
                                                 # compare the simulator's errors with it
 
@@ -44,17 +45,29 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="replace an existing --out, only if it holds nothing but an earlier simulation's "
         "files (recording.mcap, truth.npz, calibration.yaml)",
     )
-    parser.add_argument("--cameras", type=int, default=3, help="number of cameras (default 3)")
+    from hiros_sim.presets import PRESETS
+
+    width = max(map(len, PRESETS))
+    parser.epilog = "presets (--preset NAME, hiros_sim.PRESETS):\n" + "\n".join(
+        f"  {name:<{width}}  {preset.description}" for name, preset in PRESETS.items()
+    )
+    parser.add_argument(
+        "--preset",
+        choices=list(PRESETS),
+        metavar="NAME",
+        help="a robustness condition, listed below; the options given apply on top of it",
+    )
+    parser.add_argument("--cameras", type=int, help="number of cameras (default 3)")
     parser.add_argument(
         "--setup",
-        default="room",
-        help="room (default; a facing pair plus others), facing, ring, or a calibration YAML",
+        help="room (default; a facing pair plus others), facing, ring, pair (two cameras "
+        "40-50 deg apart, 1.3-1.5 m baseline), or a calibration YAML",
     )
-    parser.add_argument("--people", type=int, default=2, help="1..6 people (default 2)")
-    parser.add_argument("--duration", type=float, default=60.0, help="seconds (default 60)")
-    parser.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    parser.add_argument("--people", type=int, help="1..6 people (default 2)")
+    parser.add_argument("--duration", type=float, help="seconds (default 60)")
+    parser.add_argument("--seed", type=int, help="random seed (default 0)")
     parser.add_argument(
-        "--rate", type=float, default=30.0, help="camera frame rate in Hz: 30, 15, 5 (default 30)"
+        "--rate", type=float, help="camera frame rate in Hz: 30, 15, 5 (default 30)"
     )
     parser.add_argument("--bvh", nargs="+", type=Path, help="BVH clips (default: hiros_data)")
     parser.add_argument(
@@ -87,22 +100,22 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def _params(args: argparse.Namespace):  # noqa: ANN202 - SimParams, imported lazily
-    from hiros_sim import SimParams, sample_params
+    """The preset (or the demo's parameters, or the defaults), then each option given."""
+    from hiros_sim import SimParams, preset_params, sample_params
 
-    if args.sample:
-        params = sample_params()
-    else:
-        params = SimParams(
-            n_cameras=args.cameras,
-            setup=args.setup,
-            n_people=args.people,
-            duration=args.duration,
-            seed=args.seed,
-            rate=args.rate,
-            bvh_files=tuple(str(p) for p in args.bvh or ()),
-            noise=not args.no_noise,
-        )
+    if args.sample and args.preset:
+        msg = "give --sample or --preset, not both"
+        raise ConfigError(msg)
+    params = sample_params() if args.sample else SimParams()
     overrides = {
+        "n_cameras": args.cameras,
+        "setup": args.setup,
+        "n_people": args.people,
+        "duration": args.duration,
+        "seed": args.seed,
+        "rate": args.rate,
+        "bvh_files": tuple(str(p) for p in args.bvh) if args.bvh else None,
+        "noise": False if args.no_noise else None,
         "max_time_offset": args.max_offset,
         "drift_ppm": args.drift_ppm,
         "ghost_rate": args.ghost_rate,
@@ -110,6 +123,8 @@ def _params(args: argparse.Namespace):  # noqa: ANN202 - SimParams, imported laz
     }
     overrides = {k: v for k, v in overrides.items() if v is not None}
     overrides.update(_knobs(params, args.set))
+    if args.preset:
+        return preset_params(args.preset, **overrides)
     return replace(params, **overrides)
 
 
@@ -175,7 +190,8 @@ def _check_out(args: argparse.Namespace) -> bool:
     from hiros_core.outputs import check_output, only_holds
 
     out: Path = args.out
-    inputs = [*(args.bvh or ()), *([Path(args.setup)] if Path(args.setup).is_file() else [])]
+    setup = Path(args.setup) if args.setup else None
+    inputs = [*(args.bvh or ()), *([setup] if setup and setup.is_file() else [])]
     empty = out.is_dir() and not out.is_symlink() and not any(out.iterdir())
     check_output(
         out,
