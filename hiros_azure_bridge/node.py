@@ -21,9 +21,9 @@ from __future__ import annotations
 
 import dataclasses
 from dataclasses import dataclass, field
+from typing import Any
 
 from hiros_skeleton_msgs.msg import SkeletonGroup as SkeletonGroupMsg
-from rclpy.parameter import Parameter
 from visualization_msgs.msg import MarkerArray
 
 from hiros_azure_bridge.driver_format import DriverBridge, DriverBridgeParams, load_bridge_params
@@ -31,6 +31,7 @@ from hiros_core.accounting import Merged
 from hiros_core.codec import encode_group
 from hiros_ros import HirosNode, run_node
 from hiros_ros.node import camera_qos, pipeline_qos
+from hiros_ros.params import parameter_specs
 
 __all__ = ["BridgeNode", "BridgeNodeParams", "generic_main", "main"]
 
@@ -61,9 +62,7 @@ class BridgeNode(HirosNode):
 
     def __init__(self, node_name: str = "azure_bridge") -> None:
         super().__init__(node_name)
-        self.params = self.declare_params(BridgeNodeParams)
-        if self.params.description:
-            self._apply_description(self.params.description)
+        self.declare_params(BridgeNodeParams, fixed=self._description())
         bridge_fields = {f.name for f in dataclasses.fields(DriverBridgeParams)}
         bridge_params = DriverBridgeParams(
             **{k: v for k, v in dataclasses.asdict(self.params).items() if k in bridge_fields}
@@ -84,21 +83,21 @@ class BridgeNode(HirosNode):
         bridges = self.bridges.values()
         self.accounted = Merged([(f"{c}.", b) for c, b in self.bridges.items()], bridges)
 
-    def _apply_description(self, path: str) -> None:
-        """Replace the parameters by those of a description file, visibly (set_parameters)."""
+    def _description(self) -> dict[str, Any]:
+        """The values of the ``description`` file, which replace the parameters'.
+
+        ``description`` is declared first, so that the others can be declared with them.
+        """
+        spec = next(s for s in parameter_specs(BridgeNodeParams) if s.name == "description")
+        path = self.declare_parameter(spec.name, spec.default, spec.descriptor()).value
+        if not path:
+            return {}
         bridge, extra = load_bridge_params(path)
         node_fields = {"cameras", "input_topic", "output_topic", "input_qos"}
         values = dataclasses.asdict(bridge) | {k: v for k, v in extra.items() if k in node_fields}
         if "cameras" in values:
             values["cameras"] = [str(c) for c in values["cameras"]]
-        self.params = dataclasses.replace(self.params, **values)
-        self.set_parameters(
-            [
-                Parameter(name, value=value)
-                for name, value in values.items()
-                if not (isinstance(value, list) and not value)
-            ]
-        )
+        return values
 
     def on_markers(self, camera: str, publisher: object, data: bytes) -> None:
         """Decode, convert, publish; a dropped message publishes nothing."""

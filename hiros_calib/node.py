@@ -33,7 +33,28 @@ from hiros_core.errors import CalibrationError
 from hiros_ros import HirosNode, run_node
 from hiros_ros.node import camera_qos
 
-__all__ = ["CalibNode", "CalibNodeParams", "main"]
+__all__ = ["LIVE", "CalibNode", "CalibNodeParams", "main"]
+
+LIVE = (
+    "buffer_length",
+    "first_estimate_after",
+    "update_period",
+    "blend",
+    "check_period",
+    "check_length",
+    "moved_ratio",
+    "moved_floor",
+    "moved_shift",
+    "recalibrate_after",
+    "replace_after",
+    "replace_margin",
+    "silent_after",
+    "step_period",
+    "save_file",
+    "publish_tf",
+)
+"""The live schedule, windows and outputs: applied while the node runs (the calibrator reads
+its parameters at every step)."""
 
 
 @dataclass
@@ -43,6 +64,7 @@ class CalibNodeParams(LiveCalibratorParams):
     camera_names: list[str] = field(default_factory=lambda: ["k01", "k02", "k03"])
     """Cameras to listen to (not ``cameras``: that prefix holds the results)."""
     camera_topic: str = "/{camera}/skeletons"
+    """Topic of each camera; {camera} is replaced by each name of camera_names."""
     camera_qos: str = "sensor_data"
     calibration_file: str = ""
     """Loaded at start when it exists; the default place ``~/save`` writes to."""
@@ -88,7 +110,7 @@ class CalibNode(HirosNode):
 
     def __init__(self) -> None:
         super().__init__("calib")
-        self.params = self.declare_params(CalibNodeParams)
+        self.declare_params(CalibNodeParams, live=LIVE, apply=self._apply)
         self.live = LiveCalibrator(self.params, self._initial_calibration())
         # snapshots handed from the worker thread: the newest result, and the one to publish
         self._current = copy.deepcopy(self.live.calibration)
@@ -111,6 +133,9 @@ class CalibNode(HirosNode):
         self._worker = threading.Thread(target=self._work, name="calib-worker", daemon=True)
         self._worker.start()
         self.get_logger().info(f"{topics} -> LiveCalibrator -> parameters cameras.*, /tf_static")
+
+    def _apply(self, params: CalibNodeParams) -> None:
+        self.live.params = params
 
     def _initial_calibration(self) -> Calibration | None:
         path = self.params.calibration_file

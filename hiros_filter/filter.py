@@ -149,6 +149,27 @@ class _Tracks:
         self.designed_for = np.zeros(capacity)  # rate each slot's low-pass state belongs to
         self._kernel_arguments: tuple | None = None
 
+    def retune(self, params: FilterParams) -> None:
+        """Take new noise and low-pass parameters, keeping every track's state.
+
+        The Kalman constants change in place, the covariances scaled with the measurement
+        variance: the state keeps the weight it had against a measurement (kept as it was, a
+        covariance tuned to a far smaller noise would make the filter coast on its old
+        velocities), and settles to the new tuning over the next frames. The low-pass is
+        designed anew on the next frame, each channel restarting at rest on its last output
+        (as after a rate change).
+        """
+        kalman = self.kalman
+        r = params.measurement_noise**2
+        kalman.P *= r / kalman.r
+        kalman.q = params.jerk_spectral_density
+        kalman.r = r
+        kalman.initial[0, 0] = kalman.r
+        kalman.max_noise_scale = params.max_noise_scale
+        self.low_pass = None
+        self.designed_for[:] = 0.0
+        self._kernel_arguments = None
+
     def kernel_arguments(self, params: FilterParams) -> tuple:
         """The state and constants :func:`~hiros_filter.compiled.filter_step` takes, grouped.
 
@@ -232,6 +253,16 @@ class Filter(Accounted):
         if not self._intervals:
             return None
         return 1.0 / float(np.median(self._intervals))
+
+    def set_params(self, params: FilterParams) -> None:
+        """Filter with ``params`` from the next frame on; the tracks keep their state.
+
+        Meant for the noise, cutoff and timing parameters (the node's live ones); ``filter``
+        and ``compiled`` are chosen at construction.
+        """
+        self.params = params
+        for tracks in self._layouts.values():
+            tracks.retune(params)
 
     def reset(self) -> None:
         """Forget every track (e.g. when a recording restarts)."""

@@ -2,19 +2,37 @@
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 from hiros_filter.filter import Filter, FilterParams
 from hiros_ros import stage_main
 
-__all__ = ["main"]
+__all__ = ["LIVE", "FilterNodeParams", "main"]
+
+LIVE = (
+    "cutoff_frequency",
+    "butterworth_order",
+    "sample_frequency",
+    "rate_tolerance",
+    "jerk_spectral_density",
+    "max_noise_scale",
+    "measurement_noise",
+    "orientation_cutoff_frequency",
+    "max_gap",
+    "track_timeout",
+)
+"""Parameters applied while the node runs (``Filter.set_params``); the rest are read-only."""
+
+
+@dataclass
+class FilterNodeParams(FilterParams):
+    """The filter's parameters plus the node's topics."""
+
+    input_topic: str = "/hiros/optimizer"
+    output_topic: str = "/hiros/filter"
+    input_qos: str = "reliable"
 
 
 def main(args: list[str] | None = None) -> None:
     """Entry point of ``ros2 run hiros filter``."""
-    stage_main(
-        "filter",
-        FilterParams,
-        Filter,
-        input_topic="/hiros/optimizer",
-        output_topic="/hiros/filter",
-        args=args,
-    )
+    stage_main("filter", FilterNodeParams, Filter, live=LIVE, args=args)

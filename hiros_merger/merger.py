@@ -261,8 +261,8 @@ class Merger(Accounted):
     """Fuses each track's camera detections into one skeleton (see the module docstring).
 
     Attributes:
-        params: the parameters it was built with (the fusion's are read once, at a layout's
-            first fusion).
+        params: the parameters (the fusion's are read once, at a layout's first fusion, and
+            again after ``set_params``).
         drops: reason -> count of input left out (detections; a frame is never dropped
             whole: each ``update`` is processed, see ``Accounted``).
         agreement: camera name -> running mean distance (m) of its detections to the fused
@@ -291,6 +291,11 @@ class Merger(Accounted):
         self._constants: dict[str, tuple] = {}  # layout name -> ``_kernel_constants``
         if calibration is not None:
             self.set_calibration(calibration)
+
+    def set_params(self, params: MergerParams) -> None:
+        """Fuse with ``params`` from the next update on (tracks and agreements are kept)."""
+        self.params = params
+        self._constants.clear()  # they pack the parameters (``_kernel_constants``)
 
     # ----------------------------------------------------------------------------- calibration
     def set_calibration(self, calibration: Calibration) -> None:

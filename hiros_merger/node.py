@@ -8,7 +8,7 @@ live, from the ``calib`` node's parameters; without them those weights are left 
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 
 from hiros_core.calibration import Calibration, load_calibration
 from hiros_core.errors import CalibrationError
@@ -16,13 +16,19 @@ from hiros_merger.merger import Merger, MergerParams
 from hiros_ros import StageNode, run_node
 from hiros_ros.calibration_follower import CalibrationFollower
 
-__all__ = ["MergerNode", "MergerNodeParams", "main"]
+__all__ = ["LIVE", "MergerNode", "MergerNodeParams", "main"]
+
+LIVE = tuple(f.name for f in fields(MergerParams))
+"""Every fusion parameter is applied while the node runs (``Merger.set_params``)."""
 
 
 @dataclass
 class MergerNodeParams(MergerParams):
-    """The merger's parameters plus where the camera poses come from."""
+    """The merger's parameters plus its topics and where the camera poses come from."""
 
+    input_topic: str = "/hiros/tracker"
+    output_topic: str = "/hiros/merger"
+    input_qos: str = "reliable"
     calibration_file: str = ""
     calib_node: str = "/calib"
 
@@ -31,13 +37,7 @@ class MergerNode(StageNode):
     """``/hiros/tracker`` -> ``Merger.update`` -> ``/hiros/merger``."""
 
     def __init__(self) -> None:
-        super().__init__(
-            "merger",
-            MergerNodeParams,
-            Merger,
-            input_topic="/hiros/tracker",
-            output_topic="/hiros/merger",
-        )
+        super().__init__("merger", MergerNodeParams, Merger, live=LIVE)
         calibration = Calibration(reference="")
         if self.params.calibration_file:
             try:

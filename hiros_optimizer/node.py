@@ -9,6 +9,7 @@ whenever a person calibration is accepted or moved.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import Any
 
 from hiros_skeleton_msgs.srv import Calibrate, ChangeId
@@ -18,24 +19,33 @@ from hiros_optimizer.calibration_file import read_person_calibrations, write_per
 from hiros_optimizer.optimizer import Optimizer, OptimizerParams
 from hiros_ros import StageNode, run_node
 
-__all__ = ["OptimizerNode", "main"]
+__all__ = ["LIVE", "OptimizerNode", "OptimizerNodeParams", "main"]
+
+LIVE = ("export_calibration",)
+"""Parameters applied while the node runs; the fit's are fixed when a layout is first seen."""
+
+
+@dataclass
+class OptimizerNodeParams(OptimizerParams):
+    """The optimizer's parameters plus the node's topics."""
+
+    input_topic: str = "/hiros/merger"
+    output_topic: str = "/hiros/optimizer"
+    input_qos: str = "reliable"
 
 
 class OptimizerNode(StageNode):
     """The optimizer stage node with its services and calibration file."""
 
     def __init__(self) -> None:
-        super().__init__(
-            "optimizer",
-            OptimizerParams,
-            Optimizer,
-            input_topic="/hiros/merger",
-            output_topic="/hiros/optimizer",
-        )
+        super().__init__("optimizer", OptimizerNodeParams, Optimizer, live=LIVE)
         if self.params.load_calibration:
             self._load()
         self.create_service(Calibrate, "~/calibrate", self.on_calibrate)
         self.create_service(ChangeId, "~/change_id", self.on_change_id)
+
+    def _apply(self, params: OptimizerNodeParams) -> None:
+        """Nothing to hand over: ``export_calibration`` is read at each export."""
 
     def on_group(self, data: bytes) -> None:
         """Run the stage, then export when a person calibration was just accepted."""

@@ -18,11 +18,20 @@ from visualization_msgs.msg import MarkerArray
 from hiros_core.accounting import Merged
 from hiros_core.calibration import Calibration, load_calibration
 from hiros_core.codec import decode_group, encode_group
-from hiros_core.parameters import stage_config_defaults
+from hiros_filter.node import LIVE as FILTER_LIVE
+from hiros_merger.node import LIVE as MERGER_LIVE
 from hiros_pipeline.pipeline import STAGES, Pipeline, PipelineParams
-from hiros_ros import HirosNode, declare_params, run_node
+from hiros_ros import HirosNode, run_node
 from hiros_ros.calibration_follower import CalibrationFollower
 from hiros_ros.node import camera_qos, pipeline_qos
+from hiros_tracker.node import LIVE as TRACKER_LIVE
+
+LIVE = (
+    *(f"tracker.{name}" for name in TRACKER_LIVE),
+    *(f"merger.{name}" for name in MERGER_LIVE),
+    *(f"filter.{name}" for name in FILTER_LIVE),
+)
+"""The stage nodes' live parameters, under their stage's name."""
 
 
 @dataclass
@@ -30,7 +39,9 @@ class PipelineNodeParams(PipelineParams):
     """The stages' parameters plus where the cameras and the calibration come from."""
 
     cameras: list[str] = field(default_factory=lambda: ["k01", "k02", "k03"])
-    input: str = "driver"  # "driver": /<cam>/body_tracking_data; "skeletons": /<cam>/skeletons
+    input: str = "driver"
+    """What the cameras publish: ``driver`` (the Azure Kinect driver's MarkerArray on
+    /<camera>/body_tracking_data) or ``skeletons`` (SkeletonGroup on /<camera>/skeletons)."""
     camera_qos: str = "sensor_data"
     calibration_file: str = ""
     calib_node: str = "/calib"
@@ -41,9 +52,7 @@ class PipelineNode(HirosNode):
 
     def __init__(self) -> None:
         super().__init__("pipeline")
-        self.params = declare_params(
-            self, PipelineNodeParams, extra_defaults=stage_config_defaults()
-        )
+        self.declare_params(PipelineNodeParams, live=LIVE, apply=self._apply)
         calibration = (
             load_calibration(self.params.calibration_file)
             if self.params.calibration_file
@@ -67,6 +76,9 @@ class PipelineNode(HirosNode):
             f"cameras {self.params.cameras} ({self.params.input}) -> "
             + ", ".join(f"/hiros/{s}" for s in STAGES)
         )
+
+    def _apply(self, params: PipelineNodeParams) -> None:
+        self.pipeline.set_params(params)
 
     def _subscribe(self, camera: str) -> None:
         qos = camera_qos(self.params.camera_qos)

@@ -60,6 +60,16 @@ class Pipeline(Accounted):
         self.optimizer = Optimizer(self.params.optimizer)
         self.filter = Filter(self.params.filter)
 
+    def set_params(self, params: PipelineParams) -> None:
+        """New tracker, merger and filter parameters from the next camera frame on.
+
+        The optimizer's are fixed at construction (its fit settings are built once).
+        """
+        self.params = params
+        self.tracker.set_params(params.tracker)
+        self.merger.set_params(params.merger)
+        self.filter.set_params(params.filter)
+
     def set_calibration(self, calibration: Calibration) -> None:
         """Apply a new calibration from the next camera frame on."""
         self.tracker.set_calibration(calibration)

@@ -23,18 +23,20 @@ import signal
 import threading
 import time
 from collections import Counter
-from collections.abc import Callable
+from collections.abc import Callable, Collection
 from typing import Any, TypeVar
 
 import rclpy
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rclpy.executors import Executor, ExternalShutdownException, SingleThreadedExecutor
+from rclpy.logging import get_logger
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, qos_profile_sensor_data
 
 from hiros_core.accounting import Accounted
 from hiros_core.codec import warm_up as codec_warm_up
-from hiros_ros.params import declare_params
+from hiros_core.errors import ConfigError
+from hiros_ros.params import NodeParameters, declare_params
 
 T = TypeVar("T")
 
@@ -77,13 +79,35 @@ class HirosNode(Node):
         self._seen_drops: Counter[str] = Counter()  # the stage's drops already counted
         self._log_interval = log_interval
         self._last_log: dict[str, float] = {}
+        self.parameters: NodeParameters[Any]
         self._diagnostics = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
         self.create_timer(1.0, self.publish_diagnostics)
 
     # -- parameters
-    def declare_params(self, params_type: type[T]) -> T:
-        """Declare the dataclass fields as parameters (YAML defaults, ``-p`` overrides)."""
-        return declare_params(self, params_type)
+    def declare_params(
+        self,
+        params_type: type[T],
+        *,
+        live: Collection[str] = (),
+        apply: Callable[[T], None] | None = None,
+        aliases: dict[str, str] | None = None,
+        fixed: dict[str, Any] | None = None,
+    ) -> T:
+        """Declare the dataclass fields as parameters (``hiros_ros.params``); ``params`` follows.
+
+        Defaults are the dataclass's, ``-p`` and ``--params-file`` override them; ``live``
+        names are applied while running (``apply`` gets the new dataclass first), the rest are
+        read-only.
+        """
+        self.parameters = declare_params(
+            self, params_type, live=live, apply=apply, aliases=aliases, fixed=fixed
+        )
+        return self.parameters.params
+
+    @property
+    def params(self) -> Any:
+        """The node's parameters dataclass as it is now (live changes included)."""
+        return self.parameters.params
 
     # -- raw topics through the fast codec
     def create_raw_subscription(
@@ -269,7 +293,11 @@ def run_node(node_factory: Callable[[], Node], args: list[str] | None = None) ->
     signal.signal(signal.SIGTERM, _request_stop)
     node = None
     try:
-        node = node_factory()
+        try:
+            node = node_factory()
+        except ConfigError as exc:  # a parameter out of range, of the wrong type, ...
+            get_logger("hiros").fatal(str(exc))
+            raise SystemExit(1) from None
         executor = make_executor()
         executor.add_node(node)
         gc.freeze()  # start-up's objects out of the collector: a full pass over them is a

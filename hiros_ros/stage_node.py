@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Collection
 from typing import Any
 
 from hiros_skeleton_msgs.msg import SkeletonGroup as SkeletonGroupMsg
@@ -17,9 +17,10 @@ __all__ = ["StageNode", "stage_main"]
 class StageNode(HirosNode):
     """Subscribes ``input_topic`` (raw), runs the stage, publishes ``output_topic`` (raw).
 
-    The topics and the input QoS are parameters of their own, beside the stage's dataclass
-    fields. The stage accounts for the node's frames (``HirosNode.accounted``): what it
-    processes, holds and drops is reported as the node's.
+    ``params_type`` is the node's dataclass: the stage's fields plus ``input_topic``,
+    ``output_topic`` and ``input_qos``. A change of a ``live`` parameter reaches the stage
+    through its ``set_params``. The stage accounts for the node's frames
+    (``HirosNode.accounted``): what it processes, holds and drops is reported as the node's.
     """
 
     def __init__(
@@ -28,22 +29,25 @@ class StageNode(HirosNode):
         params_type: type,
         make_stage: Callable[[Any], Any],
         *,
-        input_topic: str,
-        output_topic: str,
-        input_qos: str = "reliable",
+        live: Collection[str] = (),
     ) -> None:
         super().__init__(node_name)
-        self.params = self.declare_params(params_type)
-        self.stage = make_stage(self.params)
-        input_topic = self.declare_parameter("input_topic", input_topic).value
-        output_topic = self.declare_parameter("output_topic", output_topic).value
-        qos_kind = self.declare_parameter("input_qos", input_qos).value
+        self.stage: Any = None
+        params = self.declare_params(params_type, live=live, apply=self._apply)
+        self.stage = make_stage(params)
         self.accounted = self.stage
-        self.publisher = self.create_raw_publisher(SkeletonGroupMsg, output_topic, pipeline_qos())
-        self.create_raw_subscription(
-            SkeletonGroupMsg, input_topic, self.on_group, camera_qos(qos_kind)
+        self.publisher = self.create_raw_publisher(
+            SkeletonGroupMsg, params.output_topic, pipeline_qos()
         )
-        self.get_logger().info(f"{input_topic} -> {type(self.stage).__name__} -> {output_topic}")
+        self.create_raw_subscription(
+            SkeletonGroupMsg, params.input_topic, self.on_group, camera_qos(params.input_qos)
+        )
+        self.get_logger().info(
+            f"{params.input_topic} -> {type(self.stage).__name__} -> {params.output_topic}"
+        )
+
+    def _apply(self, params: Any) -> None:
+        self.stage.set_params(params)
 
     def on_group(self, data: bytes) -> None:
         """Decode, update, publish; an empty result is published too (a frame with nobody)."""
@@ -57,14 +61,8 @@ def stage_main(
     params_type: type,
     make_stage: Callable[[Any], Any],
     *,
-    input_topic: str,
-    output_topic: str,
+    live: Collection[str] = (),
     args: list[str] | None = None,
 ) -> None:
     """``main()`` of a stage node executable."""
-    run_node(
-        lambda: StageNode(
-            node_name, params_type, make_stage, input_topic=input_topic, output_topic=output_topic
-        ),
-        args,
-    )
+    run_node(lambda: StageNode(node_name, params_type, make_stage, live=live), args)

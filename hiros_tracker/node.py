@@ -22,7 +22,28 @@ from hiros_ros.calibration_follower import CalibrationFollower
 from hiros_ros.node import camera_qos, pipeline_qos
 from hiros_tracker.tracker import Tracker, TrackerParams
 
-__all__ = ["TrackerNode", "TrackerNodeParams", "main"]
+__all__ = ["ALIASES", "LIVE", "TrackerNode", "TrackerNodeParams", "main"]
+
+LIVE = (
+    "max_delay",
+    "gate_distance",
+    "gate_growth",
+    "min_confidence",
+    "body_id_bonus",
+    "velocity_weight",
+    "orientation_weight",
+    "recent_window",
+    "duplicate_distance",
+    "min_hits",
+    "min_cameras",
+    "single_camera_confirm",
+    "tentative_timeout",
+    "track_timeout",
+)
+"""Gates, association and track life: applied while the node runs (``Tracker.set_params``)."""
+
+ALIASES = {"fixed_delay": "max_delay"}
+"""Hi-ROS's names of our parameters (``input_topics`` is a parameter of its own)."""
 
 
 @dataclass
@@ -31,6 +52,9 @@ class TrackerNodeParams(TrackerParams):
 
     cameras: list[str] = field(default_factory=lambda: ["k01", "k02", "k03"])
     camera_topic: str = "/{camera}/skeletons"
+    input_topics: list[str] = field(default_factory=list)
+    """Camera topics in full, as Hi-ROS's tracker takes them; when given, they replace
+    ``cameras`` and ``camera_topic``."""
     camera_qos: str = "sensor_data"
     output_topic: str = "/hiros/tracker"
     calibration_file: str = ""
@@ -42,7 +66,7 @@ class TrackerNode(HirosNode):
 
     def __init__(self) -> None:
         super().__init__("tracker")
-        self.params = self.declare_params(TrackerNodeParams)
+        self.declare_params(TrackerNodeParams, live=LIVE, apply=self._apply, aliases=ALIASES)
         calibration = self._initial_calibration()
         self.tracker = Tracker(self.params, calibration)
         self.follower = CalibrationFollower(
@@ -52,12 +76,17 @@ class TrackerNode(HirosNode):
             SkeletonGroupMsg, self.params.output_topic, pipeline_qos()
         )
         qos = camera_qos(self.params.camera_qos)
-        topics = [self.params.camera_topic.format(camera=c) for c in self.params.cameras]
+        topics = self.params.input_topics or [
+            self.params.camera_topic.format(camera=c) for c in self.params.cameras
+        ]
         for topic in topics:
             self.create_raw_subscription(SkeletonGroupMsg, topic, self.on_group, qos)
         self.accounted = self.tracker
         self._reported: set[str] = set()
         self.get_logger().info(f"{topics} -> Tracker -> {self.params.output_topic}")
+
+    def _apply(self, params: TrackerNodeParams) -> None:
+        self.tracker.set_params(params)
 
     def _initial_calibration(self) -> Calibration:
         path = self.params.calibration_file

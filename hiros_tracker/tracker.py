@@ -397,6 +397,13 @@ class Tracker(Accounted):
         self._info: _LayoutInfo | None = None
         self._camera_positions: dict[str, tuple[CameraCalibration, np.ndarray]] = {}
 
+    def set_params(self, params: TrackerParams) -> None:
+        """Track with ``params`` from the next frame on (tracks are kept).
+
+        Every parameter is read per frame except ``joint_weight_decay`` (once per layout).
+        """
+        self.params = params
+
     # ----------------------------------------------------------------------------- calibration
     def set_calibration(self, calibration: Calibration) -> None:
         """Use a new calibration from the next frame on (tracks are kept)."""

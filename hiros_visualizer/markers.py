@@ -44,9 +44,13 @@ class VisualizerParams:
     """How skeletons are drawn."""
 
     joint_size: float = 0.05
+    """Diameter (m) of a joint's sphere."""
     link_width: float = 0.02
+    """Width (m) of the lines between joints."""
     label_height: float = 0.12
+    """Height (m) of the id label's text, drawn above each skeleton."""
     lifetime: float = 0.25
+    """Seconds a marker stays without a newer one (a lost skeleton disappears)."""
 
 
 @lru_cache(maxsize=1024)

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
 
 from hiros_skeleton_msgs.msg import SkeletonGroup as SkeletonGroupMsg
 from visualization_msgs.msg import MarkerArray
@@ -12,12 +12,16 @@ from hiros_ros import HirosNode, run_node
 from hiros_ros.node import pipeline_qos
 from hiros_visualizer.markers import VisualizerParams, encode_skeleton_markers
 
+LIVE = tuple(f.name for f in fields(VisualizerParams))
+"""Drawing parameters are read for every message: all applied while the node runs."""
+
 
 @dataclass
 class VisualizerNodeParams(VisualizerParams):
     """Drawing parameters plus the topics to draw."""
 
     topics: list[str] = field(default_factory=lambda: ["/hiros/filter"])
+    """SkeletonGroup topics to draw; each one's markers go out on <topic>/markers."""
 
 
 class VisualizerNode(HirosNode):
@@ -25,7 +29,7 @@ class VisualizerNode(HirosNode):
 
     def __init__(self) -> None:
         super().__init__("visualizer")
-        self.params = self.declare_params(VisualizerNodeParams)
+        self.declare_params(VisualizerNodeParams, live=LIVE)
         for topic in self.params.topics:
             publisher = self.create_raw_publisher(MarkerArray, f"{topic}/markers", pipeline_qos())
             self.create_raw_subscription(

@@ -1,4 +1,5 @@
-"""Parameters from a dataclass: YAML defaults, command-line overrides, nested names."""
+"""Parameters from a dataclass: descriptors, command-line overrides, no implicit file, live
+changes checked and applied or refused with the reason."""
 
 from __future__ import annotations
 
@@ -9,38 +10,151 @@ import pytest
 pytest.importorskip("rclpy")
 
 import rclpy
+from rclpy.parameter import Parameter
 
-from hiros_ros.params import declare_params, load_config_defaults
+from hiros_core.errors import ConfigError
+from hiros_ros.params import declare_params
 
 
 @dataclass
 class Gate:
+    """A nested group.
+
+    Attributes:
+        max_distance: metres, the gate.
+
+    """
+
     max_distance: float = 0.5
 
 
 @dataclass
 class DemoParams:
     rate: float = 30.0
+    """Hz of the output."""
     cameras: list[str] = field(default_factory=list)
+    """Camera names."""
     name: str = "x"
+    """A name fixed at start."""
+    filter: str = "kalman"
+    """Which filter."""
+    order: int = 2
+    """Filter order."""
     gate: Gate = field(default_factory=Gate)
 
+    def __post_init__(self) -> None:
+        if self.rate > 1000:
+            msg = "rate above 1000 Hz: no camera is that fast"
+            raise ConfigError(msg)
 
-def test_yaml_then_command_line(tmp_path, monkeypatch: pytest.MonkeyPatch) -> None:
-    (tmp_path / "demo_params.yaml").write_text(
-        "demo_params:\n  ros__parameters:\n    rate: 15.0\n    gate: {max_distance: 0.8}\n"
-    )
-    monkeypatch.setenv("HIROS_CONFIG_DIR", str(tmp_path))
-    assert load_config_defaults("demo_params") == {"rate": 15.0, "gate.max_distance": 0.8}
-    context = rclpy.Context()
-    rclpy.init(args=["--ros-args", "-p", "name:=override"], context=context)
-    try:
-        node = rclpy.create_node("demo_params", context=context)
-        params = declare_params(node, DemoParams)
-        assert params.rate == 15.0
-        assert params.gate.max_distance == 0.8
-        assert params.name == "override"
-        assert params.cameras == []
+
+LIVE = ("rate", "filter", "gate.max_distance")
+
+
+@pytest.fixture
+def make_node(ros_env):
+    """``make_node(*ros_args)``: a node built with those ``--ros-args``, destroyed after."""
+    made = []
+
+    def make(*ros_args: str):
+        context = rclpy.Context()
+        rclpy.init(args=["--ros-args", *ros_args], context=context)
+        made.append((rclpy.create_node("demo_params", context=context), context))
+        return made[-1][0]
+
+    yield make
+    for node, context in made:
         node.destroy_node()
-    finally:
         rclpy.shutdown(context=context)
+
+
+@pytest.fixture
+def node(make_node):
+    return make_node()
+
+
+def test_command_line_overrides_and_no_file_is_read(make_node, tmp_path, monkeypatch) -> None:
+    (tmp_path / "demo_params.yaml").write_text("demo_params:\n  ros__parameters:\n    rate: 15.0\n")
+    monkeypatch.setenv("HIROS_CONFIG_DIR", str(tmp_path))
+    node = make_node("-p", "name:=override", "-p", "gate.max_distance:=0.8")
+    params = declare_params(node, DemoParams, live=LIVE).params
+    assert params.rate == 30.0  # the node's file is not read unasked
+    assert params.gate.max_distance == 0.8
+    assert params.name == "override"
+    assert params.cameras == []
+
+
+def test_descriptors_tell_description_range_and_read_only(node) -> None:
+    declare_params(node, DemoParams, live=LIVE)
+    rate, name, order, gate, choice = node.describe_parameters(
+        ["rate", "name", "order", "gate.max_distance", "filter"]
+    )
+    assert rate.description == "Hz of the output."
+    assert (rate.floating_point_range[0].from_value, rate.read_only) == (0.0, False)
+    assert name.read_only
+    assert "fixed at start" in name.additional_constraints
+    assert order.integer_range[0].from_value == 0
+    assert gate.description == "metres, the gate."
+    assert "one of: kalman, butterworth, statespace" in choice.additional_constraints
+
+
+def test_live_changes_are_applied_or_refused_with_the_reason(node) -> None:
+    applied = []
+    parameters = declare_params(node, DemoParams, live=LIVE, apply=applied.append)
+
+    def result(name, value):
+        return node.set_parameters([Parameter(name, value=value)])[0]
+
+    assert result("rate", 60.0).successful
+    assert parameters.params.rate == 60.0
+    assert applied[-1].rate == 60.0
+    assert result("gate.max_distance", 0.3).successful
+    assert parameters.params.gate.max_distance == 0.3
+    refused = {
+        "rate": (-5.0, "out of range"),
+        "filter": ("nonsense", "must be one of kalman, butterworth, statespace"),
+        "name": ("other", "read-only"),
+        "order": (3, "read-only"),
+    }
+    for name, (value, reason) in refused.items():
+        outcome = result(name, value)
+        assert not outcome.successful, name
+        assert reason in outcome.reason, (name, outcome.reason)
+    outcome = result("rate", 2000.0)
+    assert not outcome.successful
+    assert "no camera is that fast" in outcome.reason
+    assert result("rate", 5).reason.startswith("Wrong parameter type")
+    assert parameters.params.rate == 60.0
+    assert len(applied) == 2
+    assert node.get_parameter("rate").value == 60.0
+    # Hi-ROS's name of the Kalman filter is taken, and means ours
+    assert result("filter", "statespace").successful
+    assert parameters.params.filter == "kalman"
+
+
+def test_a_refusal_by_the_node_keeps_the_old_values(node) -> None:
+    def apply(params: DemoParams) -> None:
+        if params.rate > 100:
+            msg = "the stage cannot run above 100 Hz"
+            raise ValueError(msg)
+
+    parameters = declare_params(node, DemoParams, live=LIVE, apply=apply)
+    outcome = node.set_parameters([Parameter("rate", value=200.0)])[0]
+    assert not outcome.successful
+    assert outcome.reason == "the stage cannot run above 100 Hz"
+    assert parameters.params.rate == 30.0
+    assert node.get_parameter("rate").value == 30.0
+
+
+def test_a_value_out_of_range_or_of_no_choice_at_start_is_refused(make_node) -> None:
+    with pytest.raises(ConfigError, match="rate"):
+        declare_params(make_node("-p", "rate:=-1.0"), DemoParams, live=LIVE)
+    with pytest.raises(ConfigError, match="filter must be one of"):
+        declare_params(make_node("-p", "filter:=nonsense"), DemoParams, live=LIVE)
+
+
+def test_hiros_names_give_the_defaults_of_ours(make_node) -> None:
+    node = make_node("-p", "fixed_delay:=0.25")
+    parameters = declare_params(node, DemoParams, live=LIVE, aliases={"fixed_delay": "rate"})
+    assert parameters.params.rate == 0.25
+    assert node.describe_parameter("fixed_delay").read_only
