@@ -213,6 +213,9 @@ def run_recording(
             parts["write"] += clock() - written
         finishing = clock()
         _write(writer, pipeline.downstream(item.flushed), summary, drawings)
+        for stage, drawing in drawings.items():  # the end: nobody is left to draw
+            for message in drawing.finish(writer.end_ns or 0, calibration.world_frame):
+                writer.write(f"/hiros/{stage}/markers", MARKER_ARRAY, message, writer.end_ns or 0)
     summary.seconds = {**item.seconds, **parts, "finish": clock() - finishing}
     summary.add_drops(item.reader_drops, "reader: ")
     summary.problems.extend(item.reader_problems)
@@ -434,10 +437,7 @@ def _write(
     drawings: dict[str, Drawing],
 ) -> None:
     for stage, group in zip(STAGES, outputs, strict=True):
-        drawn = stage in DRAWN_STAGES and "markers" in summary.written
         if not group.skeletons:
-            if drawn and group.stamp_ns > 0:  # the markers of people who left go at once
-                _write_markers(writer, stage, drawings[stage], group)
             continue
         summary.published[stage] += 1
         if summary.outputs is not None:
@@ -449,7 +449,7 @@ def _write(
         if stage not in summary.written:
             continue
         writer.write_group(f"/hiros/{stage}", group)
-        if drawn:
+        if stage in DRAWN_STAGES and "markers" in summary.written:
             _write_markers(writer, stage, drawings[stage], group)
 
 

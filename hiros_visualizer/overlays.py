@@ -5,8 +5,8 @@
 * joint-angle text next to the joints asked for (``hiros_eval.body.JOINT_ANGLES``, degrees);
 * per-joint transforms (a TF frame per joint of each person) for tools that follow frames;
 * ``Drawing``: per topic, what was drawn, so that a person who left has their markers
-  deleted (DELETE; DELETEALL once nobody is left) at once instead of when their lifetime
-  runs out.
+  deleted (DELETE) with the next frame instead of when their lifetime runs out, and
+  everything (DELETEALL) when the stream ends.
 
 Each kind of marker has its own namespace (``<ns>``, ``<ns>/velocity``,
 ``<ns>/acceleration``, ``<ns>/angles``), so RViz and Foxglove can show or hide it alone.
@@ -167,6 +167,10 @@ class Drawing:
     ``draw`` gives the messages for a group: first the deletion of what people who left had
     drawn (if any), then the skeletons (``encode_skeleton_markers``), then each overlay that
     is on. Keeps which people are drawn, in which layout, to know what to delete.
+
+    An empty group changes nothing: stages publish one between their outputs (the merger's
+    for a camera frame that completed no fused frame), so it does not say that people left.
+    ``finish`` deletes everything once the stream ends.
     """
 
     def __init__(
@@ -183,14 +187,14 @@ class Drawing:
 
     def draw(self, group: SkeletonGroup) -> list[bytes]:
         """Encoded MarkerArrays for ``group``, in publishing order (possibly none)."""
+        if not group.skeletons:
+            return []
         messages = []
         now = {int(s.id): s.layout.n_joints for s in group.skeletons}
         left = sorted(set(self._drawn) - set(now))
         if left:
             messages.append(encode_marker_array(self._deletions(group, left)))
         self._drawn = now
-        if not group.skeletons:
-            return messages
         messages.append(encode_skeleton_markers(group, self.namespace, self.params))
         lifetime = self.params.lifetime
         for kind in ("velocity", "acceleration"):
@@ -202,13 +206,18 @@ class Drawing:
             messages.append(encode_marker_array(angles))
         return messages
 
+    def finish(self, stamp_ns: int, frame_id: str = "") -> list[bytes]:
+        """One DELETEALL when anything is drawn: the stream ended, nobody is left."""
+        if not self._drawn:
+            return []
+        self._drawn = {}
+        data = MarkerArrayData.new(1, frame_id=frame_id, stamp_ns=stamp_ns)
+        data.actions[:] = DELETEALL
+        data.namespaces = [""]
+        return [encode_marker_array(data)]
+
     def _deletions(self, group: SkeletonGroup, left: list[int]) -> MarkerArrayData:
-        """DELETE for every marker of the people who left; one DELETEALL when nobody is left."""
-        if not group.skeletons:
-            data = MarkerArrayData.new(1, frame_id=group.frame_id, stamp_ns=group.stamp_ns)
-            data.actions[:] = DELETEALL
-            data.namespaces = [""]
-            return data
+        """DELETE for every marker of the people who left."""
         keys = [(self.namespace, 3 * s + k) for s in left for k in range(3)]
         per_joint = [f"{self.namespace}/{kind}" for kind in ("velocity", "acceleration")
                      if getattr(self.overlays, f"{kind}_arrows")]  # fmt: skip

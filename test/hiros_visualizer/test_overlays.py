@@ -69,9 +69,10 @@ def test_people_who_leave_are_deleted_at_once():
     assert ("filter/angles", 64 * 9) in keys
     assert not any(ns == "filter" and i // 3 == 4 for ns, i in keys)  # person 4 stays
     assert len(drawn) == 3
-    (everyone,) = drawing.draw(SkeletonGroup(3, "world", []))
-    assert decode_marker_array(everyone).actions.tolist() == [DELETEALL]
-    assert drawing.draw(SkeletonGroup(4, "world", [])) == []
+    assert drawing.draw(SkeletonGroup(3, "world", [])) == []  # a stage's frame without output
+    (everything,) = drawing.finish(4, "world")
+    assert decode_marker_array(everything).actions.tolist() == [DELETEALL]
+    assert drawing.finish(5, "world") == []
 
 
 def test_per_joint_frames():
