@@ -179,13 +179,22 @@ class Memory:
             )  # fmt: skip
             return
         self.forget_stale(rows, stamps, settings.track_timeout)
-        measured = markers[..., 1:4]
-        counted = _weights(markers, present, 0.0) > 0
-        lengths = link_lengths(np.where(counted[..., None], measured, np.nan), self.tree.parents)
-        self.window[rows, :, self.filled[rows] % self.window.shape[2]] = lengths
-        self.filled[rows] += 1
-        seen = np.where(present[..., None], measured, np.nan)
+        self.record(rows, markers, present)
+        seen = np.where(present[..., None], markers[..., 1:4], np.nan)
         self.remember(rows, stamps, seen, np.full_like(seen, np.nan))
+
+    def record(self, rows: np.ndarray, markers: np.ndarray, present: np.ndarray) -> None:
+        """Push the people's measured link lengths into their windows (no motion).
+
+        Also for people already fitted to some learnt links, while others are learnt: their
+        raw measurement, before the fit. A joint counts only when its confidence is above 0.
+        """
+        counted = _weights(markers, present, 0.0) > 0
+        measured = np.where(counted[..., None], markers[..., 1:4], np.nan)
+        self.window[rows, :, self.filled[rows] % self.window.shape[2]] = link_lengths(
+            measured, self.tree.parents
+        )
+        self.filled[rows] += 1
 
     def fit(
         self,

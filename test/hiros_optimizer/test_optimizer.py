@@ -12,6 +12,7 @@ from hiros_optimizer import (
     write_person_calibrations,
 )
 from hiros_optimizer.kinematics import link_lengths
+from hiros_optimizer.learning import LIMB_JOINTS
 
 PARENTS = np.asarray(AZURE_KINECT.parents)
 FRAMES = 30
@@ -216,7 +217,9 @@ def test_params_are_checked():
     with pytest.raises(ConfigError):
         OptimizerParams(number_of_frames_for_calibration=1)
     with pytest.raises(ConfigError):
-        OptimizerParams(min_calibrated_fraction=0.0)
+        OptimizerParams(min_link_presence=0.0)
+    with pytest.raises(ConfigError):
+        OptimizerParams(acceptance_timeout=0.0)
 
 
 def test_compiled_frames_equal_the_numpy_frames(noisy_people, group_at):
@@ -276,3 +279,79 @@ def test_a_track_whose_decoded_layout_changes_size_is_learnt_again(compiled):
     for frame, n_markers in enumerate([3] * 5 + [32] * 5):
         out = stage.update(decode_group(_unknown_layout_bytes(n_markers, (frame + 1) * 10**8)))
         assert [len(s.markers) for s in out.skeletons] == [n_markers]
+
+
+SHORT_JOINTS = [
+    AZURE_KINECT.index(name)
+    for name in (
+        "HandLeft", "HandTipLeft", "ThumbLeft", "HandRight", "HandTipRight", "ThumbRight",
+        "Nose", "EyeLeft", "EarLeft", "EyeRight", "EarRight",
+    )
+]  # fmt: skip
+LIMBS = [AZURE_KINECT.index(name) for name in LIMB_JOINTS]
+
+
+def test_noisy_short_links_stay_free_while_the_limbs_lock(noisy_people, run):
+    """A third of the links far too noisy to learn (hands, thumbs, face): the old all-or-
+    nothing rule (80 % of the links steady) never accepted such a person."""
+    _, measured, true_lengths = noisy_people
+    rng = np.random.default_rng(3)
+    shaky = measured[0].copy()
+    scale = 0.5 * true_lengths[0][SHORT_JOINTS, None]  # (per axis: a CV far above 0.2)
+    shaky[:, SHORT_JOINTS] += scale * rng.standard_normal((len(shaky), len(SHORT_JOINTS), 3))
+    optimizer = small_optimizer()
+    outputs = run(optimizer, [shaky], 90)
+    progress = optimizer.people()[0]
+    assert progress.acceptance_time == pytest.approx((FRAMES - 1) / 30)
+    lengths = optimizer.calibrations[0].lengths
+    assert np.isnan(lengths[SHORT_JOINTS]).all()
+    assert np.isfinite(lengths[LIMBS]).all()
+    locked = np.isfinite(lengths)
+    assert locked.sum() == AZURE_KINECT.n_links - 1 - len(SHORT_JOINTS)
+    after = np.stack([o.skeletons[0].positions for o in outputs[FRAMES:]])
+    np.testing.assert_allclose(
+        link_lengths(after, PARENTS)[:, locked], np.tile(lengths[locked], (len(after), 1))
+    )
+    report = optimizer.report()[0]
+    assert report.startswith("accepted after 1.0 s (free: ")
+    assert "HandRight-HandTipRight" in report
+    free = progress.free_links(AZURE_KINECT, 0.2)
+    assert all(why.startswith("unsteady") for why in free.values())
+
+
+def test_hands_never_seen_still_give_constrained_legs(noisy_people, run):
+    _, measured, _ = noisy_people
+    handless = measured[0].copy()
+    handless[:, SHORT_JOINTS[:6]] = np.nan
+    optimizer = small_optimizer()
+    run(optimizer, [handless], 60)
+    lengths = optimizer.calibrations[0].lengths
+    assert np.isfinite(lengths[LIMBS]).all()
+    assert np.isnan(lengths[SHORT_JOINTS[:6]]).all()
+    assert optimizer.people()[0].accepted_ns is not None
+    free = optimizer.people()[0].free_links(AZURE_KINECT, 0.2)
+    assert free["WristLeft-HandLeft"] == "seen in 0 % of frames"
+
+
+def test_a_person_who_never_qualifies_is_reported(noisy_people, run):
+    """The left arm never seen: the legs lock, the person is reported once past the timeout."""
+    _, measured, _ = noisy_people
+    armless = measured[0].copy()
+    elbow, right = AZURE_KINECT.index("ElbowLeft"), AZURE_KINECT.index("ClavicleRight")
+    armless[:, elbow:right] = np.nan  # elbow to thumb, left
+    optimizer = small_optimizer(acceptance_timeout=1.5)
+    overdue = []
+    for frame in range(60):
+        run(optimizer, [armless], 1, start=frame)
+        overdue += [(frame, track) for track in optimizer.new_overdue]
+    assert overdue == [(46, 0)]  # 1.53 s after the first frame
+    progress = optimizer.people()[0]
+    assert progress.accepted_ns is None
+    assert np.isfinite(optimizer.calibrations[0].lengths[LIMBS[4:]]).all()
+    report = optimizer.report()[0]
+    assert report == (
+        "not accepted after 2.0 s: ElbowLeft-WristLeft seen in 0 % of frames; "
+        "ShoulderLeft-ElbowLeft seen in 0 % of frames "
+        "(free: HandLeft-HandTipLeft, WristLeft-HandLeft, WristLeft-ThumbLeft)"
+    )
+    assert optimizer.diagnostics() == {"person.0": report}
