@@ -2,7 +2,8 @@
 
     /<cam>/skeletons (raw CDR, camera frame and clock) -> LiveCalibrator -> parameters
         cameras.<cam>.{frame_id, time_offset, drift, drift_epoch, translation, rotation,
-        quality.*} and /tf_static (world -> each camera's frame)
+        quality.*} and /tf_static (world -> each camera's <prefix>camera_base, the root of
+        its driver's TF tree: hiros_core.frames)
 
 Other nodes follow the parameters through ``/parameter_events`` (``ros2 param get /calib
 cameras.k02.time_offset`` reads one). A calibration file (``calibration_file``) is loaded at
@@ -19,7 +20,6 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from geometry_msgs.msg import TransformStamped
 from hiros_skeleton_msgs.msg import SkeletonGroup as SkeletonGroupMsg
 from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, QoSProfile
@@ -30,8 +30,10 @@ from hiros_calib.live import LiveCalibrator, LiveCalibratorParams
 from hiros_core.calibration import Calibration, load_calibration, save_calibration
 from hiros_core.codec import decode_group
 from hiros_core.errors import CalibrationError
+from hiros_core.frames import AZURE_KINECT_MOUNT, CameraMount, camera_transforms
 from hiros_ros import HirosNode, run_node
 from hiros_ros.node import camera_qos
+from hiros_ros.tf import tf_message
 
 __all__ = ["LIVE", "CalibNode", "CalibNodeParams", "main"]
 
@@ -72,6 +74,16 @@ class CalibNodeParams(LiveCalibratorParams):
     """Where ``~/save`` and shutdown write; empty: ``calibration_file`` or calibration.yaml."""
     publish_tf: bool = True
     """Publish world -> camera transforms on /tf_static."""
+    tf_frame_suffix: str = AZURE_KINECT_MOUNT.frame_suffix
+    """A skeleton frame with this suffix hangs in its driver's tree below tf_base_suffix."""
+    tf_base_suffix: str = AZURE_KINECT_MOUNT.base_suffix
+    """Root of each camera's driver tree, which /tf_static attaches to the world (world ->
+    <prefix>camera_base, so that no frame has two parents); empty: world -> skeleton frame."""
+    tf_base_to_frame: list[float] = field(
+        default_factory=lambda: list(AZURE_KINECT_MOUNT.base_to_frame)
+    )
+    """The driver's fixed base -> skeleton frame transform: x, y, z (m), qx, qy, qz, qw
+    (default: the Azure Kinect ROS driver's camera_base -> depth_camera_link)."""
     step_period: float = 0.2
     """Seconds between the worker's looks at whether a check or an estimate is due."""
 
@@ -204,23 +216,11 @@ class CalibNode(HirosNode):
         self.set_parameters(changed)
         self._published.update(values)
         if self.params.publish_tf:
-            self._tf.publish(self._transforms(latest))
+            mount = CameraMount(self.params.tf_frame_suffix, self.params.tf_base_suffix,
+                                tuple(self.params.tf_base_to_frame))  # fmt: skip
+            stamp = self.get_clock().now().to_msg()
+            self._tf.publish(tf_message(camera_transforms(latest, mount), stamp))
         self.count("results_published")
-
-    def _transforms(self, calibration: Calibration) -> TFMessage:
-        stamp = self.get_clock().now().to_msg()
-        transforms = []
-        for cam in calibration.cameras.values():
-            t = TransformStamped()
-            t.header.stamp = stamp
-            t.header.frame_id = calibration.world_frame
-            t.child_frame_id = cam.frame_id
-            (t.transform.translation.x, t.transform.translation.y,
-             t.transform.translation.z) = (float(v) for v in cam.translation)  # fmt: skip
-            (t.transform.rotation.x, t.transform.rotation.y, t.transform.rotation.z,
-             t.transform.rotation.w) = (float(v) for v in cam.rotation)  # fmt: skip
-            transforms.append(t)
-        return TFMessage(transforms=transforms)
 
     def _save_path(self) -> Path:
         return Path(self.params.save_file or self.params.calibration_file or "calibration.yaml")

@@ -51,7 +51,9 @@ def test_calib_node_publishes_parameters_tf_and_saves(ros_env, tmp_path: Path) -
     found = re.search(r"offset (\S+) truth (\S+) tf \[(.*)\] save: (.*)", log)
     assert found, log
     assert float(found.group(1)) == pytest.approx(float(found.group(2)), abs=5e-3), log
-    assert "cam1_depth_camera_link" in found.group(3), log
+    # attached at the root of the driver's tree, never at the frame the driver gives a parent
+    assert "'cam1_camera_base'" in found.group(3), log
+    assert "depth_camera_link" not in found.group(3), log
     assert found.group(4).startswith("saved ['cam0', 'cam1']"), log
     written = yaml.safe_load(saved.read_text())
     assert set(written["cameras"]) == {"cam0", "cam1"}
