@@ -10,11 +10,13 @@ the same 3.5 % (one whole-body scale per frame; only the thumbs vary more) and a
 correlates with its parent's (0.5-0.7). The simulator therefore makes the SDK's *evidence*
 first and then fits a rigid model to it (``fit_body_model``):
 
-1. evidence = truth + noise + a fixed per camera, person and joint bias (``joint_bias``), with
-   per-joint sigma per axis::
+1. evidence = truth + noise + a per camera, person and joint bias (``joint_bias``; fixed, or
+   drifting as an AR(1) process with time constant ``bias_drift_time``), with per-joint sigma
+   per axis::
 
        sigma = (noise_base + noise_per_metre * depth) * (1 + oblique_gain * obliqueness)
                * (occluded_gain if occluded) * (out_of_view_gain if outside the field of view)
+               * (extremity_gain on hands, feet and face)
 
    the depth (z) axis scaled by ``depth_axis_gain``, correlated over time as an AR(1) process
    with correlation time ``noise_correlation_time``; a share ``noise_body_share`` of its
@@ -27,7 +29,8 @@ first and then fits a rigid model to it (``fit_body_model``):
    across it, about as large as the evidence error at any depth in the tree;
 3. the posed model is scaled about its centroid by ``1 + body_scale_cv * AR(1)`` (the SDK's
    per-frame body size), which moves the limb lengths all together;
-4. optionally ``noise_residual``: independent noise on top (none on the take).
+4. optionally ``noise_residual``: independent noise on top, times the joint's occlusion, view
+   and extremity factors (none on the take).
 
 Per-joint error statistics stay about those of the independent model it replaces (the fitted
 sigma, bias and correlation time); the limb lengths vary like the real SDK's (median CV 3.8 %

@@ -82,3 +82,35 @@ def test_bad_files_raise_recording_error(tmp_path):
     )
     with pytest.raises(RecordingError, match="expected 3 frames"):
         read_bvh(short)
+
+
+def test_position_channels_replace_the_offset(tmp_path):
+    """Files that give every joint position channels repeat its offset there (Bandai-Namco's):
+    the bone keeps its length, and a root's channels place it whatever its offset."""
+    text = (
+        "HIERARCHY\nROOT Hips\n{\n OFFSET 5 90 -400\n"
+        " CHANNELS 6 Xposition Yposition Zposition Zrotation Xrotation Yrotation\n"
+        " JOINT Spine\n {\n  OFFSET 0 15 0\n"
+        "  CHANNELS 6 Xposition Yposition Zposition Zrotation Xrotation Yrotation\n"
+        "  End Site\n  {\n   OFFSET 0 10 0\n  }\n }\n}\n"
+        "MOTION\nFrames: 1\nFrame Time: 0.0333333\n0 92 -1 0 0 0 0 15 0 0 0 0\n"
+    )
+    path = tmp_path / "channels.bvh"
+    path.write_text(text)
+    motion = read_bvh(path)
+    np.testing.assert_allclose(motion.positions[0], [[0, 92, -1], [0, 107, -1], [0, 117, -1]])
+
+
+@pytest.mark.skipif(not SHARED.is_dir(), reason="needs ../shared/data")
+def test_bandai_clip_keeps_its_bone_lengths():
+    motion = read_bvh(SHARED / "bandai_motion2" / "dataset-2_wave-both-hands_normal_001.bvh")
+    assert motion.rate == pytest.approx(30.0, rel=1e-3)
+    pelvis = motion.positions[:, motion.index("Hips")]
+    assert 80.0 < np.median(pelvis[:, 1]) < 110.0  # centimetres, Y up
+    child = motion.index("LowerLeg_L")
+    shank = np.linalg.norm(
+        motion.positions[:, motion.index("Foot_L")] - motion.positions[:, child], axis=-1
+    )
+    np.testing.assert_allclose(
+        shank, np.linalg.norm(motion.offsets[motion.index("Foot_L")]), rtol=1e-6
+    )

@@ -1,3 +1,5 @@
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -5,6 +7,7 @@ from hiros_core.layouts import AZURE_KINECT
 from hiros_sim import default_bvh_files, read_bvh
 from hiros_sim.mapping import BVH_TO_WORLD, map_to_azure
 from hiros_sim.people import body_forward, prepare_clip
+from hiros_sim.shared import BANDAI_FOLDER, shared_data_dir
 
 IDX = AZURE_KINECT.index
 # plausible adult limb lengths (m): generous bounds that a wrong joint would break
@@ -16,14 +19,26 @@ LIMBS = {
     ("Pelvis", "Neck"): (0.35, 0.65),
     ("Neck", "Head"): (0.03, 0.15),
     ("HipLeft", "HipRight"): (0.1, 0.25),
-    ("ShoulderLeft", "ShoulderRight"): (0.25, 0.45),
+    ("ShoulderLeft", "ShoulderRight"): (0.18, 0.45),  # Bandai-Namco's rig: 0.20
     ("WristLeft", "HandTipLeft"): (0.1, 0.25),
 }
 
 
-@pytest.fixture(scope="module", params=range(4), ids=lambda i: f"clip{i}")
+# Bandai-Namco's clips (shared data, CC BY-NC): centimetres, suffix names, every joint with
+# position channels, a rest pose with every bone along its joint's x, a root on the floor.
+BANDAI = [
+    str(shared_data_dir() / BANDAI_FOLDER / f"dataset-2_{name}_001.bvh")
+    for name in ("wave-both-hands_elderly", "walk-turn-left_normal")
+]
+
+
+@pytest.fixture(
+    scope="module", params=[*default_bvh_files(), *BANDAI], ids=lambda p: Path(p).name[:24]
+)
 def mapped(request):
-    return map_to_azure(read_bvh(default_bvh_files()[request.param]))
+    if not Path(request.param).is_file():
+        pytest.skip(f"needs {request.param}")
+    return map_to_azure(read_bvh(request.param))
 
 
 def test_limb_lengths_plausible_and_rigid(mapped):
@@ -62,6 +77,8 @@ def test_world_is_z_up_and_face_in_front(mapped):
     assert np.dot(forward, nose) > 0.05  # the nose points where the body faces
     left = mapped[:20, IDX("HipLeft")] - mapped[:20, IDX("HipRight")]
     assert np.dot(np.cross(left.mean(axis=0), [0, 0, 1]), forward) > 0  # forward = left × up
+    spine = [IDX(n) for n in ("Pelvis", "SpineNaval", "SpineChest", "Neck")]
+    assert np.all(np.diff(first[spine, 2]) > 0.05)  # the spine rises from the pelvis
 
 
 def test_bvh_to_world_is_a_rotation():

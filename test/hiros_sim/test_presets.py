@@ -114,7 +114,7 @@ def test_log_clock_receiver_logs_on_the_reference_clock():
     assert np.ptp(offsets) > 0.1  # log minus stamp follows the camera's clock offset
 
 
-def test_noisy_sdk_errs_more_and_its_bias_drifts():
+def test_noisy_sdk_errs_more_most_on_hands_feet_and_face():
     base = {"duration": 40.0, "seed": 1, "n_people": 1, "n_cameras": 1, **QUIET}
     default = _joint_errors(simulate(SimParams(**base)), "k01")
     noisy = _joint_errors(simulate(preset_params("noisy-sdk", **base)), "k01")
@@ -130,13 +130,20 @@ def test_noisy_sdk_errs_more_and_its_bias_drifts():
         > 1.3 * rms["d"][hands].mean() / rms["d"][body].mean()
     )
 
-    def drift(errors: np.ndarray) -> float:
-        """Spread of each joint's 4-second mean error over the recording, metres."""
-        windows = np.array_split(errors, 8)
-        means = np.stack([np.nanmean(w, axis=0) for w in windows])  # (8, 32, 3)
+
+def test_drifting_bias_changes_over_seconds():
+    """Joint noise off: a fixed bias gives each joint a steady error, a drifting one does not."""
+    bias_only = {"noise_base": 0.0, "noise_per_metre": 0.0, "body_scale_cv": 0.0}
+    base = {"duration": 40.0, "seed": 1, "n_people": 1, "n_cameras": 1, **QUIET, **bias_only}
+
+    def drift(bias_drift_time: float) -> float:
+        """Median spread of each joint's 5-second mean error over the recording, metres."""
+        errors = _joint_errors(simulate(SimParams(bias_drift_time=bias_drift_time, **base)), "k01")
+        means = np.stack([np.nanmean(w, axis=0) for w in np.array_split(errors, 8)])
         return float(np.median(np.nanstd(means, axis=0)))
 
-    assert drift(noisy) > 2.0 * drift(default)
+    assert drift(3.0) > 2.0 * drift(0.0)
+    assert preset_params("noisy-sdk").bias_drift_time == 3.0
 
 
 def test_15hz_and_5_percent_drops():
