@@ -27,7 +27,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -42,7 +42,7 @@ from hiros_calib.sync import CameraClock, PairOffset
 from hiros_calib.tracks import BodyTrack
 from hiros_core.geometry import RigidTransform
 
-__all__ = ["LagFit", "fit_at_lag", "settle_lag"]
+__all__ = ["LagFit", "compare_fits", "fit_at_lag", "settle_lag"]
 
 
 @dataclass
@@ -53,11 +53,12 @@ class LagFit:
     """``tau = t_a - t_b`` (s)."""
     correlation: float
     """The pooled motion correlation at this lag."""
-    residual_m: float
-    """Median over frames of the per-frame mean joint distance after the fit (m); inf when
-    no person could be matched between the cameras at this lag."""
-    frames: int
-    """Frames of same-instant skeletons the fit used."""
+    frames: dict[tuple[int, int], float] = field(default_factory=dict)
+    """Per frame of camera a, keyed by (track index, time in 0.1 ms), the mean joint
+    distance after the fit (m), the better of direct and left/right swapped."""
+    residual_m: float = math.inf
+    """Median of ``frames`` over the frames every candidate lag shares (set by
+    :func:`compare_fits`); inf when no person could be matched at this lag."""
 
 
 def _light(params: ExtrinsicsParams) -> ExtrinsicsParams:
@@ -77,41 +78,66 @@ def fit_at_lag(
     correlation: float,
     params: ExtrinsicsParams,
 ) -> LagFit:
-    """The rigid-fit residual of camera b's skeletons onto camera a's at clock lag ``lag``."""
+    """Camera b's skeletons fitted onto camera a's at clock lag ``lag``, per frame of a."""
     clock_a = CameraClock("a", "ok", time_offset=0.0)
     clock_b = CameraClock("b", "ok", time_offset=lag)  # o_b - o_a = tau
     matches = associate(tracks_a, tracks_b, clock_a, clock_b, params)
     found = [
-        pair_correspondences(tracks_a[i], tracks_b[j], clock_a, clock_b, params)
+        (i, pair_correspondences(tracks_a[i], tracks_b[j], clock_a, clock_b, params))
         for i, j, _ in matches
     ]
-    usable = [c for c in found if c is not None]
+    usable = [(i, c) for i, c in found if c is not None]
+    fit = LagFit(lag, correlation)
     if not usable:
-        return LagFit(lag, correlation, math.inf, 0)
-    joined = Correspondences.concatenate(usable)
-    pose = estimate_pair_pose(joined, _light(params))
+        return fit
+    pose = estimate_pair_pose(Correspondences.concatenate([c for _, c in usable]), _light(params))
     if not pose.ok:
-        return LagFit(lag, correlation, math.inf, 0)
-    residual, frames = _fit_residual(joined, pose.transform)
-    return LagFit(lag, correlation, residual, frames)
+        return fit
+    for track, c in usable:
+        residual = _frame_residuals(c, pose.transform)
+        keys = np.round(c.times * 1e4).astype(np.int64)
+        fit.frames.update(
+            ((track, int(k)), float(r))
+            for k, r in zip(keys, residual, strict=True)
+            if np.isfinite(r)
+        )
+    return fit
 
 
-def _fit_residual(c: Correspondences, transform: RigidTransform) -> tuple[float, int]:
-    """Median over frames of the mean joint distance (m), the better of direct and mirrored."""
+def _frame_residuals(c: Correspondences, transform: RigidTransform) -> np.ndarray:
+    """``(F,)`` mean joint distance per frame (m), the better of direct and mirrored.
+
+    NaN where a frame has too few joints seen by both cameras.
+    """
     moved = transform.apply(c.points_b.reshape(-1, 3)).reshape(c.points_b.shape)
     valid = c.weights > 0
     counts = valid.sum(axis=1)
-    frames = counts >= max(3, valid.shape[1] // 3)
-    if not frames.any():
-        return math.inf, 0
     direct = np.linalg.norm(moved - c.points_a, axis=2)
     swapped = np.linalg.norm(moved[:, c.mirror] - c.points_a, axis=2)
     both = valid & valid[:, c.mirror]
-    per_frame = np.minimum(
-        np.where(valid, direct, 0.0).sum(axis=1) / np.maximum(counts, 1),
-        np.where(both, swapped, np.inf).sum(axis=1) / np.maximum(both.sum(axis=1), 1),
-    )
-    return float(np.median(per_frame[frames])), int(frames.sum())
+    with np.errstate(invalid="ignore", divide="ignore"):
+        per_frame = np.minimum(
+            np.where(valid, direct, 0.0).sum(axis=1) / counts,
+            np.where(both, swapped, np.inf).sum(axis=1) / both.sum(axis=1),
+        )
+    return np.where(counts >= max(3, valid.shape[1] // 3), per_frame, np.nan)
+
+
+def compare_fits(fits: list[LagFit], min_frames: int = 30) -> None:
+    """Set each fit's residual over the frames of camera a that every fit shares.
+
+    A lag that pairs camera a's moving stretches with b's still ones, or overlaps less, would
+    otherwise be judged on other frames than its rivals. When fewer than ``min_frames`` are
+    shared, each fit is judged on its own frames.
+    """
+    matched = [f for f in fits if f.frames]
+    shared = set.intersection(*(set(f.frames) for f in matched)) if matched else set()
+    for fit in fits:
+        if not fit.frames:
+            fit.residual_m = math.inf
+            continue
+        keys = shared if len(shared) >= min_frames else fit.frames.keys()
+        fit.residual_m = float(np.median([fit.frames[k] for k in keys]))
 
 
 def settle_lag(
@@ -137,6 +163,7 @@ def settle_lag(
         fit_at_lag(tracks_a, tracks_b, float(lag), float(corr), params)
         for lag, corr in pair.candidates
     ]
+    compare_fits(fits)
     by_fit = sorted(range(len(fits)), key=lambda k: fits[k].residual_m)
     motion_ratio = float(pair.candidates[1, 1] / pair.candidates[0, 1]) if len(fits) > 1 else 0.0
     ambiguous = motion_ratio >= max_ambiguity

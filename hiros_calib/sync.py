@@ -74,14 +74,15 @@ class SyncParams:
     """How far (s) the true lag may lie from the lag the arrival times suggest.
 
     Lag aliases of repeated motion correlate nearly as well as the true lag; the times the
-    messages arrived at one receiver pin the lag to within network latency. The prior only
-    chooses among lags the motion supports: it never narrows the search, so a prior the
-    motion contradicts is noticed and ignored (see ``prior_support``).
+    messages arrived at one receiver pin the lag to within network latency. The lag found
+    within this window is checked against the best lag anywhere (see ``prior_contradiction``),
+    so a prior the motion contradicts is noticed and ignored, never silently obeyed.
     """
-    prior_support: float = 0.8
-    """The arrival-time prior is used only when a lag within ``prior_window`` of it
-    correlates at least this fraction as well as the best lag anywhere; otherwise the motion
-    contradicts it and it is ignored (the pair's quality says so)."""
+    prior_contradiction: float = 1.5
+    """The motion contradicts the arrival-time prior when the best lag outside
+    ``prior_window`` is this many times more significant (Fisher z of the correlation times
+    the square root of the overlap) than the best lag within it; the search then takes every
+    lag and the pair's quality says ``arrival_prior: contradicted``."""
     min_overlap: float = 3.0
     """Seconds two tracks must overlap at a lag for that lag to count."""
     min_motion: float = 0.01
@@ -527,19 +528,54 @@ def estimate_pair_offset(
     """The clock lag ``tau = t_a - t_b`` between two cameras from their body tracks.
 
     Every lag within ``± max_offset`` (all when 0) is searched. ``prior`` is the lag the
-    message arrival times suggest (s): among the lags the motion supports, those within
-    ``prior_window`` of it are preferred, unless the motion contradicts it. ``around`` pins
-    the search to the lobe of one candidate lag (after the poses chose it). ``work`` shares
-    per-track results between the pairs of one :func:`synchronise` call.
+    message arrival times suggest (s): the lag within ``prior_window`` of it is taken unless
+    the motion contradicts it (a far more significant lag elsewhere, or none clear near it).
+    ``around`` pins the search to the lobe of one candidate lag (after the poses chose it).
+    ``work`` shares per-track results between the pairs of one :func:`synchronise` call.
     """
     work = work if work is not None else _TrackWork(params)
+    names = {"camera_a": camera_a, "camera_b": camera_b}
     if around is not None:
         reach = max(3 * params.grid_step, 2 * params.consensus_tolerance)
-        search: tuple[float, float] | None = (around - reach, around + reach)
-    elif params.max_offset > 0:
-        search = (-params.max_offset, params.max_offset)
-    else:
-        search = None
+        return _estimate(tracks_a, tracks_b, params, (around - reach, around + reach),
+                         work=work, **names)  # fmt: skip
+    anywhere = (-params.max_offset, params.max_offset) if params.max_offset > 0 else None
+    free = _estimate(tracks_a, tracks_b, params, anywhere, work=work, **names)
+    if prior is None:
+        return free
+    window = (prior - params.prior_window, prior + params.prior_window)
+    near = _estimate(tracks_a, tracks_b, params, window, work=work, **names)
+    if near.ok and not _contradicts(free, near, params):
+        near.quality["arrival_prior"] = "used"
+        return near
+    free.quality["arrival_prior"] = "contradicted"
+    return free
+
+
+def _significance(pair: PairOffset) -> float:
+    """Fisher z of the pair's pooled peak times the square root of its overlap."""
+    peak = float(np.clip(pair.quality.get("peak", 0.0), -0.999, 0.999))
+    return math.atanh(peak) * math.sqrt(pair.quality.get("overlap_s", 0.0))
+
+
+def _contradicts(free: PairOffset, near: PairOffset, params: SyncParams) -> bool:
+    """Whether the best lag anywhere is far from, and far more significant than, the prior's."""
+    if not free.ok or abs(free.offset - near.offset) <= params.prior_window:
+        return False
+    return _significance(free) > params.prior_contradiction * _significance(near)
+
+
+def _estimate(
+    tracks_a: list[BodyTrack],
+    tracks_b: list[BodyTrack],
+    params: SyncParams,
+    search: tuple[float, float] | None,
+    *,
+    camera_a: str,
+    camera_b: str,
+    work: _TrackWork,
+) -> PairOffset:
+    """The lag within ``search`` (s; None: every lag), with its candidates."""
     sig_a, sig_b = work.signatures(tracks_a), work.signatures(tracks_b)
     refusal = _refuse_unusable(
         camera_a, camera_b, sig_a=sig_a, sig_b=sig_b, params=params, work=work
@@ -568,7 +604,7 @@ def estimate_pair_offset(
             pairs_considered=len(candidates),
         )
     used = _consensus(good, params)
-    lags, prior_note = _candidate_lags(used, params, search, prior)
+    lags = _candidate_lags(used, params, search)
     chosen = round(lags[0, 0] / params.grid_step)
     tolerance = max(1, round(params.consensus_tolerance / params.grid_step))
     if abs(chosen - used[0].lag_index) > tolerance:
@@ -576,12 +612,13 @@ def estimate_pair_offset(
         near = [c for c in good if abs(c.lag_index - chosen) <= tolerance]
         used = _consensus(near, params) if near else []
         if not used:
-            pinned = estimate_pair_offset(
-                tracks_a, tracks_b, params, camera_a=camera_a, camera_b=camera_b,
-                around=float(lags[0, 0]), work=work,
+            reach = max(3 * params.grid_step, 2 * params.consensus_tolerance)
+            pinned = _estimate(
+                tracks_a, tracks_b, params, (lags[0, 0] - reach, lags[0, 0] + reach),
+                camera_a=camera_a, camera_b=camera_b, work=work,
             )  # fmt: skip
             pinned.candidates = lags
-            pinned.quality.update(_lag_quality(lags, prior_note))
+            pinned.quality.update(_lag_quality(lags))
             return pinned
     result = _finish(
         camera_a,
@@ -595,7 +632,7 @@ def estimate_pair_offset(
         centre=chosen,
     )
     result.candidates = lags
-    result.quality.update(_lag_quality(lags, prior_note))
+    result.quality.update(_lag_quality(lags))
     return result
 
 
@@ -669,17 +706,13 @@ def _clear(candidate: _Candidate, params: SyncParams) -> bool:
 
 
 def _candidate_lags(
-    used: list[_Candidate],
-    params: SyncParams,
-    search: tuple[float, float] | None,
-    prior: float | None,
-) -> tuple[np.ndarray, str]:
-    """``(K, 2)`` candidate lags (s) and pooled correlations, best first, and the prior's fate.
+    used: list[_Candidate], params: SyncParams, search: tuple[float, float] | None
+) -> np.ndarray:
+    """``(K, 2)`` candidate lags (s) and their pooled correlations, best first.
 
     The candidates are the pooled curve's local maxima of significance at least
     ``candidate_ratio`` of the best's correlation, plus always the runner-up (so the poses can
-    show how much worse the next lag fits). A prior the motion supports moves the best lag
-    near it to the front and drops the lags far from it; one it contradicts changes nothing.
+    show how much worse the next lag fits).
     """
     step = params.grid_step
     first, pooled, overlap = _pooled_curve(used, step)
@@ -691,19 +724,10 @@ def _candidate_lags(
         significance = np.arctanh(np.clip(pooled, -0.999, 0.999)) * np.sqrt(overlap)
     significance = np.where(valid, significance, -np.inf)
     peaks = _local_maxima(significance, max(3, round(0.25 / step)))
-    rows = np.array([(lags[k], pooled[k], significance[k]) for k in peaks]).reshape(-1, 3)
+    rows = np.array([(lags[k], pooled[k]) for k in peaks]).reshape(-1, 2)
     keep = rows[:, 1] >= params.candidate_ratio * rows[0, 1]
     keep[: min(2, len(rows))] = True
-    rows = rows[keep][: max(2, params.max_candidates)]
-    note = "none"
-    if prior is not None:
-        near = np.abs(rows[:, 0] - prior) <= params.prior_window
-        if near.any() and rows[near, 1].max() >= params.prior_support * rows[0, 1]:
-            rows = rows[near]
-            note = "used"
-        else:
-            note = "contradicted"
-    return rows[:, :2], note
+    return rows[keep][: max(2, params.max_candidates)]
 
 
 def _local_maxima(values: np.ndarray, separation: int) -> list[int]:
@@ -714,9 +738,9 @@ def _local_maxima(values: np.ndarray, separation: int) -> list[int]:
     return [int(k) for k in peaks[np.argsort(finite[peaks])[::-1]]]
 
 
-def _lag_quality(lags: np.ndarray, prior_note: str) -> dict[str, Any]:
+def _lag_quality(lags: np.ndarray) -> dict[str, Any]:
     """The candidates' figures for the pair's quality: the runner-up and its margin."""
-    quality: dict[str, Any] = {"candidates": len(lags), "arrival_prior": prior_note}
+    quality: dict[str, Any] = {"candidates": len(lags), "arrival_prior": "none"}
     if len(lags) > 1:
         quality["runner_up_lag"] = round(float(lags[1, 0]), 3)
         quality["runner_up_ratio"] = round(float(lags[1, 1] / lags[0, 1]), 3)
