@@ -112,6 +112,13 @@ class Accounted:
         """Frames accounted for: processed, dropped whole, or held."""
         return self.processed + self.drops.frame_total + self.held
 
+    def diagnostics(self) -> dict[str, str]:
+        """The stage's own figures for ``/diagnostics`` beside the counts: key -> text.
+
+        None by default; e.g. the optimizer's time to accept each person.
+        """
+        return {}
+
 
 class Merged(Accounted):
     """Several stages' accounts as one, for a node or a pipeline that runs more than one.
@@ -144,3 +151,11 @@ class Merged(Accounted):
         for prefix, stage in self.parts:
             total.add(stage.drops, prefix)
         return total
+
+    def diagnostics(self) -> dict[str, str]:
+        """Every stage's figures, each key under the stage's prefix."""
+        return {
+            prefix + key: text
+            for prefix, stage in self.parts
+            for key, text in stage.diagnostics().items()
+        }

@@ -93,6 +93,9 @@ class RunSummary:
     it holds the run up), ``finish`` (the last chunks and the index), and with two processes
     ``waiting`` (this process idle, waiting for the child's frames)."""
     outputs: dict[str, list] | None = None
+    acceptance: dict[int, str] = field(default_factory=dict)
+    """Optimizer: track id -> when its limb lengths were accepted, or why not
+    (``Optimizer.report``)."""
     """stage -> its output groups, when ``run_recording(keep_outputs=True)``."""
     cpu: dict[str, float] = field(default_factory=dict)
     """CPU seconds over the same span as ``wall_time``: ``main`` (the calling thread),
@@ -222,6 +225,7 @@ def run_recording(
     summary.add_drops(item.tracker_drops, "tracker: ")
     summary.add_drops(pipeline.downstream_drops)
     summary.processed = item.tracker_processed
+    summary.acceptance = pipeline.optimizer.report()
     summary.wall_time = time.perf_counter() - started
     main = time.thread_time() - cpu_started[0]
     summary.cpu = {"main": main, "writer": time.process_time() - cpu_started[1] - main}

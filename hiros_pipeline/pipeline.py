@@ -111,6 +111,10 @@ class Pipeline(Accounted):
         """
         return Merged(self._parts(STAGES), [self.tracker]).drops
 
+    def diagnostics(self) -> dict[str, str]:
+        """Every stage's own figures for ``/diagnostics``, under the stage's name."""
+        return Merged(self._parts(STAGES), []).diagnostics()
+
     @property
     def downstream_drops(self) -> Drops:
         """The drop reasons of the stages after the tracker (see :meth:`downstream`)."""

@@ -230,6 +230,9 @@ class HirosNode(Node):
         status = DiagnosticStatus(name=self.get_fully_qualified_name(), hardware_id="hiros")
         status.level, status.message = self._status()
         status.values = [KeyValue(key=k, value=str(v)) for k, v in sorted(self.counters.items())]
+        if self.accounted is not None:  # the stage's own figures after the counts
+            figures = self.accounted.diagnostics()
+            status.values += [KeyValue(key=k, value=v) for k, v in figures.items()]
         array = DiagnosticArray(status=[status])
         array.header.stamp = self.get_clock().now().to_msg()
         self._diagnostics.publish(array)

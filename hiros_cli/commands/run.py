@@ -255,6 +255,8 @@ def print_summary(console: Console, summary, out: Path) -> None:  # noqa: ANN001
         table.add_row(what, f"{groups} ({len(summary.people[stage])} ids)")
     for reason, count in sorted(summary.dropped_detections.items()):
         table.add_row(f"detections dropped: {reason}", str(count))
+    for track, text in summary.acceptance.items():
+        table.add_row(f"limb lengths: person {track}", text)
     console.print(table)
     print_warnings(console, summary.problems)
     console.print(

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 import pytest
@@ -91,3 +92,11 @@ def test_write_picks_the_outputs_and_refuses_unknown_ones(
         _run(sim, sim / "recording.mcap", tmp_path / "x.mcap", "--write", "filter,tracks")
     assert exit_.value.code == 2
     assert "give one or more of tracker" in capsys.readouterr().err
+
+
+def test_the_table_gives_each_persons_time_to_accept_the_limb_lengths(
+    sim: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    assert _run(sim, sim / "recording.mcap", tmp_path / "out.mcap", "--processes", "1") == 0
+    printed = " ".join(capsys.readouterr().out.split())
+    assert re.search(r"limb lengths: person \d+ │ accepted after \d\.\d s", printed), printed

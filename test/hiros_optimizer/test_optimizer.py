@@ -1,6 +1,7 @@
 import numpy as np
 import pytest
 
+from hiros_core.accounting import Merged
 from hiros_core.errors import ConfigError
 from hiros_core.layouts import AZURE_KINECT
 from hiros_core.model import Skeleton, SkeletonGroup
@@ -355,3 +356,11 @@ def test_a_person_who_never_qualifies_is_reported(noisy_people, run):
         "(free: HandLeft-HandTipLeft, WristLeft-HandLeft, WristLeft-ThumbLeft)"
     )
     assert optimizer.diagnostics() == {"person.0": report}
+
+
+def test_diagnostics_give_the_acceptance_under_the_stage_name(noisy_people, run):
+    _, measured, _ = noisy_people
+    optimizer = small_optimizer()
+    run(optimizer, measured[:1], FRAMES)
+    merged = Merged([("optimizer: ", optimizer)], [optimizer])
+    assert merged.diagnostics() == {"optimizer: person.0": "accepted after 1.0 s"}
