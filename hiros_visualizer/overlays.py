@@ -48,7 +48,9 @@ class OverlayParams:
     """What is drawn beside the skeletons (all off by default)."""
 
     velocity_arrows: bool = False
+    """Draw an arrow per joint to where its velocity would take it after arrow_time."""
     acceleration_arrows: bool = False
+    """Draw an arrow per joint of its acceleration times arrow_time squared."""
     arrow_time: float = 0.2
     """s: an arrow reaches where the joint would be after this time (``v t``, ``a t^2`` m)."""
     joint_angles: list[str] = field(default_factory=list)
