@@ -48,12 +48,16 @@ class OptimizerNode(StageNode):
         """Nothing to hand over: ``export_calibration`` is read at each export."""
 
     def on_group(self, data: bytes) -> None:
-        """Run the stage, then export when a person calibration was just accepted."""
+        """Run the stage; export when links were learnt, warn of people past the timeout."""
         super().on_group(data)
         if self.stage.new_calibrations:
             ids = ", ".join(str(i) for i in self.stage.new_calibrations)
             self.get_logger().info(f"limb lengths calibrated for track(s) {ids}")
             self._export()
+        if self.stage.new_overdue:
+            report = self.stage.report()
+            for track in self.stage.new_overdue:  # once per person
+                self.get_logger().warning(f"limb lengths of track {track}: {report[track]}")
 
     def on_calibrate(self, request: Any, response: Any) -> Any:
         """``~/calibrate``: forget and re-learn the given tracks' limb lengths."""
