@@ -199,14 +199,12 @@ class PersonPath:
     def _looped(self, tau: np.ndarray, reps: Repetitions) -> np.ndarray:
         """``(N, 32, 3)`` world positions at clip-sequence times ``tau`` with variation.
 
-        Around each seam (``|tau - seam| < blend / 2``) the pose is the cross-fade of the two
+        ``reps`` must cover every ``tau`` (beyond its last repetition the pose is held). Around
+        each seam (``|tau - seam| < blend / 2``) the pose is the cross-fade of the two
         repetitions meeting there, each held at its end or start beyond its own span.
         """
         clip = self.clip
         bounds = np.concatenate([[0.0], np.cumsum(clip.duration / reps.speed)])
-        if tau.size and tau.max() >= bounds[-1]:
-            msg = f"{len(reps.speed)} repetitions cover {bounds[-1]:.1f} s, not {tau.max():.1f} s"
-            raise ValueError(msg)
         current = np.clip(np.searchsorted(bounds, tau, side="right") - 1, 0, len(reps.speed) - 1)
         seam = np.where(tau - bounds[current] < bounds[current + 1] - tau, current, current + 1)
         half = 0.5 * reps.blend
@@ -220,7 +218,8 @@ class PersonPath:
         blended = (1.0 - weight)[:, None, None] * first + weight[:, None, None] * second
         # the cross-fade and the amplitude shorten limbs a little: back on the true lengths
         ones = np.ones(tau.shape)
-        return fit_body_model(blended, first_recorded, ones, np.ones((*tau.shape, 32)))
+        lengths = np.ones((*tau.shape, AZURE_KINECT.n_joints))
+        return fit_body_model(blended, first_recorded, ones, lengths)
 
     def _repetition(
         self, repetition: np.ndarray, tau: np.ndarray, bounds: np.ndarray, reps: Repetitions
@@ -250,8 +249,7 @@ class PersonPath:
             return self._turned(local, np.full(repetition.shape, self.heading), self.centre)
         yaw = self.heading + np.pi * repetition
         turning = (repetition > 0) & (clip_time < self.turn_time)
-        progress = np.clip(clip_time / self.turn_time, 0.0, 1.0)
-        smooth = progress * progress * (3.0 - 2.0 * progress)
+        smooth = _smoothstep(clip_time / self.turn_time)
         yaw = np.where(turning, yaw - np.pi * (1.0 - smooth), yaw)
         return self._turned(local, yaw, origin)
 

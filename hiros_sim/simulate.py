@@ -108,7 +108,7 @@ class SimParams:
     rate: float = 30.0
     """Camera frame rate, Hz (the Azure Kinect offers 30, 15 and 5)."""
     bvh_files: tuple[str, ...] = ()
-    """Mocap clips; empty = those ``motion`` names."""
+    """Mocap clips; empty = the clips of ``motion``."""
     motion: str = "bundled"
     """``bundled``: the ``hiros_data`` clips (walks, a bend). ``bandai``: one Bandai-Namco clip
     per person from the shared data (``hiros_sim.shared``; gestures and walks repeated for the

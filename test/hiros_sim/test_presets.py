@@ -264,3 +264,22 @@ def test_all_combines_the_conditions(tmp_path):
         "pair",
     )
     assert params.bias_drift_time > 0.0
+
+
+def test_command_line_preset_under_the_options_given():
+    import argparse
+
+    from hiros_cli.commands.simulate import _params, add_arguments
+
+    parser = argparse.ArgumentParser()
+    add_arguments(parser)
+    assert all(name in parser.format_help() for name in PRESETS)
+    params = _params(parser.parse_args(["--out", "x", "--preset", "drops-5"]))
+    assert (params.drop_rate, params.n_cameras, params.rate) == (0.05, 3, 30.0)
+    args = ["--out", "x", "--preset", "drops-5", "--rate", "5", "--set", "drop_rate=0.1"]
+    params = _params(parser.parse_args(args))
+    assert (params.drop_rate, params.rate) == (0.1, 5.0)
+    with pytest.raises(ConfigError, match="--sample or --preset"):
+        _params(parser.parse_args(["--out", "x", "--preset", "15hz", "--sample"]))
+    with pytest.raises(SystemExit):
+        parser.parse_args(["--out", "x", "--preset", "warp-9"])
