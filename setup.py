@@ -26,6 +26,8 @@ setup(
         ("share/ament_index/resource_index/packages", [f"resource/{PACKAGE}"]),
         (f"share/{PACKAGE}", ["package.xml"]),
         (f"share/{PACKAGE}/config", [str(p) for p in sorted(Path("config").glob("*.yaml"))]),
+        (f"share/{PACKAGE}/config/rviz", ["config/rviz/hiros.rviz"]),
+        (f"share/{PACKAGE}/config/foxglove", ["config/foxglove/hiros_layout.json"]),
         (f"share/{PACKAGE}/launch", [str(p) for p in sorted(Path("launch").glob("*.py"))]),
     ],
     install_requires=["setuptools"],

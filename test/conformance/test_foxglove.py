@@ -74,7 +74,8 @@ def files(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
         ["run", str(sim / "recording.mcap"), "--calibration", str(sim / "calibration.yaml"),
          "--out", str(root / "run.mcap")],
         ["convert", str(_generic_csv(root / "take.csv")), "--out", str(root / "driver_bag")],
-        ["convert", str(root / "take.csv"), "--skeleton-groups", "--out", str(root / "groups.mcap")],
+        ["convert", str(root / "take.csv"), "--skeleton-groups",
+         "--out", str(root / "groups.mcap")],
     ]  # fmt: skip
     for command in commands:
         assert main(command) == 0, command
@@ -159,6 +160,9 @@ def test_run_output_calibration_comes_with_the_first_frames(foxglove: dict[str, 
     calibration = int(topics["/hiros/calibration"]["first_log_time"])
     first = min(int(s["first_log_time"]) for s in topics.values())
     assert calibration - first < 0.1e9
-    assert topics["/hiros/calibration"]["channel_metadata"]["offered_qos_profiles"].count(
-        "transient_local"
-    ) == 1
+    assert (
+        topics["/hiros/calibration"]["channel_metadata"]["offered_qos_profiles"].count(
+            "transient_local"
+        )
+        == 1
+    )
