@@ -33,6 +33,11 @@ class Preset:
     description: str
     overrides: Mapping[str, object] = field(default_factory=dict)
 
+    @property
+    def needs_shared_data(self) -> bool:
+        """Its clips come from the shared data folder (``hiros_sim.shared``), not the package."""
+        return self.overrides.get("motion") == "bandai"
+
 
 _HOST_CLOCKS = {"log_clock": "camera"}
 _REPEATED = {"motion": "bandai", "loop_variation": 0.1}

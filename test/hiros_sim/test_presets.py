@@ -47,7 +47,7 @@ def _joint_errors(result, camera: str) -> np.ndarray:
 
 @pytest.mark.parametrize("name", list(PRESETS))
 def test_every_preset_runs_and_sets_only_its_knobs(name):
-    if PRESETS[name].overrides.get("motion") == "bandai" and not BANDAI.is_dir():
+    if PRESETS[name].needs_shared_data and not BANDAI.is_dir():
         pytest.skip(f"needs {BANDAI}")
     params = preset_params(name, duration=4.0, seed=2)
     default = SimParams(duration=4.0, seed=2)
@@ -73,6 +73,7 @@ def test_preset_errors(monkeypatch, tmp_path):
     with pytest.raises(ConfigError, match="HIROS_SHARED_DATA"):
         simulate(SimParams(motion="bandai", duration=4.0))
     assert preset_params("one-person", seed=4).seed == 4  # the rest needs no shared data
+    assert {n for n, p in PRESETS.items() if p.needs_shared_data} == {"repeated-motion", "all"}
 
 
 def test_log_clock_camera_logs_each_camera_on_its_own_host(tmp_path):
