@@ -45,6 +45,7 @@ from hiros_core.codec import (
 )
 from hiros_core.errors import CodecError, ConfigError, LayoutError
 from hiros_core.layouts import AZURE_KINECT, Layout, get_layout
+from hiros_core.limits import MAX_BODIES, MAX_MARKERS, marker_counts
 from hiros_core.model import (
     BOX_WIDTH,
     STATE_WIDTH,
@@ -211,6 +212,8 @@ class DriverBridge(Accounted):
     * ``nothing_to_add``: a message of DELETE or unknown markers alone (frame);
     * ``stale_deleteall``: DELETEALL markers alone, not newer than the last message (frame);
     * ``undecodable``: bytes the codec rejects, in ``update_batch`` (frame);
+    * ``too_many_markers`` / ``too_many_bodies``: past ``hiros_core.limits.MAX_MARKERS``
+      markers or ``MAX_BODIES`` bodies in one message (frame, dropped before decoding);
     * ``delete_marker`` / ``deleteall_marker``: DELETE / DELETEALL markers (a message of
       DELETEALL markers alone still gives an empty group: "nobody in view");
     * ``unknown_action``: actions other than ADD, DELETE, DELETEALL;
@@ -288,6 +291,15 @@ class DriverBridge(Accounted):
         """
         if not _compiled_available():
             return [self._update_counted(buffer[a:b]) for a, b in zip(starts, ends, strict=True)]
+        over = marker_counts(buffer, starts, ends) > MAX_MARKERS
+        if over.any():  # dropped before the compiled reading allocates for them
+            out: list[SkeletonGroup | None] = [None] * len(starts)
+            kept = np.flatnonzero(~over)
+            made = self.update_batch(buffer, starts[kept], ends[kept]) if len(kept) else []
+            for m, group in zip(kept.tolist(), made, strict=True):
+                out[m] = group
+            self.drops.frame("too_many_markers", int(over.sum()))
+            return out
         people = _BatchPeople(self, buffer, starts, ends)
         out: list[SkeletonGroup | None] = []
         for m, (start, end) in enumerate(zip(starts.tolist(), ends.tolist(), strict=True)):
@@ -299,23 +311,29 @@ class DriverBridge(Accounted):
                 if people.mixed[m]:
                     self.drops["mixed_stamps"] += 1
                 frame = self.params.frame_id or people.frame(m)
-                out.append(SkeletonGroup(stamp, frame, people.skeletons(m, stamp, frame)))
-                self.processed += 1
+                skeletons = people.skeletons(m, stamp, frame)
+                out.append(self._bounded(SkeletonGroup(stamp, frame, skeletons)))
         return out
 
     def _update_counted(self, data: bytes) -> SkeletonGroup | None:
         """``update_bytes``, counting ``undecodable`` instead of raising."""
         try:
             return self.update_bytes(data)
-        except CodecError:
-            self.drops.frame("undecodable")
+        except CodecError as exc:  # OverLimitError: too_many_markers
+            self.drops.frame(getattr(exc, "reason", "undecodable"))
             return None
 
     def update(self, data: MarkerArrayData | MarkerFields) -> SkeletonGroup | None:
         """Convert one MarkerArray; None when the whole message is dropped (see ``drops``)."""
         group = self._convert(data)
-        if group is not None:
-            self.processed += 1
+        return None if group is None else self._bounded(group)
+
+    def _bounded(self, group: SkeletonGroup) -> SkeletonGroup | None:
+        """``group``, counted processed; None (``too_many_bodies``) past ``MAX_BODIES``."""
+        if len(group.skeletons) > MAX_BODIES:
+            self.drops.frame("too_many_bodies")
+            return None
+        self.processed += 1
         return group
 
     def _convert(self, data: MarkerArrayData | MarkerFields) -> SkeletonGroup | None:

@@ -35,6 +35,7 @@ from hiros_core.cdr import (
 )
 from hiros_core.errors import CodecError, LayoutError
 from hiros_core.layouts import AZURE_KINECT, KINECT_V2, Layout
+from hiros_core.limits import check_marker_array, check_skeleton_group
 from hiros_core.model import (
     BOX_WIDTH,
     STATE_WIDTH,
@@ -623,6 +624,7 @@ def decode_group(data: bytes | bytearray | memoryview) -> SkeletonGroup:
     skeletons' rows are views into that one array. Other messages are read skeleton by
     skeleton and teach the shape.
     """
+    check_skeleton_group(data)  # past hiros_core.limits: refused before anything is made
     size = len(data) if isinstance(data, bytes) else memoryview(data).nbytes
     readings = _GROUP_READINGS.get(size)
     if readings:
@@ -1065,6 +1067,7 @@ def encode_marker_array(data: MarkerArrayData) -> bytes:
 
 def decode_marker_array(data: bytes | bytearray | memoryview) -> MarkerArrayData:
     """Columns of a ``visualization_msgs/MarkerArray`` from CDR bytes; CodecError on bad bytes."""
+    check_marker_array(data)  # past hiros_core.limits: refused before anything is made
     size = len(memoryview(data).cast("B"))
     buffer = aligned_copy(data)
     plan = _MARKER_PLANS.find_aligned(buffer, size)
@@ -1121,6 +1124,7 @@ def decode_marker_fields(data: bytes | bytearray | memoryview) -> MarkerFields:
     Skips colours, scales, points, lifetimes and media: about half the decoding of a driver
     message.
     """
+    check_marker_array(data)  # past hiros_core.limits: refused before anything is made
     size = len(memoryview(data).cast("B"))
     buffer = aligned_copy(data)
     plan = _MARKER_PLANS.find_aligned(buffer, size)

@@ -191,8 +191,8 @@ def _batch_groups(
             for i in rows.tolist():
                 try:
                     groups[i] = decode_group(batch.data(i))
-                except CodecError:
-                    drops.frame("undecodable")
+                except CodecError as exc:  # OverLimitError: too_many_bodies
+                    drops.frame(getattr(exc, "reason", "undecodable"))
         elif msgtype == MARKER_ARRAY:
             bridge = bridges.get(topic)
             if bridge is None:

@@ -37,6 +37,7 @@ from typing import Any
 import numpy as np
 
 from hiros_core.errors import RecordingError
+from hiros_core.limits import MAX_CHUNK_BYTES, MAX_MESSAGE_BYTES
 from hiros_core.recording.checksum import crc32
 from hiros_core.recording.msgdefs import normalize_msgtype
 from hiros_core.safe_yaml import load_yaml
@@ -271,6 +272,8 @@ class _McapSource(_Source):
                     topic, msgtype = channels.get(record.channel_id, ("", ""))
                     if not topic:
                         self.drops["unknown_channel"] += 1
+                    elif len(record.data) > MAX_MESSAGE_BYTES:
+                        self.drops["oversized_message"] += 1
                     elif topics is None or topic in topics:
                         count += 1
                         yield RecordedMessage(topic, msgtype, record.log_time, record.data)
@@ -300,7 +303,6 @@ class _McapSource(_Source):
         and reading goes on with the next record: the chunk's length is outside its data.
         """
         from mcap.records import Chunk, Message
-        from mcap.stream_reader import breakup_chunk
 
         start = self.stream.tell()  # where the record the next step reads begins
         while True:
@@ -317,7 +319,11 @@ class _McapSource(_Source):
                 yield record
             else:
                 try:
-                    inner = breakup_chunk(record, validate_crc=True)
+                    inner = self._chunk_of_records(record, start)
+                except _OversizedChunkError as exc:
+                    if count_damage:
+                        self.drops["oversized_chunk"] += 1
+                        self.problems.append(f"{exc}; skipped its messages, read on after it")
                 except Exception as exc:  # mcap, zstandard and lz4 raise their own error types
                     if count_damage:
                         self.drops["damaged_chunk"] += 1
@@ -329,6 +335,23 @@ class _McapSource(_Source):
                 else:
                     yield from inner
             start = self.stream.tell()
+
+    def _chunk_of_records(self, chunk: Any, offset: int) -> list[Any]:
+        """The records of a chunk read straight through, decompressed within the limits.
+
+        ``breakup_chunk`` itself would inflate whatever the compressed frame claims.
+        """
+        from mcap.records import Chunk
+        from mcap.stream_reader import breakup_chunk
+
+        size = chunk.uncompressed_size
+        records = self._decompress(chunk.compression, memoryview(chunk.data), size, offset)
+        if chunk.uncompressed_crc and crc32(records) != chunk.uncompressed_crc:
+            msg = f"{self.path}: the chunk at byte {offset} is damaged (its CRC does not match)"
+            raise RecordingError(msg)
+        plain = Chunk(compression="", data=records, message_start_time=0, message_end_time=0,
+                      uncompressed_size=len(records), uncompressed_crc=0)  # fmt: skip
+        return breakup_chunk(plain)
 
     def _cut_chunk_records(self, start: int) -> bytes:
         """The records bytes that the beginning of a chunk cut by the file's end gives.
@@ -412,7 +435,8 @@ class _McapSource(_Source):
             return self._locate(records, offset, table)
         except RecordingError as exc:
             lost = self._indexed_messages(chunk, table)
-            self.drops["damaged_chunk"] += lost if lost is not None else 1
+            reason = "oversized_chunk" if isinstance(exc, _OversizedChunkError) else "damaged_chunk"
+            self.drops[reason] += lost if lost is not None else 1
             count = f"its {lost} messages" if lost is not None else "its messages"
             self.problems.append(f"{exc}; skipped {count}, read on after it")
             return _Located(b"", np.empty((0, _COLUMNS), dtype=np.int64))
@@ -450,6 +474,8 @@ class _McapSource(_Source):
             msg = f"{self.path}: its index points at byte {offset}, where no chunk starts"
             raise RecordingError(msg)
         _, _, _, _, size, crc, name_length = _CHUNK_HEAD.unpack(head)
+        if size > MAX_CHUNK_BYTES:
+            raise _OversizedChunkError(self.path, offset, size)
         rest = self.stream.read(max(0, indexed_length - _CHUNK_HEAD.size))
         try:
             (data_length,) = _U64.unpack_from(rest, name_length)
@@ -505,7 +531,9 @@ class _McapSource(_Source):
                 continue
             channel_id, _, log_time, _ = _MESSAGE_HEAD.unpack_from(records, body)
             index = table.get(channel_id)
-            if index is not None:
+            if index is not None and length - _MESSAGE_HEAD.size > MAX_MESSAGE_BYTES:
+                self.drops["oversized_message"] += 1
+            elif index is not None:
                 rows.append((log_time, offset, body, index, body + _MESSAGE_HEAD.size, pos))
             elif channel_id not in channels:
                 self.drops["unknown_channel"] += 1
@@ -515,26 +543,53 @@ class _McapSource(_Source):
         return _Located(records, np.array(rows, dtype=np.int64).reshape(-1, _COLUMNS))
 
     def _decompress(self, compression: str, data: memoryview, size: int, offset: int) -> bytes:
-        """A chunk's records, as the ``mcap`` library decompresses them."""
+        """A chunk's records, at most ``size`` bytes (the chunk's own uncompressed size).
+
+        The decompressors are asked for ``size + 1`` bytes at most: a frame that claims, or
+        inflates to, more than the chunk says (a 33 KB zstd frame of 1 GB) is refused
+        without being inflated, whatever its own header says.
+        """
+        if size > MAX_CHUNK_BYTES:
+            raise _OversizedChunkError(self.path, offset, size)
         try:
             if compression == "zstd":
-                import zstandard
-
-                return zstandard.decompress(data, max_output_size=size)
-            if compression == "lz4":
+                records = _zstd_prefix(data, size + 1)
+            elif compression == "lz4":
                 import lz4.frame
 
-                return lz4.frame.decompress(data)
+                records = lz4.frame.LZ4FrameDecompressor().decompress(data, max_length=size + 1)
+            elif compression:
+                msg = f"chunk compression {compression!r} is not supported (zstd or lz4)"
+                raise RecordingError(f"{self.path}: {msg}")
+            else:
+                return bytes(data)
+        except RecordingError:
+            raise
         except Exception as exc:  # zstandard and lz4 raise their own error types
             msg = f"{self.path}: cannot decompress the chunk at byte {offset}: {exc}"
             raise RecordingError(msg) from exc
-        if compression:
-            msg = f"{self.path}: chunk compression {compression!r} is not supported (zstd or lz4)"
+        if len(records) != size:
+            msg = f"{self.path}: the chunk at byte {offset} does not decompress to its {size} bytes"
             raise RecordingError(msg)
-        return bytes(data)
+        return records
 
     def close(self) -> None:
         self.stream.close()
+
+
+def _zstd_prefix(data: bytes | memoryview, limit: int) -> bytes:
+    """The first ``limit`` bytes (or fewer: all) that zstd ``data`` decompresses to.
+
+    ``zstandard.decompress`` allocates what the frame's header claims, whatever
+    ``max_output_size`` says; a stream reader read up to ``limit`` never holds more.
+    """
+    import zstandard
+
+    out = bytearray()
+    with zstandard.ZstdDecompressor().stream_reader(data) as stream:
+        while len(out) < limit and (piece := stream.read(min(1 << 20, limit - len(out)))):
+            out += piece
+    return bytes(out)
 
 
 def _readable_prefix(compression: str, data: bytes) -> bytes:
@@ -551,12 +606,16 @@ def _readable_prefix(compression: str, data: bytes) -> bytes:
             import zstandard
 
             reader = zstandard.ZstdDecompressor().stream_reader(io.BytesIO(data))
-            while piece := reader.read(1 << 16):
+            read = 0
+            while read < MAX_CHUNK_BYTES and (piece := reader.read(1 << 16)):
                 pieces.append(piece)
+                read += len(piece)
         elif compression == "lz4":
             import lz4.frame
 
-            pieces.append(lz4.frame.LZ4FrameDecompressor().decompress(data))
+            pieces.append(
+                lz4.frame.LZ4FrameDecompressor().decompress(data, max_length=MAX_CHUNK_BYTES)
+            )
     return b"".join(pieces)
 
 
@@ -587,6 +646,16 @@ _MESSAGE_INDEX_OPCODE = 0x07
 _MESSAGE_INDEX_HEAD = struct.Struct("<BQHI")  # opcode, length, channel id, entries' length
 _U64 = struct.Struct("<Q")
 _COLUMNS = 6  # log time, chunk offset, record position, channel index, data start, data end
+
+
+class _OversizedChunkError(RecordingError):
+    """A chunk whose records would take more than ``MAX_CHUNK_BYTES``: not decompressed."""
+
+    def __init__(self, path: Path, offset: int, size: int) -> None:
+        super().__init__(
+            f"{path}: the chunk at byte {offset} would decompress to {size} bytes, more than "
+            f"the {MAX_CHUNK_BYTES} read (hiros_core.limits)"
+        )
 
 
 @dataclass(frozen=True)
