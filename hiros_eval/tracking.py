@@ -44,6 +44,7 @@ __all__ = [
     "detection_labels",
     "identity_metrics",
     "match_to_truth",
+    "mirrored_share",
     "output_mpjpe",
 ]
 
@@ -338,14 +339,10 @@ def identity_metrics(
     )
 
 
-def output_mpjpe(
-    groups: Sequence[SkeletonGroup], truth: TruthLike, *, threshold: float = 0.5
-) -> dict[str, float]:
-    """MPJPE (m) of matched output skeletons against their person, per source frame.
-
-    Use it on the merger's output (one source: the world frame) or the tracker's (one entry per
-    camera).
-    """
+def _matched_by_source(
+    groups: Sequence[SkeletonGroup], truth: TruthLike, threshold: float
+) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+    """Source frame -> matched output skeletons ``(N, J, 3)`` and their people's truth."""
     frames, at, matches, _ = match_to_truth(groups, truth, threshold=threshold)
     estimates: dict[str, list[np.ndarray]] = defaultdict(list)
     targets: dict[str, list[np.ndarray]] = defaultdict(list)
@@ -355,9 +352,57 @@ def output_mpjpe(
                 estimates[frame.source].append(frame.positions[h])
                 targets[frame.source].append(people[p])
     return {
-        source: mpjpe(np.stack(estimates[source]), np.stack(targets[source]))[0]
+        source: (np.stack(estimates[source]), np.stack(targets[source]))
         for source in sorted(estimates)
     }
+
+
+def _mirrored(estimate: np.ndarray, target: np.ndarray, mirror: np.ndarray) -> np.ndarray:
+    """``(N,)`` whether each skeleton with left and right swapped is closer to its truth."""
+    with np.errstate(invalid="ignore"):
+        as_labelled = np.nanmean(np.linalg.norm(estimate - target, axis=-1), axis=1)
+        swapped = np.nanmean(np.linalg.norm(estimate[:, mirror] - target, axis=-1), axis=1)
+    return swapped < as_labelled
+
+
+def output_mpjpe(
+    groups: Sequence[SkeletonGroup],
+    truth: TruthLike,
+    *,
+    threshold: float = 0.5,
+    oracle_sides: bool = False,
+) -> dict[str, float]:
+    """MPJPE (m) of matched output skeletons against their person, per source frame.
+
+    Use it on the merger's output (one source: the world frame) or the tracker's (one entry per
+    camera). ``oracle_sides`` scores each skeleton with its left and right labels as given or
+    swapped, whichever fits its person better: the side mistakes an oracle would undo, so that
+    only the skeleton's noise and bias remain.
+    """
+    out = {}
+    for source, (labelled, target) in _matched_by_source(groups, truth, threshold).items():
+        estimate = labelled
+        if oracle_sides:
+            mirror = groups[0].skeletons[0].layout.mirror
+            swap = _mirrored(labelled, target, mirror)
+            estimate = np.where(swap[:, None, None], labelled[:, mirror], labelled)
+        out[source] = mpjpe(estimate, target)[0]
+    return out
+
+
+def mirrored_share(
+    groups: Sequence[SkeletonGroup], truth: TruthLike, *, threshold: float = 0.5
+) -> float:
+    """Share of the matched output skeletons whose whole body is mirrored (left for right).
+
+    A skeleton is mirrored when swapping all its left and right joints brings it closer to its
+    person's truth. NaN when nothing is matched.
+    """
+    counts = np.zeros(2)
+    for estimate, target in _matched_by_source(groups, truth, threshold).values():
+        mirror = groups[0].skeletons[0].layout.mirror
+        counts += (_mirrored(estimate, target, mirror).sum(), len(estimate))
+    return float(counts[0] / counts[1]) if counts[1] else float("nan")
 
 
 def camera_mpjpe(
@@ -366,16 +411,18 @@ def camera_mpjpe(
     truth: TruthLike,
     *,
     threshold: float = 0.5,
+    oracle_sides: bool = False,
 ) -> dict[str, float]:
     """MPJPE (m) of each camera alone: its raw detections moved into the world, no tracking.
 
-    What one camera gives without the others (front/back flips and side swaps included).
+    What one camera gives without the others (front/back flips and side swaps included;
+    with ``oracle_sides``, the side swaps undone, see :func:`output_mpjpe`).
     """
     correction = CameraCorrection(calibration)
     out = {}
     for _name, groups in camera_groups.items():
         moved = [g for g in (correction.apply(group) for group in groups) if g is not None]
-        out.update(output_mpjpe(moved, truth, threshold=threshold))
+        out.update(output_mpjpe(moved, truth, threshold=threshold, oracle_sides=oracle_sides))
     return out
 
 

@@ -9,6 +9,9 @@ Suites:
              and a norfair tracker on the same detections
   body       optimizer and filter time per frame vs Hi-ROS, filter lag/jitter vs One-Euro
   pipeline   offline throughput and end-to-end DDS latency (separate nodes and composed)
+  robust     the stages under the simulator's conditions (noisy SDK, one person, 45 deg pair,
+             15 Hz, drops, repeated motion, four crossing), true calibration: MPJPE per stage,
+             ratio to the best oracle-labelled camera, switches, limb CV, acceptance, mirrors
 Without a suite, all of them run in turn. Timings are best-of-N batches; the machine is shared,
 so read ratios, not absolute times.
 
@@ -26,7 +29,7 @@ import inspect
 from rich.console import Console
 
 HELP = "speed and accuracy benchmarks, each beside a baseline run alongside"
-SUITES = ("codec", "io", "calib", "tracking", "body", "pipeline")
+SUITES = ("codec", "io", "calib", "tracking", "body", "pipeline", "robust")
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
