@@ -11,14 +11,17 @@ from __future__ import annotations
 import itertools
 import re
 from collections import Counter
+from collections.abc import Iterable
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 
+from hiros_core.errors import RecordingError
 from hiros_core.layouts import Layout
 from hiros_core.model import Skeleton, SkeletonGroup
 
-__all__ = ["CameraStream", "build_stream", "camera_frame", "topic_name"]
+__all__ = ["CameraStream", "build_stream", "camera_frame", "camera_topics", "topic_name"]
 
 _NOT_NAME = re.compile(r"[^A-Za-z0-9_]+")
 
@@ -33,6 +36,30 @@ def topic_name(raw: str) -> str:
     if not name:
         return "camera"
     return f"kinect_{name}" if name[0].isdigit() else name
+
+
+def camera_topics(raws: Iterable[str], path: str | Path) -> dict[str, str]:
+    """``{camera name in the file: topic namespace}``, refusing names that would share one.
+
+    ``cam-A`` and ``cam_A`` both become ``cam_A``: converted as they were, the second
+    camera's frames replaced the first's without a word.
+
+    Raises:
+        RecordingError: naming the file and the colliding camera names.
+
+    """
+    topics: dict[str, str] = {}
+    for raw in dict.fromkeys(raws):
+        name = topic_name(raw)
+        clash = [other for other, taken in topics.items() if taken == name]
+        if clash:
+            msg = (
+                f"{path}: cameras {clash[0]!r} and {raw!r} both become the topic namespace "
+                f"{name!r}; rename one of them in the camera column"
+            )
+            raise RecordingError(msg)
+        topics[raw] = name
+    return topics
 
 
 def camera_frame(camera: str) -> str:

@@ -25,7 +25,7 @@ from pathlib import Path
 
 import numpy as np
 
-from hiros_convert._frames import CameraStream, build_stream, topic_name
+from hiros_convert._frames import CameraStream, build_stream, camera_topics
 from hiros_convert._table import Table, read_table
 from hiros_core.layouts import AZURE_KINECT, Layout
 from hiros_core.model import SkeletonGroup
@@ -116,7 +116,7 @@ def read_generic_streams(
     drops["unknown_joint"] += int((~known).sum())
     values = table.numbers(value_cols)
     out: dict[str, CameraStream] = {}
-    for raw in dict.fromkeys(cameras.tolist()):
+    for raw, camera in camera_topics(cameras.tolist(), table.path).items():
         rows = np.flatnonzero((cameras == raw) & known)
         keys = np.stack([stamps_ns[rows], body_ids[rows]], axis=1)
         detections, which = np.unique(keys, axis=0, return_inverse=True)
@@ -135,7 +135,6 @@ def read_generic_streams(
         positions[cells] = values[rows, 0:3]
         orientations[cells] = values[rows, 3:7]
         confidences[cells] = values[rows, 7]
-        camera = topic_name(raw)
         out[camera] = build_stream(
             camera,
             detections[:, 0],

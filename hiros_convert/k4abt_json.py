@@ -34,8 +34,20 @@ _J = AZURE_KINECT.n_joints
 _LEVEL_KEYS = ("joint_confidence_levels", "joint_confidences")
 
 
+MAX_JSON_BYTES = 256 << 20
+"""Largest JSON file read (about half an hour of two people at 30 Hz); Python's JSON objects
+take about ten times the file's size."""
+_MAX_STAMP_USEC = (1 << 63) // 1000 - 1
+"""Stamps in nanoseconds are int64: microsecond stamps above this cannot be converted."""
+_MAX_BODY_ID = (1 << 31) - 1
+"""Skeleton ids are int32 in the messages."""
+
+
 def _load(path: Path) -> list[Any]:
     try:
+        if path.stat().st_size > MAX_JSON_BYTES:
+            msg = f"k4abt JSON file {path} is larger than {MAX_JSON_BYTES} bytes: not read"
+            raise RecordingError(msg)
         document = json.loads(path.read_text())
     except (OSError, UnicodeDecodeError) as exc:
         msg = f"cannot read k4abt JSON file {path}: {exc}"
@@ -43,6 +55,9 @@ def _load(path: Path) -> list[Any]:
     except json.JSONDecodeError as exc:
         msg = f"{path} is not valid JSON (line {exc.lineno}: {exc.msg}); is the file complete?"
         raise RecordingError(msg) from exc
+    except RecursionError:
+        msg = f"{path} nests too deep to be an Azure Kinect offline processor file"
+        raise RecordingError(msg) from None
     frames = document.get("frames") if isinstance(document, dict) else None
     if not isinstance(frames, list):
         msg = f"{path} has no 'frames' list: not an Azure Kinect offline processor file"
@@ -54,13 +69,15 @@ def _body_arrays(body: Any) -> tuple[int, np.ndarray, np.ndarray, np.ndarray] | 
     """(id, positions m, orientations xyzw, confidences) of one body, None when malformed."""
     try:
         body_id = int(body["body_id"])
+        if not 0 <= body_id <= _MAX_BODY_ID:
+            return None
         positions = np.asarray(body["joint_positions"], dtype=float) / 1000.0
         wxyz = np.asarray(body.get("joint_orientations", np.full((_J, 4), np.nan)), dtype=float)
         levels = next((body[k] for k in _LEVEL_KEYS if k in body), None)
         confidences = (
             np.full(_J, np.nan) if levels is None else np.asarray(levels, dtype=float) / 3.0
         )
-    except (KeyError, TypeError, ValueError):
+    except (KeyError, TypeError, ValueError, OverflowError):  # Overflow: an id of 1e400
         return None
     if positions.shape != (_J, 3) or wxyz.shape != (_J, 4) or confidences.shape != (_J,):
         return None
@@ -76,11 +93,15 @@ def read_k4abt_streams(
     stamps, ids, positions, orientations, confidences = [], [], [], [], []
     for frame in _load(path):
         try:
-            stamp_ns = int(frame["timestamp_usec"]) * 1000
+            stamp_usec = int(frame["timestamp_usec"])  # 1e400 is inf: OverflowError
             bodies = list(frame.get("bodies") or [])
-        except (KeyError, TypeError, ValueError):
+        except (KeyError, TypeError, ValueError, OverflowError, AttributeError):
             drops["bad_frame"] += 1
             continue
+        if not 0 <= stamp_usec <= _MAX_STAMP_USEC:
+            drops["bad_frame"] += 1
+            continue
+        stamp_ns = stamp_usec * 1000
         for body in bodies:
             arrays = _body_arrays(body)
             if arrays is None:
@@ -114,8 +135,9 @@ def read_k4abt_json(
     Args:
         path: the JSON file.
         camera: camera name for the frame id ``<camera>_depth_camera_link``.
-        drops: optional counter: ``bad_frame`` (no timestamp), ``bad_body`` (missing id or
-            wrong array sizes), ``repeated_detection``, ``no_joints``.
+        drops: optional counter: ``bad_frame`` (no timestamp, or one outside 0 to 2^63 ns),
+            ``bad_body`` (missing id, an id outside 0 to 2^31 - 1, wrong array sizes),
+            ``repeated_detection``, ``no_joints``.
 
     Returns:
         ``{camera: groups}``, one group per frame with bodies (frames without bodies give no

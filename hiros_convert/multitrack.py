@@ -22,7 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
-from hiros_convert._frames import CameraStream, build_stream, topic_name
+from hiros_convert._frames import CameraStream, build_stream, camera_topics
 from hiros_convert._table import read_table
 from hiros_core.errors import RecordingError
 from hiros_core.layouts import KINECT_V2
@@ -64,9 +64,8 @@ def read_multitrack_streams(
     person_ids = table.integers(person_col)
     cameras = np.char.strip(table.rows[:, camera_col])
     out: dict[str, CameraStream] = {}
-    for raw in dict.fromkeys(cameras.tolist()):
+    for raw, camera in camera_topics(cameras.tolist(), table.path).items():
         rows = cameras == raw
-        camera = topic_name(raw)
         out[camera] = build_stream(
             camera,
             stamps_ns[rows],
