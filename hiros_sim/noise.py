@@ -54,7 +54,6 @@ levels survive the trip through the driver's MarkerArray.
 from __future__ import annotations
 
 import numpy as np
-from scipy.signal import lfilter
 
 from hiros_core.layouts import AZURE_KINECT
 
@@ -151,6 +150,10 @@ def ar1_noise(rng: np.random.Generator, shape: tuple[int, ...], rho: float) -> n
         return white
     scale = np.sqrt(1.0 - rho * rho)
     white[:, 0] /= scale  # start in the stationary distribution, not at zero
+    # imported here: scipy.signal takes most of a second to import, and every ``hiros`` command
+    # imports this package to list the simulator's presets in its help
+    from scipy.signal import lfilter
+
     return lfilter([scale], [1.0, -rho], white, axis=1)
 
 
