@@ -22,6 +22,8 @@ COMMANDS = (
     "simulate",
     "evaluate",
     "play",
+    "topic",
+    "param",
     "convert",
     "export",
     "bench",

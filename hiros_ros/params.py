@@ -34,6 +34,7 @@ from rcl_interfaces.msg import (
     IntegerRange,
     ParameterDescriptor,
     ParameterType,
+    ParameterValue,
     SetParametersResult,
 )
 from rclpy.exceptions import ParameterUninitializedException
@@ -368,6 +369,12 @@ class NodeParameters(Generic[T]):
         """Declare one parameter (one the node declared already keeps its value)."""
         name = spec.name
         value = fixed.get(name, default)
+        given = getattr(self._node, "_parameter_overrides", {})
+        if value == [] and name not in fixed and name in given:
+            # rclpy takes an empty list for a byte array: the given list (of strings, ...)
+            # would be refused; a typed empty value takes it (rclpy has no public way to ask
+            # whether a value was given, nor takes a typed value when none was)
+            value = ParameterValue(type=_parameter_type(spec.hint, value))
         try:
             parameter = (
                 self._node.get_parameter(name)

@@ -82,6 +82,9 @@ def test_command_line_overrides_and_no_file_is_read(make_node, tmp_path, monkeyp
     assert params.gate.max_distance == 0.8
     assert params.name == "override"
     assert params.cameras == []
+    # a list whose default is empty takes the given list (rclpy alone wants a byte array)
+    node = make_node("-p", "cameras:=[k01, k02]")
+    assert declare_params(node, DemoParams).params.cameras == ["k01", "k02"]
 
 
 def test_descriptors_tell_description_range_and_read_only(node) -> None:
