@@ -53,6 +53,7 @@ def _padded(size: int) -> int:
 
 _U32 = struct.Struct("<I")
 _I32 = struct.Struct("<i")
+_F64 = struct.Struct("<d")
 
 
 class CdrReader:
@@ -295,6 +296,11 @@ class PlanBuilder:
     def u8(self, value: int) -> None:
         """A constant byte."""
         self.buf.append(value)
+
+    def f64(self, value: float) -> None:
+        """A constant float64."""
+        self.align(8)
+        self.buf += _F64.pack(value)
 
     def string(self, text: str) -> None:
         """A constant CDR string; like rclpy (a C string), it ends at an embedded NUL."""

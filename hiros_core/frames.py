@@ -21,6 +21,7 @@ from typing import NamedTuple
 import numpy as np
 
 from hiros_core.calibration import Calibration
+from hiros_core.cdr import PlanBuilder
 from hiros_core.geometry import RigidTransform
 
 __all__ = [
@@ -29,6 +30,8 @@ __all__ = [
     "CameraMount",
     "StaticTransform",
     "camera_transforms",
+    "encode_tf_message",
+    "recording_transforms",
 ]
 
 
@@ -88,10 +91,13 @@ def camera_transforms(
 ) -> list[StaticTransform]:
     """``world -> <camera_base>`` (or ``-> <frame>``) for each calibrated camera.
 
-    The reference camera is included like the others: its frame is not the world's.
+    The reference camera is included like the others (its frame is not the world's),
+    unless the world is named after its frame.
     """
     out = []
     for camera in calibration.cameras.values():
+        if camera.frame_id == calibration.world_frame:  # a world named after a camera frame
+            continue
         pose = camera.extrinsics  # skeleton frame -> world
         base = mount.base_of(camera.frame_id)
         child = camera.frame_id
@@ -101,3 +107,35 @@ def camera_transforms(
             StaticTransform(calibration.world_frame, child, pose.translation, pose.quaternion)
         )
     return out
+
+
+def recording_transforms(
+    calibration: Calibration, mount: CameraMount = AZURE_KINECT_MOUNT
+) -> list[StaticTransform]:
+    """The static tree a recording without the driver needs: ours and the driver's fixed edges.
+
+    ``camera_transforms`` plus ``<prefix>camera_base -> <prefix>depth_camera_link`` for each
+    camera attached through its base, which the driver would publish live.
+    """
+    out = camera_transforms(calibration, mount)
+    fixed = mount.fixed
+    for camera in calibration.cameras.values():
+        base = mount.base_of(camera.frame_id)
+        if base is not None:
+            out.append(StaticTransform(base, camera.frame_id, fixed.translation, fixed.quaternion))
+    return out
+
+
+def encode_tf_message(edges: list[StaticTransform], stamp_ns: int) -> bytes:
+    """``tf2_msgs/msg/TFMessage`` (CDR) of ``edges``, each stamped ``stamp_ns``."""
+    message = PlanBuilder()
+    sec, nanosec = divmod(int(stamp_ns), 1_000_000_000)
+    message.u32(len(edges))
+    for edge in edges:
+        message.i32(sec)
+        message.u32(nanosec)
+        message.string(edge.parent)
+        message.string(edge.child)
+        for value in (*edge.translation, *edge.rotation):
+            message.f64(float(value))
+    return bytes(message.buf)

@@ -2,7 +2,8 @@
 
 Reads camera topics (Azure-driver MarkerArray or SkeletonGroup) in log-time order, feeds each
 camera frame to ``Pipeline.update`` and writes every stage's output, the visualisation markers
-of the merged and filtered people, and the calibration used into one MCAP. Deterministic: the
+of the merged and filtered people, the calibration used and the cameras' static TF tree
+(``/tf_static``: ``hiros_core.frames.recording_transforms``) into one MCAP. Deterministic: the
 same recording and parameters give the same bytes.
 """
 
@@ -29,6 +30,7 @@ from hiros_core.calibration import Calibration
 from hiros_core.cdr import PlanBuilder
 from hiros_core.codec import warm_up as codec_warm_up
 from hiros_core.errors import ConfigError, RecordingError
+from hiros_core.frames import encode_tf_message, recording_transforms
 from hiros_core.model import SkeletonGroup
 from hiros_core.recording import MARKER_ARRAY, RecordingWriter, iter_groups
 from hiros_pipeline.pipeline import STAGES, Pipeline, PipelineParams, StageOutputs
@@ -201,6 +203,8 @@ def run_recording(
         writer.write_initial(
             "/hiros/calibration", "std_msgs/msg/String", _calibration_message(calibration)
         )
+        tree = encode_tf_message(recording_transforms(calibration), 0)  # static: any time
+        writer.write_initial("/tf_static", "tf2_msgs/msg/TFMessage", tree)
         for item in tracked:
             if isinstance(item, _TrackingEnd):
                 break

@@ -101,7 +101,8 @@ def foxglove(files: dict[str, Path]) -> dict[str, dict]:
 
 
 def _python_counts(path: Path) -> dict[str, tuple[int, int]]:
-    """Per topic: messages decoded by ``mcap_ros2`` and the skeletons/markers/strings in them."""
+    """Per topic: messages decoded by ``mcap_ros2``, and the skeletons, markers, transforms or
+    strings in them."""
     counts: dict[str, tuple[int, int]] = {}
     with path.open("rb") as stream:
         reader = make_reader(stream, decoder_factories=[DecoderFactory()])
@@ -109,6 +110,7 @@ def _python_counts(path: Path) -> dict[str, tuple[int, int]]:
             items = (
                 len(message.skeletons) if hasattr(message, "skeletons")
                 else len(message.markers) if hasattr(message, "markers")
+                else len(message.transforms) if hasattr(message, "transforms")
                 else int(bool(message.data))
             )  # fmt: skip
             messages, total = counts.get(channel.topic, (0, 0))

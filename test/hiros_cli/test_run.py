@@ -85,7 +85,7 @@ def test_write_picks_the_outputs_and_refuses_unknown_ones(
     assert _run(sim, sim / "recording.mcap", out, "--processes", "1", "--write", "filter") == 0
     assert "merger (not written)" in capsys.readouterr().out
     with RecordingReader(out) as reader:
-        assert set(reader.topics) == {"/hiros/calibration", "/hiros/filter"}
+        assert set(reader.topics) == {"/hiros/calibration", "/tf_static", "/hiros/filter"}
     assert main(["export", str(out), "--out", str(tmp_path / "x"), "--stage", "merger"]) == 1
     assert "holds no /hiros/merger output; it holds filter" in capsys.readouterr().err
     with pytest.raises(SystemExit) as exit_:

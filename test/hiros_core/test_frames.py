@@ -96,3 +96,31 @@ def test_direct_and_custom_mounts():
     edges = {e.child: e for e in camera_transforms(calibration, other)}
     assert "lidar_base" in edges
     assert np.allclose(edges["lidar_base"].translation, [0.0, 1.0, 1.0])
+
+
+def test_recording_tree_encodes_as_tf2s_message():
+    """A run's /tf_static: ours and the driver's edges, decoded by another CDR reader."""
+    from rosbags.typesys import Stores, get_typestore
+
+    from hiros_core.frames import encode_tf_message, recording_transforms
+
+    calibration = _calibration()
+    edges = recording_transforms(calibration)
+    assert max(Counter(e.child for e in edges).values()) == 1
+    message = get_typestore(Stores.ROS2_JAZZY).deserialize_cdr(
+        encode_tf_message(edges, 1_700_000_000_123_456_789), "tf2_msgs/msg/TFMessage"
+    )
+    assert len(message.transforms) == len(edges) == 7  # 4 cameras, 3 with a driver tree
+    for edge, decoded in zip(edges, message.transforms, strict=True):
+        assert (decoded.header.stamp.sec, decoded.header.stamp.nanosec) == (1700000000, 123456789)
+        assert (decoded.header.frame_id, decoded.child_frame_id) == (edge.parent, edge.child)
+        t, q = decoded.transform.translation, decoded.transform.rotation
+        assert np.allclose([t.x, t.y, t.z, q.x, q.y, q.z, q.w], [*edge.translation, *edge.rotation])
+
+
+def test_a_world_named_after_a_camera_frame_is_not_its_child():
+    calibration = Calibration(
+        "k01", world_frame="k01_depth_camera_link",
+        cameras={"k01": CameraCalibration("k01_depth_camera_link")},
+    )  # fmt: skip
+    assert camera_transforms(calibration) == []

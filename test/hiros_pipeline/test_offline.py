@@ -36,7 +36,7 @@ def test_every_stage_writes_and_every_frame_is_accounted_for(
     with RecordingReader(out) as reader:
         topics = set(reader.topics)
     assert {f"/hiros/{stage}" for stage in STAGES} <= topics
-    assert {"/hiros/filter/markers", "/hiros/calibration"} <= topics
+    assert {"/hiros/filter/markers", "/hiros/calibration", "/tf_static"} <= topics
     for stage in STAGES:
         assert summary.published[stage] > 0
     assert 1 <= len(summary.people["merger"]) <= 4
@@ -82,7 +82,7 @@ def test_only_the_outputs_asked_for_are_written_and_all_are_counted(
     for name in ("all", "filter"):
         with RecordingReader(tmp_path / f"{name}.mcap") as reader:
             read[name] = [(m.topic, m.log_time_ns, m.data) for m in reader.messages()]
-    kept = {"/hiros/calibration", "/hiros/filter", "/hiros/filter/markers"}
+    kept = {"/hiros/calibration", "/tf_static", "/hiros/filter", "/hiros/filter/markers"}
     assert {topic for topic, _, _ in read["filter"]} == kept
     assert read["filter"] == [m for m in read["all"] if m[0] in kept]
     assert part.published == whole.published
