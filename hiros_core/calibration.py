@@ -18,7 +18,9 @@ One loader and one writer, used by ``hiros calibrate``, the ``calib`` node and e
 
 from __future__ import annotations
 
+import contextlib
 import math
+import os
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -37,6 +39,9 @@ _MAX_CLOCK_SECONDS = 4e9
 nanoseconds overflow once the offset is applied."""
 _MAX_DRIFT = 0.1
 """Largest |drift| accepted (a clock 10 % fast or slow; real ones are within 1e-4)."""
+_MAX_TRANSLATION_M = 1000.0
+"""Largest |translation| component accepted, metres: depth cameras see a few metres, so a
+camera a kilometre from the reference is a broken file (1e30 made every detection vanish)."""
 
 
 @dataclass
@@ -120,11 +125,25 @@ class Calibration:
             str(name): _camera_from_dict(entry, f"{source}: camera {name}")
             for name, entry in data["cameras"].items()
         }
+        _check_frame_ids(cameras, source)
         reference = str(data.get("reference", next(iter(cameras), "")))
         if cameras and reference not in cameras:
             msg = f"{source}: reference camera {reference!r} is not among the cameras"
             raise CalibrationError(msg)
         return cls(reference, str(data.get("world_frame", "world")), cameras)
+
+
+def _check_frame_ids(cameras: dict[str, CameraCalibration], source: str) -> None:
+    """Refuse two cameras with one ``frame_id``: their detections would be merged as one's."""
+    owners: dict[str, str] = {}
+    for name, cam in cameras.items():
+        if cam.frame_id and cam.frame_id in owners:
+            msg = (
+                f"{source}: cameras {owners[cam.frame_id]} and {name} have the same frame_id "
+                f"{cam.frame_id!r}; each camera needs its own"
+            )
+            raise CalibrationError(msg)
+        owners.setdefault(cam.frame_id, name)
 
 
 def _camera_from_dict(entry: Any, where: str) -> CameraCalibration:
@@ -162,8 +181,11 @@ def _camera_from_dict(entry: Any, where: str) -> CameraCalibration:
 
 def _check_ranges(translation: np.ndarray, scalars: dict[str, float], where: str) -> None:
     """Reject values every stage would turn into NaN poses or overflowing stamps."""
-    if not np.isfinite(translation).all():
-        msg = f"{where}: translation {translation.tolist()} is not finite"
+    if not (np.abs(translation) < _MAX_TRANSLATION_M).all():  # also NaN and inf
+        msg = (
+            f"{where}: translation {translation.tolist()} is out of range (finite, each "
+            f"|value| < {_MAX_TRANSLATION_M:g} m)"
+        )
         raise CalibrationError(msg)
     limits = {"time_offset": _MAX_CLOCK_SECONDS, "drift_epoch": _MAX_CLOCK_SECONDS}
     for key, value in scalars.items():
@@ -195,7 +217,10 @@ def load_calibration(path: str | Path) -> Calibration:
 
 
 def save_calibration(calibration: Calibration, path: str | Path) -> None:
-    """Write a calibration file (parent folders are created).
+    """Write a calibration file (parent folders are created), whole or not at all.
+
+    It is written beside the target under a hidden name and renamed over it, so that the
+    ``calib`` node saving while a stage reads, or a full disk, never leaves half a file.
 
     Raises:
         CalibrationError: the file cannot be written (a folder there, no permission).
@@ -203,9 +228,14 @@ def save_calibration(calibration: Calibration, path: str | Path) -> None:
     """
     path = Path(path)
     text = yaml.safe_dump(calibration.to_dict(), sort_keys=False)
+    partial = path.with_name(f".{path.name}.partial-{os.getpid()}")
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
-        path.write_text(text)
+        partial.write_text(text)
+        partial.replace(path)  # the file is whole or not there: a reader never sees half
     except OSError as exc:
         msg = f"cannot write calibration file {path}: {exc}"
         raise CalibrationError(msg) from exc
+    finally:
+        with contextlib.suppress(OSError):  # renamed, or its folder cannot hold it
+            partial.unlink(missing_ok=True)

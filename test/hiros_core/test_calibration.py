@@ -13,8 +13,9 @@ GOOD = "k01: {time_offset: 1.5, drift: 1.0e-5, drift_epoch: 1.7e9, translation: 
 @pytest.mark.parametrize(
     ("camera", "message"),
     [
-        ("k01: {translation: [.nan, 0, 0]}", "translation .* is not finite"),
-        ("k01: {translation: [.inf, 0, 0]}", "translation .* is not finite"),
+        ("k01: {translation: [.nan, 0, 0]}", "translation .* is out of range"),
+        ("k01: {translation: [.inf, 0, 0]}", "translation .* is out of range"),
+        ("k01: {translation: [1.0e+30, 0, 0]}", "translation .* is out of range"),  # case 16
         ("k01: {time_offset: .nan}", "time_offset nan is out of range"),
         ("k01: {time_offset: 1.0e+300}", "time_offset .* is out of range"),
         ("k01: {drift: .inf}", "drift inf is out of range"),
@@ -53,3 +54,27 @@ def test_an_unwritable_path_is_a_calibration_error(tmp_path) -> None:
     for path in (tmp_path / "folder", tmp_path / "file" / "calib.yaml"):
         with pytest.raises(CalibrationError, match="cannot write calibration file"):
             save_calibration(calibration, path)
+
+
+def test_case16_two_cameras_with_one_frame_id_are_refused(tmp_path) -> None:
+    path = tmp_path / "twins.yaml"
+    path.write_text("cameras: {k01: {frame_id: cam_link}, k02: {frame_id: cam_link}}")
+    with pytest.raises(CalibrationError, match=r"twins\.yaml: cameras k01 and k02 have the same"):
+        load_calibration(path)
+
+
+def test_a_calibration_is_saved_whole_or_not_at_all(tmp_path, monkeypatch) -> None:
+    path = tmp_path / "calib.yaml"
+    path.write_text("reference: k01\ncameras: {k01: {frame_id: old}}\n")
+    calibration = Calibration("k01", cameras={"k01": CameraCalibration("new")})
+
+    def full_disk(self, text, *args, **kwargs):
+        self.open("w").write(text[:10])
+        raise OSError(28, "No space left on device")
+
+    monkeypatch.setattr(type(path), "write_text", full_disk)
+    with pytest.raises(CalibrationError, match="No space left"):
+        save_calibration(calibration, path)
+    monkeypatch.undo()
+    assert load_calibration(path).camera("k01").frame_id == "old"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["calib.yaml"]
