@@ -250,7 +250,10 @@ class Optimizer(Accounted):
         """Forget these tracks' lengths and learn them again from their next frames.
 
         Returns True when every id is known (seen or calibrated); unknown ids are ignored.
+        An empty list asks for nothing: False.
         """
+        if len(track_ids) == 0:
+            return False
         known = True
         for requested in track_ids:
             track_id = self._renames.get(int(requested), int(requested))
@@ -270,9 +273,12 @@ class Optimizer(Accounted):
 
         If ``to_id`` already has a calibration (e.g. loaded for a known person) that one is
         kept; otherwise ``from_id``'s calibration and state move to ``to_id``. Returns False
-        (and changes nothing) when ``from_id`` is unknown or ``to_id`` is a live track.
+        (and changes nothing) when ``from_id`` is unknown, ``to_id`` is a live track, the two
+        are equal (nothing to change) or ``to_id`` is negative (-1 means "no id").
         """
         from_id, to_id = int(from_id), int(to_id)
+        if from_id == to_id or to_id < 0:
+            return False
         source = self._renames.get(from_id, from_id)
         if source not in self._tracks and source not in self.calibrations:
             return False

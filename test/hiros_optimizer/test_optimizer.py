@@ -364,3 +364,18 @@ def test_diagnostics_give_the_acceptance_under_the_stage_name(noisy_people, run)
     run(optimizer, measured[:1], FRAMES)
     merged = Merged([("optimizer: ", optimizer)], [optimizer])
     assert merged.diagnostics() == {"optimizer: person.0": "accepted after 1.0 s"}
+
+
+def test_services_refuse_meaningless_arguments(noisy_people, run):
+    """Issue 21 case 20: ``~/calibrate []`` and ``~/change_id(0, 0)`` returned success."""
+    _, measured, _ = noisy_people
+    optimizer = small_optimizer()
+    run(optimizer, measured, FRAMES)
+    calibrations = dict(optimizer.calibrations)
+    assert sorted(calibrations) == [0, 1]
+    assert not optimizer.calibrate([])
+    assert not optimizer.change_id(0, 0)
+    assert not optimizer.change_id(0, -1)
+    assert optimizer.calibrations == calibrations  # nothing changed
+    assert optimizer.change_id(0, 7)
+    assert optimizer.calibrate([7])
