@@ -364,6 +364,12 @@ def _joint_weights(layout: Layout, decay: float) -> np.ndarray:
     return decay**depth
 
 
+MIN_RESTART_S = 1.0
+"""A frame older than the last processed one by more than ``track_timeout`` (and at least
+this) is not late: its source restarted (a replayed recording, a restarted driver); every
+track would have timed out over such a gap, and the tracker starts its time over."""
+
+
 class Tracker(Accounted):
     """Gives every camera detection a persistent track id (see the module docstring).
 
@@ -396,6 +402,8 @@ class Tracker(Accounted):
         self._up = np.zeros(4)  # the world's up (x, y, z, known): see kernels._update_up
         self._info: _LayoutInfo | None = None
         self._camera_positions: dict[str, tuple[CameraCalibration, np.ndarray]] = {}
+        self.restarts = 0  # times a source's stamps went back past the tracks' timeout
+        self._last_restart = ""
 
     def set_params(self, params: TrackerParams) -> None:
         """Track with ``params`` from the next frame on (tracks are kept).
@@ -450,6 +458,9 @@ class Tracker(Accounted):
             return self._output([])
         stamp_ns = corrected.group.stamp_ns
         camera = corrected.camera or group.camera
+        restart_ns = round(max(self.params.track_timeout, MIN_RESTART_S) * 1e9)
+        if self._released_ns is not None and self._released_ns - stamp_ns > restart_ns:
+            return self._start_over(stamp_ns, camera, corrected)
         if self._seen_before(camera, stamp_ns):
             self.drops.frame("duplicate frame")
             return self._output([])
@@ -475,6 +486,32 @@ class Tracker(Accounted):
             self._buffered(*self._suspect)
             self._suspect = None
         return self._release(None)
+
+    def _start_over(self, stamp_ns: int, camera: str, frame: MovedFrame) -> SkeletonGroup:
+        """A frame far older than the processed ones: its source restarted; time starts over.
+
+        A replayed recording (``hiros play --loop``, a second ``hiros play``) or a driver
+        restarted with its clock sends stamps far behind; taken as late frames, every one
+        was dropped and the output stopped for good. The frames still buffered are processed
+        (their output is returned), the tracks and time state are forgotten (new tracks get
+        new ids) and ``restarts`` counts the event for ``/diagnostics``; ``frame`` is the
+        first of the new time.
+        """
+        flushed = self.flush()
+        self._newest_ns = self._released_ns = None
+        self._recent.clear()
+        self._table = None
+        self.restarts += 1
+        self._last_restart = f"{camera} went back {(flushed.stamp_ns - stamp_ns) / 1e9:.1f} s"
+        self._seen_before(camera, stamp_ns)
+        self._buffered(stamp_ns, camera, frame)
+        return flushed
+
+    def diagnostics(self) -> dict[str, str]:
+        """``restarts``: how often time started over, and why the last time (if ever)."""
+        if not self.restarts:
+            return {}
+        return {"restarts": f"{self.restarts} (last: {self._last_restart})"}
 
     def _seen_before(self, camera: str, stamp_ns: int) -> bool:
         """Whether this camera already sent a frame with this stamp (among its last 64)."""
