@@ -22,6 +22,7 @@ __all__ = [
     "MAX_CHUNK_BYTES",
     "MAX_MARKERS",
     "MAX_MESSAGE_BYTES",
+    "MAX_POSITION_M",
     "OverLimitError",
     "check_marker_array",
     "check_skeleton_group",
@@ -36,6 +37,10 @@ MAX_BODIES = 64
 """Most skeletons (bodies, people) in one SkeletonGroup or one driver frame."""
 MAX_MARKERS = 4096
 """Most markers in one driver MarkerArray (64 bodies of 64 joints)."""
+
+MAX_POSITION_M = 1e4
+"""Largest |coordinate| of a joint in the world frame, metres (depth cameras see ~10 m, and a
+calibration places a camera within 1 km): a joint past it is marked absent and counted."""
 
 _HEADER = 4  # CDR encapsulation header: 0, 1 (little endian) or 0, 0 (big endian), options
 

@@ -50,6 +50,7 @@ from scipy.optimize import linear_sum_assignment
 from hiros_core.accounting import Accounted, Drops
 from hiros_core.calibration import Calibration, CameraCalibration
 from hiros_core.layouts import AZURE_KINECT, Layout
+from hiros_core.limits import MAX_POSITION_M
 from hiros_core.model import Skeleton, SkeletonGroup
 from hiros_tracker import kernels
 from hiros_tracker.correction import CameraCorrection, MovedFrame
@@ -456,6 +457,7 @@ class Tracker(Accounted):
         corrected = self.correction.move(group)
         if corrected is None:
             return self._output([])
+        self._mask_unusable_joints(corrected)
         stamp_ns = corrected.group.stamp_ns
         camera = corrected.camera or group.camera
         restart_ns = round(max(self.params.track_timeout, MIN_RESTART_S) * 1e9)
@@ -486,6 +488,30 @@ class Tracker(Accounted):
             self._buffered(*self._suspect)
             self._suspect = None
         return self._release(None)
+
+    def _mask_unusable_joints(self, frame: MovedFrame) -> None:
+        """Mark absent (counted) the present joints that are not finite or absurdly far.
+
+        NaN and infinite joints otherwise reached ``/hiros/tracker`` marked present, and a
+        joint at 1e30 m made its detection vanish in the gating without a count. Far is past
+        ``hiros_core.limits.MAX_POSITION_M`` in the world frame. A stacked frame is checked
+        in one pass over its rows, which its skeletons are views of.
+        """
+        stack = frame.stack
+        rows = (
+            [(stack.markers, stack.marker_present)]
+            if stack is not None
+            else [(s.markers[None], s.marker_present[None]) for s in frame.group.skeletons]
+        )
+        for markers, present in rows:
+            positions = markers[..., 1:4]  # a marker row's x, y, z (as in kernels)
+            bad = present & ~(np.abs(positions) < MAX_POSITION_M).all(axis=-1)  # NaN too
+            if not bad.any():
+                continue
+            finite = np.isfinite(positions).all(axis=-1)
+            self.drops.detections("nan joint", int((bad & ~finite).sum()))
+            self.drops.detections("joint too far", int((bad & finite).sum()))
+            present[bad] = False
 
     def _start_over(self, stamp_ns: int, camera: str, frame: MovedFrame) -> SkeletonGroup:
         """A frame far older than the processed ones: its source restarted; time starts over.
