@@ -208,7 +208,10 @@ class DriverBridge(Accounted):
     in time. Bad input is never raised: it is counted in ``drops`` by reason, each reason
     dropping the whole message (a frame: see ``Accounted``) or some of its markers:
 
-    * ``empty_array``: a MarkerArray with no markers (nothing to stamp a group with; frame);
+    * ``empty_array``: a MarkerArray with no markers, without its arrival time (nothing to
+      stamp a group with; frame). The Azure driver publishes one per body frame when nobody
+      is in view; given the arrival time (``update(data, arrival_ns)``), the bridge turns it
+      into an empty group, "nobody in view" (``nobody_in_view`` counts them);
     * ``nothing_to_add``: a message of DELETE or unknown markers alone (frame);
     * ``stale_deleteall``: DELETEALL markers alone, not newer than the last message (frame);
     * ``undecodable``: bytes the codec rejects, in ``update_batch`` (frame);
@@ -228,8 +231,11 @@ class DriverBridge(Accounted):
     ``processed`` counts the messages that gave a group.
     """
 
-    def __init__(self, params: DriverBridgeParams | None = None) -> None:
+    def __init__(self, params: DriverBridgeParams | None = None, default_frame: str = "") -> None:
         self.params = params or DriverBridgeParams()
+        self.nobody_in_view = 0  # empty arrays turned into empty groups (processed)
+        self._frame = self.params.frame_id or default_frame  # of the last group
+        self._transit_ns = 0  # arrival - stamp of the last stamped message
         self.layout: Layout = get_layout(self.params.layout)
         if self.params.id_scheme not in _ID_SCHEMES:
             msg = f"id_scheme must be one of {_ID_SCHEMES}, not {self.params.id_scheme!r}"
@@ -269,14 +275,16 @@ class DriverBridge(Accounted):
             found = self._lookups[namespace] = (layout, table)
         return found
 
-    def update_bytes(self, data: bytes | bytearray | memoryview) -> SkeletonGroup | None:
-        """``update(decode_marker_array(data))``, decoding only the columns a bridge reads.
+    def update_bytes(
+        self, data: bytes | bytearray | memoryview, arrival_ns: int | None = None
+    ) -> SkeletonGroup | None:
+        """``update(decode_marker_array(data), arrival_ns)``, decoding only what it reads.
 
         Raises:
             CodecError: the bytes are no MarkerArray.
 
         """
-        return self.update(decode_marker_fields(data))
+        return self.update(decode_marker_fields(data), arrival_ns)
 
     def update_batch(
         self, buffer: bytes | memoryview, starts: np.ndarray, ends: np.ndarray
@@ -323,10 +331,38 @@ class DriverBridge(Accounted):
             self.drops.frame(getattr(exc, "reason", "undecodable"))
             return None
 
-    def update(self, data: MarkerArrayData | MarkerFields) -> SkeletonGroup | None:
-        """Convert one MarkerArray; None when the whole message is dropped (see ``drops``)."""
+    def update(
+        self, data: MarkerArrayData | MarkerFields, arrival_ns: int | None = None
+    ) -> SkeletonGroup | None:
+        """Convert one MarkerArray; None when the whole message is dropped (see ``drops``).
+
+        ``arrival_ns``, when the message arrived (the receiver's clock), lets an empty array
+        become an empty group (see ``empty_array``).
+        """
+        if arrival_ns is not None and len(data.actions) == 0:
+            return self._nobody_in_view(arrival_ns)
         group = self._convert(data)
-        return None if group is None else self._bounded(group)
+        if group is None:
+            return None
+        if arrival_ns is not None:
+            self._transit_ns = arrival_ns - group.stamp_ns
+        self._frame = group.frame_id
+        return self._bounded(group)
+
+    def _nobody_in_view(self, arrival_ns: int) -> SkeletonGroup:
+        """An empty group for an empty array, stamped on the camera's clock.
+
+        The array has no stamp: it is stamped at its arrival less the transit of the last
+        stamped message (none before the first: the receiver's clock is taken for the
+        camera's), and never before the last stamp (a group's stamps only go forward).
+        """
+        stamp = arrival_ns - self._transit_ns
+        if self.last_stamp_ns is not None:
+            stamp = max(stamp, self.last_stamp_ns + 1)
+        self.last_stamp_ns = stamp
+        self.nobody_in_view += 1
+        self.processed += 1
+        return SkeletonGroup(stamp, self._frame, [])
 
     def _bounded(self, group: SkeletonGroup) -> SkeletonGroup | None:
         """``group``, counted processed; None (``too_many_bodies``) past ``MAX_BODIES``."""

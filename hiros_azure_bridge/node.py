@@ -68,10 +68,13 @@ class BridgeNode(HirosNode):
             **{k: v for k, v in dataclasses.asdict(self.params).items() if k in bridge_fields}
         )
         self.bridges: dict[str, DriverBridge] = {}
+        self._empty: dict[str, bool] = {}  # camera -> its last group had nobody
         for camera in self.params.cameras:
             source = self.params.input_topic.format(camera=camera)
             target = self.params.output_topic.format(camera=camera)
-            self.bridges[camera] = DriverBridge(bridge_params)
+            self.bridges[camera] = DriverBridge(
+                bridge_params, default_frame=f"{camera}_depth_camera_link"
+            )
             publisher = self.create_raw_publisher(SkeletonGroupMsg, target, pipeline_qos())
             self.create_raw_subscription(
                 MarkerArray,
@@ -100,10 +103,23 @@ class BridgeNode(HirosNode):
         return values
 
     def on_markers(self, camera: str, publisher: object, data: bytes) -> None:
-        """Decode, convert, publish; a dropped message publishes nothing."""
-        group = self.bridges[camera].update_bytes(data)
+        """Decode, convert, publish; a dropped message publishes nothing.
+
+        An empty MarkerArray (the Azure driver's "nobody in view") goes out as an empty
+        group, stamped at its arrival on the camera's clock (``DriverBridge.update``).
+        """
+        group = self.bridges[camera].update_bytes(data, self.get_clock().now().nanoseconds)
         if group is not None:
+            self._empty[camera] = not group.skeletons
             self.publish_raw(publisher, encode_group(group))
+
+    def status_notes(self) -> list[str]:
+        """The cameras whose last frame showed nobody, and how many such frames there were."""
+        empty = sorted(camera for camera, nobody in self._empty.items() if nobody)
+        if not empty:
+            return []
+        frames = sum(self.bridges[camera].nobody_in_view for camera in self.bridges)
+        return [f"nobody in view: {', '.join(empty)} ({frames} empty frame(s) so far)"]
 
 
 def main(args: list[str] | None = None) -> None:

@@ -88,12 +88,12 @@ class PipelineNode(HirosNode):
 
             warm_up()  # numba is loaded (the stages'): the bridge's compiled path too
 
-            bridge = DriverBridge(DriverBridgeParams())
+            bridge = DriverBridge(DriverBridgeParams(), default_frame=f"{camera}_depth_camera_link")
             self._bridges[camera] = bridge
             self.create_raw_subscription(
                 MarkerArray,
                 f"/{camera}/body_tracking_data",
-                lambda data, bridge=bridge: self.on_group(bridge.update_bytes(data)),
+                lambda data, bridge=bridge: self.on_group(bridge.update_bytes(data, self._now())),
                 qos,
             )
         else:
@@ -103,6 +103,10 @@ class PipelineNode(HirosNode):
                 lambda data: self.on_group(decode_group(data)),
                 qos,
             )
+
+    def _now(self) -> int:
+        """Arrival time (ns) of a driver message: an empty one is stamped from it."""
+        return self.get_clock().now().nanoseconds
 
     def on_group(self, group) -> None:  # noqa: ANN001 - SkeletonGroup | None from a bridge
         """One camera frame through the stages; publish what each stage produced.

@@ -36,6 +36,7 @@ from rclpy.qos import QoSProfile, qos_profile_sensor_data
 from hiros_core.accounting import Accounted
 from hiros_core.codec import warm_up as codec_warm_up
 from hiros_core.errors import ConfigError
+from hiros_ros.diagnostics import NodeHealth
 from hiros_ros.params import NodeParameters, declare_params
 
 T = TypeVar("T")
@@ -80,6 +81,7 @@ class HirosNode(Node):
         self._log_interval = log_interval
         self._last_log: dict[str, float] = {}
         self.parameters: NodeParameters[Any]
+        self.health = NodeHealth()
         self._diagnostics = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
         self.create_timer(1.0, self.publish_diagnostics)
 
@@ -122,6 +124,7 @@ class HirosNode(Node):
 
         def guarded(data: bytes) -> None:
             self.counters["received"] += 1
+            start = time.perf_counter()
             try:
                 callback(data)
             except Exception as exc:
@@ -131,6 +134,7 @@ class HirosNode(Node):
                     self.counters["processed"] += 1
                 else:
                     self.absorb_stage()
+            self.health.add_duration(time.perf_counter() - start)
 
         return self.create_subscription(msg_type, topic, guarded, qos, raw=True)
 
@@ -221,34 +225,57 @@ class HirosNode(Node):
         self.counters["held"] = stage.held
 
     def publish_diagnostics(self) -> None:
-        """One DiagnosticStatus with every counter; WARN when a frame was dropped or failed.
+        """One DiagnosticStatus: the level and message of the last minute, every counter.
 
-        What processed frames left out (a skeleton without joints, a duplicate track) is
-        normal in a crowded scene: it shows in the counts and the message, at level OK.
+        WARN while a frame was dropped or something failed within ``health.window`` seconds;
+        OK again after a clean window (the counters keep the totals since start). What
+        processed frames left out (a skeleton without joints, a duplicate track) is normal in
+        a crowded scene: it shows in the counts and the message, at level OK. The values add
+        the input and output rates (messages per second over ``health.rate_window``) and the
+        callbacks' processing time percentiles (``latency_ms.*``).
         """
         self.absorb_stage()
+        totals = self._totals()
+        self.health.sample(time.monotonic(), totals)
         status = DiagnosticStatus(name=self.get_fully_qualified_name(), hardware_id="hiros")
-        status.level, status.message = self._status()
-        status.values = [KeyValue(key=k, value=str(v)) for k, v in sorted(self.counters.items())]
-        if self.accounted is not None:  # the stage's own figures after the counts
-            figures = self.accounted.diagnostics()
-            status.values += [KeyValue(key=k, value=v) for k, v in figures.items()]
+        status.level, status.message = self._status(totals)
+        values = {k: str(v) for k, v in self.counters.items()}
+        values["input_rate_hz"] = f"{self.health.rate('received'):.2f}"
+        values["output_rate_hz"] = f"{self.health.rate('published'):.2f}"
+        for name, value in self.health.latency_ms().items():
+            values[f"latency_ms.{name}"] = f"{value:.3f}"
+        status.values = [KeyValue(key=k, value=v) for k, v in sorted(values.items())]
         array = DiagnosticArray(status=[status])
         array.header.stamp = self.get_clock().now().to_msg()
         self._diagnostics.publish(array)
 
-    def _status(self) -> tuple[bytes, str]:
-        """Diagnostic level and message from the counters."""
+    def _totals(self) -> Counter[str]:
+        """Counters summed by kind (``dropped``, ``errors``, ...), ``dropped`` in frames."""
         totals: Counter[str] = Counter()
         for key, value in self.counters.items():
             totals[key.partition(".")[0]] += value
+        totals["dropped"] = self._frames_dropped
+        return totals
+
+    def status_notes(self) -> list[str]:
+        """What the node says of its input besides the counts (e.g. "nobody in view: k03")."""
+        return []
+
+    def _status(self, totals: Counter[str]) -> tuple[bytes, str]:
+        """Diagnostic level and message: the window's drops and errors, the notes, the rest."""
+        window = f"in the last {self.health.window:g} s"
         parts = []
-        if self._frames_dropped:
-            received = self.counters["received"]
-            parts.append(f"{self._frames_dropped} of {received} frame(s) dropped")
-        if totals["errors"]:
-            parts.append(f"{totals['errors']} error(s)")
+        dropped, errors = self.health.recent("dropped"), self.health.recent("errors")
+        if dropped:
+            received = self.health.recent("received")
+            parts.append(f"{dropped} of {received} frame(s) dropped {window}")
+        if errors:
+            parts.append(f"{errors} error(s) {window}")
         level = DiagnosticStatus.WARN if parts else DiagnosticStatus.OK
+        parts += self.status_notes()
+        earlier = totals["dropped"] - dropped
+        if earlier:
+            parts.append(f"{earlier} frame(s) dropped before")
         if totals["dropped_detections"]:
             parts.append(f"{totals['dropped_detections']} detection(s) left out")
         return level, "; ".join(parts) or "ok"

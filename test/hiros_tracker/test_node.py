@@ -103,7 +103,7 @@ def test_the_diagnostics_account_for_every_frame_sent(ros_processes, tmp_path: P
     found = re.search(r"sent (\d+) diagnostics (\{.*\})", log)
     assert found, log
     sent, counters = int(found.group(1)), json.loads(found.group(2))
-    count = {key: int(value) for key, value in counters.items() if key not in {"message", "level"}}
+    count = {key: int(value) for key, value in counters.items() if str(value).isdigit()}
     frames_dropped = {k: v for k, v in count.items() if k.startswith("dropped.")}
     assert count["received"] == sent, log
     assert count["received"] == count["processed"] + sum(frames_dropped.values()) + count["held"]
@@ -115,5 +115,7 @@ def test_the_diagnostics_account_for_every_frame_sent(ros_processes, tmp_path: P
     }, log
     assert count["dropped_detections.no finite joint"] == 2, log
     assert counters["level"] == 1, log  # WARN: frames were dropped
-    assert f"4 of {sent} frame(s) dropped" in counters["message"], log
+    assert f"4 of {sent} frame(s) dropped in the last 60 s" in counters["message"], log
+    assert float(counters["input_rate_hz"]) > 0, log  # rates and latencies beside the counts
+    assert float(counters["latency_ms.max"]) >= float(counters["latency_ms.p50"]) > 0, log
     assert "Traceback" not in log, log
