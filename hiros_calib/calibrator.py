@@ -23,7 +23,7 @@ from hiros_calib.extrinsics import (
     pair_correspondences,
     solve_poses,
 )
-from hiros_calib.lags import settle_lag
+from hiros_calib.lags import settle_lag, split_half_spread
 from hiros_calib.quality import arrival_offsets_from_delays, flag_cameras
 from hiros_calib.sync import (
     CameraClock,
@@ -236,6 +236,10 @@ class Calibrator:
                 pose.quality["bodies_associated"] = len(matches)
                 pose.body_pairs = [(i, j) for i, j, _ in matches]
                 pose.reported = joined
+                spread = split_half_spread(joined, params) if pose.ok else None
+                if spread is not None:
+                    pose.quality["split_half_deg"] = round(spread[0], 3)
+                    pose.quality["split_half_cm"] = round(100 * spread[1], 2)
                 pairs.append(pose)
         return pairs
 

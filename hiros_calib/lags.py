@@ -8,9 +8,11 @@ one camera's joints onto the other's up to the SDKs' noise; one repetition off, 
 are elsewhere and no transform fits as well.
 
 For every candidate lag this fits a rigid transform to the same-instant joints (a light
-RANSAC fit, no per-joint offsets) and measures the *lag fit residual*: per frame the mean
-distance of the joints after the fit (left and right as the SDKs gave them or swapped,
-whichever fits), then the median over the frames. The decision:
+RANSAC fit, no per-joint offsets; two-fold cross-validated over alternating 2 s blocks, so a
+lag with little common data gains nothing from over-fitting) and measures the *lag fit
+residual*: per frame the mean distance of the joints after the fit (left and right as the
+SDKs gave them or swapped, whichever fits), then the median over the frames of camera a that
+every candidate shares. The decision:
 
 - the lag the motion prefers and the one the poses prefer agree: taken;
 - the motion cannot decide (the runner-up correlates ``max_ambiguity`` as well or more) and
@@ -37,12 +39,17 @@ from hiros_calib.extrinsics import (
     associate,
     estimate_pair_pose,
     pair_correspondences,
+    relative_error,
 )
 from hiros_calib.sync import CameraClock, PairOffset
 from hiros_calib.tracks import BodyTrack
 from hiros_core.geometry import RigidTransform
 
-__all__ = ["LagFit", "compare_fits", "fit_at_lag", "settle_lag"]
+__all__ = ["LagFit", "compare_fits", "fit_at_lag", "settle_lag", "split_half_spread"]
+
+HOLD_OUT_BLOCK = 2.0
+"""Seconds per block of the lag fit's cross-validation (longer than the SDKs' error
+correlation, so held-out frames are not near copies of fitted ones)."""
 
 
 @dataclass
@@ -90,18 +97,52 @@ def fit_at_lag(
     fit = LagFit(lag, correlation)
     if not usable:
         return fit
-    pose = estimate_pair_pose(Correspondences.concatenate([c for _, c in usable]), _light(params))
-    if not pose.ok:
+    joined = Correspondences.concatenate([c for _, c in usable])
+    # two-fold cross-validation over alternating blocks of time: each frame's residual comes
+    # from a transform fitted without it, so a lag with little common data cannot win by a
+    # transform that fits its few frames too closely
+    fold = (np.floor(joined.times / HOLD_OUT_BLOCK).astype(np.int64) % 2).astype(bool)
+    if fold.all() or not fold.any():
         return fit
-    for track, c in usable:
-        residual = _frame_residuals(c, pose.transform)
-        keys = np.round(c.times * 1e4).astype(np.int64)
-        fit.frames.update(
-            ((track, int(k)), float(r))
-            for k, r in zip(keys, residual, strict=True)
-            if np.isfinite(r)
-        )
+    residual = np.full(joined.n_frames, np.nan)
+    for held in (fold, ~fold):
+        pose = estimate_pair_pose(joined.take(np.flatnonzero(~held)), _light(params))
+        if not pose.ok:
+            return fit
+        residual[held] = _frame_residuals(joined.take(np.flatnonzero(held)), pose.transform)
+    tracks = np.array([track for track, _ in usable])[joined.bodies]
+    keys = np.round(joined.times * 1e4).astype(np.int64)
+    seen = np.isfinite(residual)
+    fit.frames.update(
+        ((int(t), int(k)), float(r))
+        for t, k, r in zip(tracks[seen], keys[seen], residual[seen], strict=True)
+    )
     return fit
+
+
+def split_half_spread(
+    correspondences: Correspondences | None, params: ExtrinsicsParams
+) -> tuple[float, float] | None:
+    """How far apart (deg, m) the poses fitted to two halves of a pair's frames lie.
+
+    The halves are alternating blocks of time, so each sees the whole recording's variety.
+    Each half's pose error is about sqrt(2) times the whole's, and their difference about
+    sqrt(2) times a half's: half the spread estimates the error of the pose from all frames
+    (the part the noise causes; an error every frame shares stays hidden). None when a half
+    gives no pose.
+    """
+    if correspondences is None or correspondences.n_frames < 2:
+        return None
+    fold = (np.floor(correspondences.times / HOLD_OUT_BLOCK).astype(np.int64) % 2).astype(bool)
+    poses = []
+    for half in (fold, ~fold):
+        if not half.any():
+            return None
+        pose = estimate_pair_pose(correspondences.take(np.flatnonzero(half)), _light(params))
+        if not pose.ok:
+            return None
+        poses.append(pose.transform)
+    return relative_error(poses[0], poses[1])
 
 
 def _frame_residuals(c: Correspondences, transform: RigidTransform) -> np.ndarray:
@@ -164,6 +205,10 @@ def settle_lag(
         for lag, corr in pair.candidates
     ]
     compare_fits(fits)
+    if "prior_lag" in pair.quality:
+        kept = _keep_prior(pair, fits, repin, min_lag_margin)
+        if kept is not None:
+            return kept
     by_fit = sorted(range(len(fits)), key=lambda k: fits[k].residual_m)
     motion_ratio = float(pair.candidates[1, 1] / pair.candidates[0, 1]) if len(fits) > 1 else 0.0
     ambiguous = motion_ratio >= max_ambiguity
@@ -190,6 +235,34 @@ def settle_lag(
     return settled
 
 
+def _keep_prior(
+    pair: PairOffset,
+    fits: list[LagFit],
+    repin: Callable[[float], PairOffset],
+    min_lag_margin: float,
+) -> PairOffset | None:
+    """The pair at the arrival times' lag, unless the poses confirm the motion's other lag.
+
+    The motion contradicted the arrival times (a more significant lag elsewhere). Arrival
+    times on one receiver are rarely wrong by seconds and a chance correlation often is, so
+    the prior's lag stays unless the skeletons fit ``min_lag_margin`` times better at the
+    motion's lag. Returns None when they do (the motion's lag then stands).
+    """
+    prior = pair.quality["prior_lag"]
+    index = int(np.argmin([abs(f.lag - prior) for f in fits]))
+    if fits[0].residual_m * min_lag_margin <= fits[index].residual_m:
+        return None
+    kept = repin(fits[index].lag)
+    if not kept.ok:
+        return None
+    kept.candidates = pair.candidates
+    kept.quality.update(_quality(pair, fits, index, 0.0))
+    kept.quality["arrival_prior"] = (
+        f"used: the motion's lag {fits[0].lag:+.3f} s is not confirmed by the poses"
+    )
+    return kept
+
+
 def _margin(fits: list[LagFit], chosen: int) -> float:
     """The best other lag's residual over the chosen lag's (inf when there is no other)."""
     others = [f.residual_m for k, f in enumerate(fits) if k != chosen]
@@ -208,6 +281,7 @@ def _quality(
     runner_up = min(others, key=lambda f: f.residual_m) if others else None
     quality: dict[str, object] = {
         "lag_decided_by": "poses" if chosen != 0 else "motion",
+        # (with a kept arrival-time prior the caller overrides this)
         "lag_fit_residual_m": _rounded(fits[chosen].residual_m),
     }
     if runner_up is not None:

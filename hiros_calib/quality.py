@@ -10,8 +10,10 @@ Two questions a calibration must answer before anyone uses it:
   when the motion contradicts them (:mod:`~hiros_calib.sync`).
 - **Is the result consistent?** Every camera pair measures a clock lag and a pose of its
   own; the solved clocks and poses must reproduce each of them (loops close), and each pair's
-  lag must fit the skeletons better than the runner-up lag (:mod:`~hiros_calib.lags`). A
-  camera that fails is *flagged* with the reason: written, but never used silently.
+  lag must fit the skeletons better than the runner-up lag (:mod:`~hiros_calib.lags`), and
+  each pair's pose must come out alike from two halves of the recording (alternating blocks
+  of time; half their spread estimates the pose's error). A camera that fails is *flagged*
+  with the reason: written, but never used silently.
 """
 
 from __future__ import annotations
@@ -44,6 +46,10 @@ class LoopTolerances:
     time_s: float = 0.05
     rotation_deg: float = 2.0
     translation_m: float = 0.10
+    uncertainty_deg: float = 1.0
+    """Largest pose uncertainty (half the split-half spread of a pair's pose), degrees."""
+    uncertainty_m: float = 0.05
+    """Largest pose uncertainty in translation, metres."""
 
 
 def arrival_offsets_from_delays(
@@ -112,6 +118,7 @@ def flag_cameras(
         angle, distance = relative_error(pose.transform, solved)
         _keep_largest(cameras, pose, "loop_rotation_deg", round(angle, 3))
         _keep_largest(cameras, pose, "loop_translation_cm", round(100 * distance, 2))
+        _uncertainty(cameras, pose, tolerances, reasons)
         if angle > tolerances.rotation_deg or distance > tolerances.translation_m:
             text = (
                 f"the poses miss the {pose.camera_a}-{pose.camera_b} pair's own pose by "
@@ -123,6 +130,30 @@ def flag_cameras(
     for name, found in reasons.items():
         if found and name != calibration.reference:
             cameras[name].flagged = "; ".join(dict.fromkeys(found))
+
+
+def _uncertainty(
+    cameras: dict[str, CameraCalibration],
+    pose: PairPose,
+    tolerances: LoopTolerances,
+    reasons: dict[str, list[str]],
+) -> None:
+    """The pair pose's split-half uncertainty on both cameras; a reason when it is too large."""
+    if "split_half_deg" not in pose.quality:
+        return
+    angle = 0.5 * pose.quality["split_half_deg"]
+    distance = 0.005 * pose.quality["split_half_cm"]
+    _keep_largest(cameras, pose, "pose_uncertainty_deg", round(angle, 3))
+    _keep_largest(cameras, pose, "pose_uncertainty_cm", round(100 * distance, 2))
+    if angle > tolerances.uncertainty_deg or distance > tolerances.uncertainty_m:
+        text = (
+            f"the {pose.camera_a}-{pose.camera_b} pose is poorly determined: two halves of the "
+            f"recording give poses {2 * angle:.1f} deg and {200 * distance:.1f} cm apart "
+            "(people walking across the whole area pin a pose down better than gestures on "
+            "the spot)"
+        )
+        for name in (pose.camera_a, pose.camera_b):
+            reasons[name].append(text)
 
 
 def _clock_miss(a: CameraCalibration, b: CameraCalibration, pair: PairOffset) -> float:

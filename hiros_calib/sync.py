@@ -50,6 +50,7 @@ __all__ = [
     "PairOffset",
     "SyncParams",
     "clock_epochs",
+    "close_loops",
     "estimate_pair_offset",
     "solve_clocks",
     "synchronise",
@@ -78,6 +79,10 @@ class SyncParams:
     within this window is checked against the best lag anywhere (see ``prior_contradiction``),
     so a prior the motion contradicts is noticed and ignored, never silently obeyed.
     """
+    min_prior_significance: float = 0.8
+    """Within the arrival-time prior's window, a body pair whose peak's significance (Fisher
+    z times the square root of the overlap, s) reaches this is usable: a correlation of 0.13
+    over 40 s, far beyond chance among the few lags of the window."""
     prior_contradiction: float = 1.5
     """The motion contradicts the arrival-time prior when the best lag outside
     ``prior_window`` is this many times more significant (Fisher z of the correlation times
@@ -289,6 +294,11 @@ class _Candidate:
     @property
     def score(self) -> float:
         return self.peak * self.sharpness
+
+    @property
+    def significance(self) -> float:
+        """Fisher z of the peak times the square root of the overlap (s)."""
+        return math.atanh(min(max(self.peak, -0.999), 0.999)) * math.sqrt(self.overlap)
 
 
 def _peak(
@@ -544,11 +554,18 @@ def estimate_pair_offset(
     if prior is None:
         return free
     window = (prior - params.prior_window, prior + params.prior_window)
-    near = _estimate(tracks_a, tracks_b, params, window, work=work, **names)
+    near = _estimate(tracks_a, tracks_b, params, window, work=work, windowed=True, **names)
     if near.ok and not _contradicts(free, near, params):
         near.quality["arrival_prior"] = "used"
         return near
     free.quality["arrival_prior"] = "contradicted"
+    if near.ok:
+        # the poses (the calibrator's settle step) must confirm the motion over the prior
+        free.quality["prior_lag"] = near.offset
+        far = np.abs(free.candidates[:, 0] - near.offset) > params.consensus_tolerance
+        if far.all():
+            peak = near.quality.get("peak", 0.0)
+            free.candidates = np.vstack([free.candidates, [[near.offset, peak]]])
     return free
 
 
@@ -574,8 +591,13 @@ def _estimate(
     camera_a: str,
     camera_b: str,
     work: _TrackWork,
+    windowed: bool = False,
 ) -> PairOffset:
-    """The lag within ``search`` (s; None: every lag), with its candidates."""
+    """The lag within ``search`` (s; None: every lag), with its candidates.
+
+    ``windowed``: ``search`` is the arrival-time prior's window, where a body pair's peak is
+    usable on its significance alone (``min_prior_significance``).
+    """
     sig_a, sig_b = work.signatures(tracks_a), work.signatures(tracks_b)
     refusal = _refuse_unusable(
         camera_a, camera_b, sig_a=sig_a, sig_b=sig_b, params=params, work=work
@@ -590,7 +612,7 @@ def _estimate(
             f"no body is seen by both cameras for {params.min_overlap:.1f} s at any lag"
             + (f" in {search[0]:+.2f}..{search[1]:+.2f} s" if search else ""),
         )
-    good = [c for c in candidates if _clear(c, params)]
+    good = [c for c in candidates if _clear(c, params, windowed=windowed)]
     best_any = max(candidates, key=lambda c: c.score)
     if not good:
         return _refused(
@@ -698,10 +720,16 @@ def _body_pair_candidates(
     return candidates
 
 
-def _clear(candidate: _Candidate, params: SyncParams) -> bool:
-    """A body pair whose peak stands out of its curve, or is high though the motion repeats."""
+def _clear(candidate: _Candidate, params: SyncParams, *, windowed: bool = False) -> bool:
+    """A body pair whose peak stands out of its curve, or is high though the motion repeats.
+
+    Within the arrival-time prior's window the curve is too short for a robust z-score: a
+    peak significant over its overlap is usable there.
+    """
     if candidate.peak < params.min_peak:
         return False
+    if windowed and candidate.significance >= params.min_prior_significance:
+        return True
     return candidate.sharpness >= params.min_sharpness or candidate.peak >= params.min_repeated_peak
 
 
@@ -724,6 +752,9 @@ def _candidate_lags(
         significance = np.arctanh(np.clip(pooled, -0.999, 0.999)) * np.sqrt(overlap)
     significance = np.where(valid, significance, -np.inf)
     peaks = _local_maxima(significance, max(3, round(0.25 / step)))
+    # a lag whose overlap is much shorter than the best one's rests on too little data to
+    # rival it (the poses would judge it on a transform fitted to a few seconds)
+    peaks = [k for k in peaks if overlap[k] >= 0.5 * overlap[peaks[0]]]
     rows = np.array([(lags[k], pooled[k]) for k in peaks]).reshape(-1, 2)
     keep = rows[:, 1] >= params.candidate_ratio * rows[0, 1]
     keep[: min(2, len(rows))] = True
@@ -1036,17 +1067,68 @@ def synchronise(
     )  # fmt: skip
     # one FFT length for every pair, so each track's spectra serve all its camera's pairs
     work = _TrackWork(params, next_fast_len(2 * longest))
-    pairs = []
+    pairs, repins = [], []
     for k, a in enumerate(cameras):
         for b in cameras[k + 1 :]:
             prior = arrival[b] - arrival[a] if a in arrival and b in arrival else None
             pair = estimate_pair_offset(
                 tracks[a], tracks[b], params, camera_a=a, camera_b=b, prior=prior, work=work
             )
+            repin = functools.partial(_repin, tracks[a], tracks[b], pair, work)
             if settle is not None:
-                pair = settle(pair, functools.partial(_repin, tracks[a], tracks[b], pair, work))
+                pair = settle(pair, repin)
             pairs.append(pair)
+            repins.append(repin)
+    pairs = close_loops(pairs, repins, params)
     return solve_clocks(cameras, reference, pairs, clock_epochs(tracks), params), pairs
+
+
+def close_loops(
+    pairs: list[PairOffset], repins: list[Callable[[float], PairOffset]], params: SyncParams
+) -> list[PairOffset]:
+    """Pairs refused as ambiguous, decided where the other pairs imply one of their lags.
+
+    With three or more cameras, a pair whose motion repeats may still be timed through the
+    others: the lags of a-c and c-b add up to the lag of a-b. A refused pair that listed
+    candidate lags takes the one within ``consensus_tolerance`` of that sum (re-estimated
+    there by ``repins[k]``), until no more can be decided.
+    """
+    pairs = list(pairs)
+    progress = True
+    while progress:
+        progress = False
+        for k, pair in enumerate(pairs):
+            if pair.ok or len(pair.candidates) == 0:
+                continue
+            implied = _implied_lag(pair.camera_a, pair.camera_b, [p for p in pairs if p.ok])
+            if implied is None:
+                continue
+            distance = np.abs(pair.candidates[:, 0] - implied)
+            best = int(np.argmin(distance))
+            if distance[best] > params.consensus_tolerance:
+                continue
+            decided = repins[k](float(pair.candidates[best, 0]))
+            if not decided.ok:
+                continue
+            decided.candidates = pair.candidates
+            decided.quality.update(lag_decided_by="loop", loop_implied_lag=round(implied, 4))
+            pairs[k] = decided
+            progress = True
+    return pairs
+
+
+def _implied_lag(camera_a: str, camera_b: str, pairs: list[PairOffset]) -> float | None:
+    """``t_a - t_b`` through a chain of other pairs' lags (None when none links a to b)."""
+    offsets = {camera_a: 0.0}  # o_x - o_a, where a pair's lag is tau = o_y - o_x
+    frontier = [camera_a]
+    while frontier:
+        here = frontier.pop()
+        for p in pairs:
+            for x, y, sign in ((p.camera_a, p.camera_b, 1.0), (p.camera_b, p.camera_a, -1.0)):
+                if x == here and y not in offsets:
+                    offsets[y] = offsets[here] + sign * p.offset
+                    frontier.append(y)
+    return offsets.get(camera_b)
 
 
 def _repin(
