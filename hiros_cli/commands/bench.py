@@ -4,7 +4,9 @@ Suites:
   codec      our CDR codec vs rclpy message objects (SkeletonGroup and MarkerArray, 4 x 32)
   io         conversion and bridge throughput (messages per second)
   calib      calibration accuracy over simulator seeds: clocks vs Pose2Sim's lag, poses vs
-             Eichler et al.'s RANSAC + Kabsch alone, on the same recordings
+             Eichler et al.'s RANSAC + Kabsch alone, on the same recordings; with --matrix
+             the robustness matrix: one row per simulator condition (host clocks, repeated
+             motion, one person, two cameras, noisy SDK, 15 Hz, drops, all), default settings
   tracking   tracker and merger time per frame for 1-4 people vs Hi-ROS's published figures,
              and a norfair tracker on the same detections
   body       optimizer and filter time per frame vs Hi-ROS, filter lag/jitter vs One-Euro
@@ -47,6 +49,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument(
         "--duration", type=float, help="calib: seconds per simulated recording (default 60)"
+    )
+    parser.add_argument(
+        "--matrix",
+        action="store_true",
+        help="calib: the robustness matrix instead (one row per simulator condition, default "
+        "settings: success, refusals, flags, silently wrong results, errors; then the real "
+        "KinectMultiTrack sessions)",
     )
 
 
@@ -98,7 +107,10 @@ def run(args: argparse.Namespace) -> int:
             continue
         console.rule(f"hiros bench {suite}")
         options = {"quick": args.quick}
-        if suite == "calib":
+        if suite == "calib" and args.matrix:
+            module = importlib.import_module("hiros_bench.calib_matrix")
+            options.update(duration=args.duration)
+        elif suite == "calib":
             options.update(sim=sim, duration=args.duration)
         accepted = inspect.signature(module.run).parameters
         module.run(console, **{k: v for k, v in options.items() if k in accepted})
