@@ -26,6 +26,7 @@ from __future__ import annotations
 import contextlib
 import heapq
 import io
+import os
 import struct
 from collections import Counter
 from collections.abc import Callable, Iterable, Iterator, Sequence
@@ -187,7 +188,7 @@ class _McapSource(_Source):
         self._scratch = bytearray()  # chunk records of ``transient`` batches
         self.problems = problems
         try:
-            self.stream = path.open("rb")
+            self.stream: Any = _BoundedFile(path)
         except OSError as exc:
             msg = f"cannot open recording {path}: {exc}"
             raise RecordingError(msg) from exc
@@ -197,7 +198,7 @@ class _McapSource(_Source):
         try:
             self.reader = SeekingReader(self.stream)
             self.summary = self.reader.get_summary()
-        except (McapError, ValueError, struct.error, OSError) as exc:
+        except (McapError, ValueError, OverflowError, struct.error, OSError) as exc:
             damage = f"{type(exc).__name__}: {exc}"
             if self.stream.seek(0, io.SEEK_END) < 8:
                 self.stream.close()
@@ -280,7 +281,7 @@ class _McapSource(_Source):
                 elif isinstance(record, (DataEnd, Footer)):  # the summary holds no messages
                     self._data_end = True
                     return
-        except (McapError, ValueError, struct.error, EOFError, OSError) as exc:
+        except (McapError, ValueError, OverflowError, struct.error, EOFError, OSError) as exc:
             self._stopped_at = self.stream.tell()
             if not collect_only:
                 self.drops["truncated"] += 1
@@ -590,6 +591,28 @@ def _zstd_prefix(data: bytes | memoryview, limit: int) -> bytes:
         while len(out) < limit and (piece := stream.read(min(1 << 20, limit - len(out)))):
             out += piece
     return bytes(out)
+
+
+class _BoundedFile:
+    """A binary file whose reads never ask for more bytes than the file still holds.
+
+    A damaged length field (2^40, 2^63) passed to ``read`` made the buffered reader allocate
+    that much at once (MemoryError) or fail to (OverflowError) before finding the file
+    shorter; here such a read returns what is left, and the reader then meets the file's
+    end as for any cut file. Everything else is the file's own.
+    """
+
+    def __init__(self, path: Path) -> None:
+        self._file = path.open("rb")
+
+    def read(self, size: int | None = -1) -> bytes:
+        if size is None or size < 0:
+            return self._file.read()
+        left = os.fstat(self._file.fileno()).st_size - self._file.tell()
+        return self._file.read(max(0, min(size, left)))
+
+    def __getattr__(self, name: str) -> Any:
+        return getattr(self._file, name)
 
 
 def _readable_prefix(compression: str, data: bytes) -> bytes:

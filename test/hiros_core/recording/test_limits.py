@@ -166,3 +166,25 @@ def test_bodies_past_the_limit_from_a_driver_message_are_dropped() -> None:
     assert np.isfinite(bridge.update_bytes(
         encode_marker_array(group_to_driver_markers(_group(3, T0 + 1)))
     ).skeletons[0].positions).any()  # fmt: skip
+
+
+@pytest.mark.parametrize("length", [2**40, 2**63 - 1])
+def test_a_record_length_past_the_file_is_a_cut_file_not_a_memory_error(
+    tmp_path: Path, length: int
+) -> None:
+    """Found by fuzzing: the buffered reader allocated a record's stated length at once."""
+    path = _recording(tmp_path / "rec.mcap")
+    data = bytearray(path.read_bytes())
+    start = _second_chunk(path)
+    name_at = start + _UNCOMPRESSED_SIZE_AT + 8 + 4  # then the uncompressed CRC
+    (name_length,) = struct.unpack_from("<I", data, name_at)
+    struct.pack_into("<Q", data, name_at + 4 + name_length, length)  # the records' length
+    cut = tmp_path / "cut.mcap"
+    cut.write_bytes(data[: len(data) * 3 // 4])  # no summary: read straight through
+    before = _max_rss_mb()
+    drops: Counter[str] = Counter()
+    problems: list[str] = []
+    groups = list(iter_groups(cut, drops=drops, problems=problems))
+    assert 0 < len(groups) < 40
+    assert any("ends early or is damaged" in p for p in problems)
+    assert _max_rss_mb() - before < 200
