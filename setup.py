@@ -29,6 +29,7 @@ setup(
         (f"share/{PACKAGE}/config/rviz", ["config/rviz/hiros.rviz"]),
         (f"share/{PACKAGE}/config/foxglove", ["config/foxglove/hiros_layout.json"]),
         (f"share/{PACKAGE}/launch", [str(p) for p in sorted(Path("launch").glob("*.py"))]),
+        (f"share/{PACKAGE}/rviz", [str(p) for p in sorted(Path("rviz").glob("*.rviz"))]),
     ],
     install_requires=["setuptools"],
     zip_safe=False,

@@ -1,0 +1,12 @@
+"""Launch the tracker node alone with its parameter file, as Hi-ROS launches each node.
+
+    ros2 launch hiros tracker.launch.py params_file:=my_tracker.yaml namespace:=hiros
+The default file is config/tracker.yaml (every parameter with its default): copy it and edit.
+"""
+
+from hiros_ros.launch_description import single_node
+
+
+def generate_launch_description():  # noqa: ANN201 - launch.LaunchDescription
+    """One tracker node."""
+    return single_node("tracker")
