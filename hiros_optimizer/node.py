@@ -5,6 +5,11 @@ Besides the stage node's data flow it offers the person-calibration services of 
 (ChangeId: track ``from_id`` is person ``to_id`` from now on), and the calibration file:
 ``load_calibration`` reads ``calibration_file`` at start, ``export_calibration`` rewrites it
 whenever a person calibration is accepted or moved.
+
+The same two services are also offered where Hi-ROS's optimizer offers them, ``/hiros/calibrate``
+and ``/hiros/change_id``, so that Hi-ROS's clients work unchanged; their types are Hi-ROS's
+(``hiros_skeleton_optimizer/srv/...``, the same fields as ours) when that package is installed
+beside hiros, and ours otherwise (``service_types``).
 """
 
 from __future__ import annotations
@@ -12,14 +17,22 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any
 
-from hiros_skeleton_msgs.srv import Calibrate, ChangeId
-
 from hiros_core.errors import ConfigError
 from hiros_optimizer.calibration_file import read_person_calibrations, write_person_calibrations
 from hiros_optimizer.optimizer import Optimizer, OptimizerParams
 from hiros_ros import StageNode, run_node
 
-__all__ = ["LIVE", "OptimizerNode", "OptimizerNodeParams", "main"]
+__all__ = [
+    "HIROS_SERVICES",
+    "LIVE",
+    "OptimizerNode",
+    "OptimizerNodeParams",
+    "main",
+    "service_types",
+]
+
+HIROS_SERVICES = ("/hiros/calibrate", "/hiros/change_id")
+"""Where Hi-ROS's optimizer (node skeleton_optimizer in namespace hiros) offers its services."""
 
 LIVE = ("export_calibration",)
 """Parameters applied while the node runs; the fit's are fixed when a layout is first seen."""
@@ -41,8 +54,10 @@ class OptimizerNode(StageNode):
         super().__init__("optimizer", OptimizerNodeParams, Optimizer, live=LIVE)
         if self.params.load_calibration:
             self._load()
-        self.create_service(Calibrate, "~/calibrate", self.on_calibrate)
-        self.create_service(ChangeId, "~/change_id", self.on_change_id)
+        calibrate, change_id = service_types()
+        for calibrate_name, change_id_name in (("~/calibrate", "~/change_id"), HIROS_SERVICES):
+            self.create_service(calibrate, calibrate_name, self.on_calibrate)
+            self.create_service(change_id, change_id_name, self.on_change_id)
 
     def _apply(self, params: OptimizerNodeParams) -> None:
         """Nothing to hand over: ``export_calibration`` is read at each export."""
@@ -91,6 +106,20 @@ class OptimizerNode(StageNode):
             )
         except ConfigError as exc:
             self.error("calibration file not written", str(exc))
+
+
+def service_types() -> tuple[type, type]:
+    """Calibrate and ChangeId: Hi-ROS's when its hiros_skeleton_optimizer is installed, else ours.
+
+    A service has one type, and Hi-ROS's clients call with theirs. In a workspace holding
+    both projects, our hiros_skeleton_msgs is left out (Hi-ROS's package of that name has the
+    same messages, no services): the node then needs Hi-ROS's service types.
+    """
+    try:
+        from hiros_skeleton_optimizer.srv import Calibrate, ChangeId
+    except ImportError:
+        from hiros_skeleton_msgs.srv import Calibrate, ChangeId
+    return Calibrate, ChangeId
 
 
 def main(args: list[str] | None = None) -> None:

@@ -31,6 +31,9 @@ NODES = ("azure_bridge", "calib", "tracker", "merger", "optimizer", "filter", "v
 
 STAGE_TOPICS = ("/hiros/tracker", "/hiros/merger", "/hiros/optimizer", "/hiros/filter")
 
+HIROS_SERVICES = ("/hiros/calibrate", "/hiros/change_id")
+"""The optimizer's services at Hi-ROS's names (``hiros_optimizer.node.HIROS_SERVICES``)."""
+
 
 @dataclasses.dataclass
 class NodeSpec:
@@ -101,6 +104,7 @@ def _remappings(namespace: str, cameras: list[str]) -> list[tuple[str, str]]:
         *(f"/{camera}/{kind}" for camera in cameras for kind in kinds),
         *STAGE_TOPICS,
         *(f"{topic}/markers" for topic in STAGE_TOPICS),
+        *HIROS_SERVICES,
     ]
     return [(topic, f"{namespace}{topic}") for topic in topics]
 

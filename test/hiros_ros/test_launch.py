@@ -52,6 +52,9 @@ def test_sim_time_calibration_and_namespace_reach_every_node() -> None:
     assert remaps["/k01/body_tracking_data"] == "/lab/k01/body_tracking_data"
     assert remaps["/hiros/filter/markers"] == "/lab/hiros/filter/markers"
     assert "/tf_static" not in remaps
+    from hiros_optimizer.node import HIROS_SERVICES
+
+    assert all(remaps[name] == f"/lab{name}" for name in HIROS_SERVICES)
     assert node_plan(["k01"])[0].remappings == []
     arguments = named["tracker"].ros_arguments("/lab")
     assert arguments[:5] == ["--ros-args", "-r", "__node:=tracker", "-r", "__ns:=/lab"]
@@ -153,7 +156,7 @@ def test_the_planned_commands_start_nodes_with_the_launch_s_values(ros_processes
     for name in ("azure_bridge", "calib", "tracker"):
         ros_processes.command(plan[name].command("/lab"))
     env = ros_processes.env
-    deadline = time.monotonic() + 40
+    deadline = time.monotonic() + 120
     while hiros(env, "param", "list", "/lab/tracker", "--timeout", "2").returncode != 0:
         assert time.monotonic() < deadline, "the tracker did not come up"
     got = hiros(env, "param", "get", "/lab/tracker", "cameras", "use_sim_time", "calib_node")

@@ -40,7 +40,7 @@ def hiros(env: dict[str, str], *args: str) -> subprocess.CompletedProcess:
 
 
 def wait_for(env: dict[str, str], node: str) -> None:
-    deadline = time.monotonic() + 30
+    deadline = time.monotonic() + 120
     while hiros(env, "param", "list", node, "--timeout", "2").returncode != 0:
         assert time.monotonic() < deadline, f"{node} did not come up"
 
