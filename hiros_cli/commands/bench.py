@@ -14,8 +14,11 @@ Suites:
   robust     the stages under the simulator's conditions (noisy SDK, one person, 45 deg pair,
              15 Hz, drops, repeated motion, four crossing), true calibration: MPJPE per stage,
              ratio to the best oracle-labelled camera, switches, limb CV, acceptance, mirrors
-Without a suite, all of them run in turn. Timings are best-of-N batches; the machine is shared,
-so read ratios, not absolute times.
+  soak       the live pipeline and calib nodes fed a looping recording for --minutes (30):
+             each node's memory over time, latency percentiles, whether the output stopped
+             (not run without being named, nor in CI)
+Without a suite, all of them but soak run in turn. Timings are best-of-N batches; the
+machine is shared, so read ratios, not absolute times.
 
 The calib suite also takes simulator settings and a recording length, to see what limits the
 accuracy, e.g. ``hiros bench calib --sim oblique_gain=0 --duration 180`` (SimParams names,
@@ -31,7 +34,9 @@ import inspect
 from rich.console import Console
 
 HELP = "speed and accuracy benchmarks, each beside a baseline run alongside"
-SUITES = ("codec", "io", "calib", "tracking", "body", "pipeline", "robust")
+SUITES = ("codec", "io", "calib", "tracking", "body", "pipeline", "robust", "soak")
+DEFAULT_SUITES = SUITES[:-1]
+"""Run when no suite is named: all but the half-hour soak."""
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -49,6 +54,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument(
         "--duration", type=float, help="calib: seconds per simulated recording (default 60)"
+    )
+    parser.add_argument(
+        "--minutes", type=float, help="soak: minutes of feeding the nodes (default 30; quick: 3)"
     )
     parser.add_argument(
         "--matrix",
@@ -98,7 +106,7 @@ def run(args: argparse.Namespace) -> int:
         return 2
     sim = _sim_overrides(args.sim)  # a mistyped setting fails before anything runs
     failed = []
-    for suite in args.suites or SUITES:
+    for suite in args.suites or DEFAULT_SUITES:
         try:
             module = importlib.import_module(f"hiros_bench.{suite}")
         except ModuleNotFoundError as exc:
@@ -112,6 +120,8 @@ def run(args: argparse.Namespace) -> int:
             options.update(duration=args.duration)
         elif suite == "calib":
             options.update(sim=sim, duration=args.duration)
+        elif suite == "soak":
+            options.update(minutes=args.minutes)
         accepted = inspect.signature(module.run).parameters
         module.run(console, **{k: v for k, v in options.items() if k in accepted})
     return 1 if failed else 0
