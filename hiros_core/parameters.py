@@ -1,9 +1,11 @@
 """Parameters dataclasses and ROS parameter files, without ROS (used by nodes and offline).
 
-Precedence, lowest first: the dataclass default, the node's YAML file (ROS parameter-file format,
-``<node>: ros__parameters: {...}`` or ``/**: ros__parameters: {...}``), then anything given on the
-command line (``--ros-args -p name:=value`` or ``--params-file``), which rclpy applies itself.
-Nested dataclasses become dotted names (``gating.max_distance``).
+A node's parameters are its dataclass's defaults, then whatever its command line gives
+(``--ros-args -p name:=value`` or ``--params-file``, applied by rclpy): no node reads a file
+unasked (``hiros_ros.params``). The files of config/ hold every node's parameters with those
+defaults (a test keeps them so); ``hiros run`` reads them (``stage_config_defaults``) and the
+file given with ``--params``. A file is in ROS's format, ``<node>: ros__parameters: {...}`` or
+``/**: ros__parameters: {...}``. Nested dataclasses become dotted names (``gating.max_distance``).
 """
 
 from __future__ import annotations
