@@ -35,8 +35,8 @@ def _camera(translation, rotation, offset=0.0):
     from hiros_core.calibration import CameraCalibration
 
     return CameraCalibration(
-        frame_id="f", time_offset=offset, translation=np.asarray(translation, float),
-        rotation=rotation.as_quat(),
+        frame_id=f"f{translation[0]}", time_offset=offset,
+        translation=np.asarray(translation, float), rotation=rotation.as_quat(),
     )  # fmt: skip
 
 

@@ -109,7 +109,8 @@ def test_case3_calibrate_never_writes_over_its_recording_or_another_file(
     assert other.read_text() == "shopping: [milk]\n"
     # an earlier calibration file is what calibrate makes: it is replaced
     calibration = _copy(sim / "calibration.yaml", tmp_path / "calib.yaml")
-    assert main(["calibrate", str(recording), "--out", str(calibration)]) == 0
+    # (3: written with a camera flagged as doubtful, as a 5 s take of one person may be)
+    assert main(["calibrate", str(recording), "--out", str(calibration)]) in {0, 3}
     assert is_calibration_file(calibration)
     assert calibration.read_text() != (sim / "calibration.yaml").read_text()
 
