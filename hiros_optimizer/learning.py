@@ -8,7 +8,10 @@ noisy hand or an unseen thumb keeps only itself free, never a thigh. A person is
 once the links of their limbs (upper arms, forearms, thighs, shanks: what joint angles are
 made of) are learnt; how long that took from the person's first frame is their acceptance
 time, and a person not accepted within ``acceptance_timeout`` is reported with the reason of
-each limb link still free.
+each limb link still free. Once a person is accepted, every link measured often enough is
+locked too, steady or not: a steady body vouches for the measurement, and a noisy link's
+median over the window is still a good length (its standard error shrinks with the window;
+constraining it steadies the joint angles next to it). Links seen too rarely stay free.
 """
 
 from __future__ import annotations
@@ -49,7 +52,8 @@ class WindowStatistics(NamedTuple):
         median: median length (m), NaN where never measured.
         variation: robust coefficient of variation, NaN where the link is not seen enough.
         learnt: whether the link's length is learnt (see the module docstring).
-        lengths: the learnt lengths, unbiased (m), NaN where not learnt.
+        lengths: the median lengths, unbiased (m), of the links seen often enough (NaN
+            elsewhere); only the ``learnt`` ones lock before the person is accepted.
 
     """
 
@@ -78,7 +82,9 @@ def window_statistics(
     # lengths; the two perpendicular axes add 2 s^2, which is removed here.
     spread = variation * median
     unbiased = np.sqrt(np.maximum(median**2 - 2 * spread**2, 0.25 * median**2))
-    return WindowStatistics(presence, median, variation, learnt, np.where(learnt, unbiased, np.nan))
+    return WindowStatistics(
+        presence, median, variation, learnt, np.where(seen & (median > 0), unbiased, np.nan)
+    )
 
 
 @dataclass

@@ -505,24 +505,26 @@ class Optimizer(Accounted):
             params.min_link_presence,
             params.max_calibration_coefficient_of_variation,
         )
-        links = layout.link_children
+        links, limbs = layout.link_children, limb_links(layout)
         for row, item in enumerate(due):
             track = item.track
-            learnt = statistics.lengths[row]
             old = track.calibration
-            if old is None:
-                lengths, variation = learnt, statistics.variation[row]
-            else:
-                known = np.isfinite(old.lengths)
-                lengths = np.where(known, old.lengths, learnt)
-                variation = np.where(known, old.variation, statistics.variation[row])
+            known = np.zeros(layout.n_joints, dtype=bool) if old is None else np.isfinite(
+                old.lengths
+            )
+            kept = np.full(layout.n_joints, np.nan) if old is None else old.lengths
+            steady = np.where(statistics.learnt[row], statistics.lengths[row], np.nan)
+            lengths = np.where(known, kept, steady)
+            if np.isfinite(lengths[limbs]).all():  # accepted: every link seen often enough
+                lengths = np.where(known, kept, statistics.lengths[row])
+            variation = statistics.variation[row]
+            if old is not None:
+                variation = np.where(known, old.variation, variation)
             free = np.zeros(layout.n_joints, dtype=bool)
             free[links] = np.isnan(lengths[links])
             track.progress.observe(statistics, row, free)
-            if old is not None and np.array_equal(np.isfinite(lengths), known):
-                continue
-            if old is None and np.isnan(lengths).all():
-                continue
+            if np.array_equal(np.isfinite(lengths), known):
+                continue  # nothing new learnt
             calibration = PersonCalibration(layout, lengths, variation, memory.window.shape[2])
             track.adopt(calibration, item.skeleton.src_time_ns)
             self.calibrations[item.track_id] = calibration
