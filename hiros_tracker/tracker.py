@@ -162,7 +162,7 @@ class TrackerParams:
     flip_misread: float = 0.05
     facing_threshold: float = 3.0
     walking_speed: float = 0.4
-    walking_evidence: float = 0.3
+    walking_evidence: float = 1.0
     duplicate_distance: float = 0.25
     joint_weight_decay: float = 0.5
     min_joints: int = 4
