@@ -33,6 +33,7 @@ from hiros_calib.sync import (
     synchronise,
 )
 from hiros_calib.tracks import BodyTrack, extract_tracks
+from hiros_calib.world import align_to_floor, fit_floor
 from hiros_core.calibration import Calibration, CameraCalibration
 from hiros_core.errors import CalibrationError
 from hiros_core.model import SkeletonGroup
@@ -55,6 +56,9 @@ class CalibratorParams(SyncParams, ExtrinsicsParams):
     """Reference camera (its frame is the world); empty: the first camera by name."""
     world_frame: str = "world"
     """Name of the world frame written to the calibration file."""
+    world: str = "floor"
+    """``floor``: z up and the floor at z = 0, found from the people (REP-103; x along the
+    reference camera's view); ``camera``: the reference camera's own frame."""
     max_gap: float = 0.25
     """A body id unseen for longer than this (s) starts a new track."""
     min_track_frames: int = 10
@@ -184,6 +188,8 @@ class Calibrator:
             for cal in calibration.cameras.values():
                 cal.quality["arrival_times"] = "ignored" if notes else "used"
         flag_cameras(calibration, sync_pairs, pose_pairs)
+        if params.world == "floor":
+            notes.extend(_align_to_floor(calibration, tracks))
         self.result = CalibrationResult(
             calibration, clocks, sync_pairs, poses, pose_pairs, tracks, refused, notes
         )
@@ -242,6 +248,19 @@ class Calibrator:
                     pose.quality["split_half_cm"] = round(100 * spread[1], 2)
                 pairs.append(pose)
         return pairs
+
+
+def _align_to_floor(calibration: Calibration, tracks: dict[str, list[BodyTrack]]) -> list[str]:
+    """Move the calibration into the floor's world; a note when no floor could be found."""
+    poses = {name: cam.extrinsics for name, cam in calibration.cameras.items()}
+    floor = fit_floor(tracks, poses)
+    if floor is None:
+        return [
+            "no floor found (no one was seen with resting feet and a body vertical): the world "
+            "is the reference camera's frame"
+        ]
+    align_to_floor(calibration, floor)
+    return []
 
 
 def _to_calibration(

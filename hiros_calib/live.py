@@ -139,6 +139,13 @@ def _agrees(old: CameraCalibration, new: CameraCalibration, params: LiveCalibrat
     )
 
 
+def _place(estimate: Calibration, world_from_reference: RigidTransform) -> None:
+    """Re-express an estimate solved in its reference camera's frame in the current world."""
+    for cam in estimate.cameras.values():
+        placed = world_from_reference @ cam.extrinsics
+        cam.translation, cam.rotation = placed.translation, placed.quaternion
+
+
 def _clock(name: str, cam: CameraCalibration) -> CameraClock:
     return CameraClock(name, "ok", "", cam.time_offset, cam.drift, cam.drift_epoch)
 
@@ -286,10 +293,14 @@ class LiveCalibrator(Accounted):
         groups, arrivals = self._window()
         if len(groups) < 2:
             return False
+        # the first estimate finds the world (the floor, by default); later ones are solved
+        # in the reference camera's frame and placed in the world the calibration already has
+        reference = self.calibration.cameras.get(self.calibration.reference)
         params = dataclasses.replace(
             self.params,
             require_all=False,
             reference=self.calibration.reference or self.params.reference,
+            world=self.params.world if reference is None else "camera",
         )
         calibrator = Calibrator(params)
         try:
@@ -298,6 +309,8 @@ class LiveCalibrator(Accounted):
             self.drops["estimate_failed"] += 1
             self.events.append((now_ns, f"estimate failed: {exc}"))
             return False
+        if reference is not None:
+            _place(estimate, reference.extrinsics)
         self.drops.update(calibrator.drops)
         changed = False
         if not self.calibration.reference:

@@ -78,6 +78,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "people repeat one motion and the lag is refused as ambiguous)",
     )
     parser.add_argument("--no-drift", action="store_true", help="do not estimate clock drift")
+    parser.add_argument(
+        "--world",
+        choices=("floor", "camera"),
+        default="floor",
+        help="floor (default): z up and the floor at z = 0, found from the people's feet, x "
+        "along the reference camera's view (REP-103); camera: the reference camera's own frame",
+    )
 
 
 def run(args: argparse.Namespace) -> int:
@@ -102,6 +109,7 @@ def run(args: argparse.Namespace) -> int:
         params.max_offset = args.max_offset
     if args.no_drift:
         params.estimate_drift = False
+    params.world = args.world
     calibration, result = calibrate_recording(
         args.recording,
         console=console,
@@ -282,6 +290,14 @@ def print_summary(console: Console, result: CalibrationResult) -> None:
         console.print(f"[yellow]{camera} left out: {reason}[/]")
     for note in result.notes:
         console.print(f"note: {note}", highlight=False)
+    floor = calibration.cameras[calibration.reference].quality
+    if "floor_up_from" in floor:
+        console.print(
+            f"world: z up from the {floor['floor_up_from']} ({floor['floor_points']} resting-foot "
+            f"samples, {floor['floor_residual_cm']:.1f} cm from their plane), the reference "
+            f"camera tilted {floor['floor_tilt_deg']:.1f} deg from level",
+            highlight=False,
+        )
 
 
 def _fit(residual: float | str | None) -> str:

@@ -19,12 +19,14 @@ def test_three_cameras_recover_the_known_calibration(three_cameras):
     assert calibration.reference == "cam0"
     assert list(calibration.cameras) == ["cam0", "cam1", "cam2"]
     reference = scene.truth.cameras["cam0"].extrinsics
+    estimated_reference = calibration.cameras["cam0"].extrinsics  # the world is the floor's
     for name, estimate in calibration.cameras.items():
         truth = scene.truth.cameras[name]
         assert estimate.frame_id == f"{name}_depth_camera_link"
         assert estimate.time_offset == pytest.approx(truth.time_offset, abs=3e-3)
         angle, distance = relative_error(
-            estimate.extrinsics, reference.inverse() @ truth.extrinsics
+            estimated_reference.inverse() @ estimate.extrinsics,
+            reference.inverse() @ truth.extrinsics,
         )
         assert angle < 0.2
         assert distance < 0.01
@@ -36,7 +38,8 @@ def test_three_cameras_recover_the_known_calibration(three_cameras):
 
 @pytest.mark.slow
 def test_reference_camera_can_be_named(three_cameras):
-    calibration = Calibrator(CalibratorParams(reference="cam2")).calibrate(
+    # world "camera": the reference camera's own frame is the world, as before the floor
+    calibration = Calibrator(CalibratorParams(reference="cam2", world="camera")).calibrate(
         three_cameras.camera_groups
     )
     assert calibration.reference == "cam2"
