@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import math
 import sys
+from collections import deque
 from dataclasses import dataclass, field
 from functools import cache
 from pathlib import Path
@@ -201,6 +202,14 @@ def _level(text: str) -> float:
         return math.nan
 
 
+_GAP_STEPS = 64
+"""Steps between a driver's stamps kept to find its frame period (the smallest)."""
+_GAP_MIN_STEPS = 8
+"""Steps seen before gaps are counted."""
+_GAP_MAX_S = 5.0
+"""A longer step is a pause or a restart, not lost frames."""
+
+
 class DriverBridge(Accounted):
     """One driver topic's MarkerArrays -> SkeletonGroups in the camera's frame and clock.
 
@@ -228,12 +237,17 @@ class DriverBridge(Accounted):
       one (frame); a jump back larger than ``reset_after_backwards`` counts
       ``source_restarted`` and is accepted.
 
-    ``processed`` counts the messages that gave a group.
+    ``processed`` counts the messages that gave a group; ``lost_before_reception`` the frames
+    missing from the driver's stamps (never received, so outside the balance; see
+    ``diagnostics``).
     """
 
     def __init__(self, params: DriverBridgeParams | None = None, default_frame: str = "") -> None:
         self.params = params or DriverBridgeParams()
         self.nobody_in_view = 0  # empty arrays turned into empty groups (processed)
+        self.lost_before_reception = 0  # frames missing from the stamps' sequence
+        self._gap_last: int | None = None  # the last driver stamp (None after an empty array)
+        self._gap_steps: deque[int] = deque(maxlen=_GAP_STEPS)
         self._frame = self.params.frame_id or default_frame  # of the last group
         self._transit_ns = 0  # arrival - stamp of the last stamped message
         self.layout: Layout = get_layout(self.params.layout)
@@ -360,6 +374,7 @@ class DriverBridge(Accounted):
         if self.last_stamp_ns is not None:
             stamp = max(stamp, self.last_stamp_ns + 1)
         self.last_stamp_ns = stamp
+        self._gap_last = None  # the driver's stamps are unknown across empty arrays
         self.nobody_in_view += 1
         self.processed += 1
         return SkeletonGroup(stamp, self._frame, [])
@@ -416,7 +431,34 @@ class DriverBridge(Accounted):
                 self.drops.frame("repeated_stamp" if stamp == last else "stamp_backwards")
                 return False
         self.last_stamp_ns = stamp
+        self._count_gap(stamp)
         return True
+
+    def _count_gap(self, stamp: int) -> None:
+        """Count the frames missing between this stamp and the last stamped one.
+
+        A driver stamps its frames at a steady period (the device clock), so a gap of
+        several periods means frames lost before this bridge received them (best-effort QoS
+        under load, a dropped connection): ``lost_before_reception`` counts them. They are no
+        part of the frame balance (they were never received). The period is the smallest
+        step among the last ``_GAP_STEPS`` (it needs ``_GAP_MIN_STEPS`` first); steps back and
+        steps over ``_GAP_MAX_S`` (a restart, a pause) are not counted.
+        """
+        last, self._gap_last = self._gap_last, stamp
+        if last is None or not 0 < stamp - last <= _GAP_MAX_S * 1e9:
+            return
+        step = stamp - last
+        if len(self._gap_steps) >= _GAP_MIN_STEPS:
+            period = min(self._gap_steps)
+            if step > 1.5 * period:
+                self.lost_before_reception += round(step / period) - 1
+        self._gap_steps.append(step)
+
+    def diagnostics(self) -> dict[str, str]:
+        """``lost_before_reception``: frames missing from the driver's stamps (when any)."""
+        if not self.lost_before_reception:
+            return {}
+        return {"lost_before_reception": str(self.lost_before_reception)}
 
     def _skeletons(
         self, data: MarkerArrayData | MarkerFields, rows: np.ndarray | None, stamp: int, frame: str
