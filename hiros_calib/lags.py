@@ -230,6 +230,8 @@ def settle_lag(
         return settled
     settled.candidates = pair.candidates
     settled.quality.update(_quality(pair, fits, chosen, motion_ratio))
+    if ambiguous:  # alike lags: the poses chose, whether or not the motion's best
+        settled.quality["lag_decided_by"] = "poses"
     if flag:
         settled.quality["flagged"] = flag
     return settled
