@@ -717,6 +717,38 @@ class _Located:
         )  # fmt: skip
 
 
+def _bounded_ros1_chunk(decompress: Callable[[bytes, int], bytes]) -> Callable[[bytes], bytes]:
+    """A ROS 1 chunk decompressor that inflates at most ``MAX_CHUNK_BYTES``.
+
+    ``rosbags`` inflates a bag's chunks whole, whatever they hold; past the limit the chunk
+    is refused (the reader then stops there, as at any damaged part).
+    """
+
+    def bounded(data: bytes) -> bytes:
+        records = decompress(data, MAX_CHUNK_BYTES + 1)
+        if len(records) > MAX_CHUNK_BYTES:
+            msg = f"a chunk decompresses to more than the {MAX_CHUNK_BYTES} bytes read"
+            raise RecordingError(msg)
+        return records
+
+    return bounded
+
+
+def _bound_ros1_chunks() -> None:
+    """Have ``rosbags`` decompress ROS 1 chunks within the limit (its table of decompressors)."""
+    import bz2
+
+    import lz4.frame
+    from rosbags.rosbag1 import reader as rosbag1
+
+    rosbag1.decompressors.update(
+        bz2=_bounded_ros1_chunk(lambda data, n: bz2.BZ2Decompressor().decompress(data, n)),
+        lz4=_bounded_ros1_chunk(
+            lambda data, n: lz4.frame.LZ4FrameDecompressor().decompress(data, max_length=n)
+        ),
+    )
+
+
 class _RosbagsSource(_Source):
     """A ``.db3`` file, a sqlite3 rosbag2 folder, or a ROS 1 bag, through ``AnyReader``."""
 
@@ -724,6 +756,7 @@ class _RosbagsSource(_Source):
         from rosbags.highlevel import AnyReader, AnyReaderError
         from rosbags.typesys import Stores, get_typestore
 
+        _bound_ros1_chunks()
         self.path = path
         self.reader = AnyReader([path], default_typestore=get_typestore(Stores.ROS2_JAZZY))
         try:

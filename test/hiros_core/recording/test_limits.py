@@ -188,3 +188,30 @@ def test_a_record_length_past_the_file_is_a_cut_file_not_a_memory_error(
     assert 0 < len(groups) < 40
     assert any("ends early or is damaged" in p for p in problems)
     assert _max_rss_mb() - before < 200
+
+
+@pytest.mark.parametrize("compression", ["lz4", "bz2"])
+def test_a_ros1_bag_chunk_past_the_limit_is_not_inflated(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, compression: str
+) -> None:
+    from rosbags.rosbag1 import Writer as Rosbag1Writer
+    from rosbags.typesys import Stores, get_typestore
+
+    from hiros_core.errors import RecordingError
+    from hiros_core.recording import RecordingReader
+    from hiros_core.recording import reader as reader_module
+
+    store = get_typestore(Stores.ROS1_NOETIC)
+    bag = tmp_path / "take.bag"
+    writer = Rosbag1Writer(bag)
+    writer.set_compression(getattr(Rosbag1Writer.CompressionFormat, compression.upper()))
+    with writer:
+        connection = writer.add_connection("/note", "std_msgs/msg/String", typestore=store)
+        note = store.types["std_msgs/msg/String"](data="0" * (3 << 20))  # 3 MB, compresses well
+        writer.write(connection, 10**9, store.serialize_ros1(note, "std_msgs/msg/String"))
+    assert bag.stat().st_size < 1 << 20
+    with RecordingReader(bag) as recording:
+        assert len(next(iter(recording)).data) > 3 << 20  # read whole within the limit
+    monkeypatch.setattr(reader_module, "MAX_CHUNK_BYTES", 1 << 20)
+    with RecordingReader(bag) as recording, pytest.raises(RecordingError, match="more than the"):
+        list(recording)
