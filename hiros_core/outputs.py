@@ -135,9 +135,10 @@ def staged_output(final: Path, *, replace: bool = False) -> Iterator[Path]:
             if not replace:
                 msg = f"{final} appeared while it was being written; the new output is not kept"
                 raise OutputError(msg)
-            _remove(final)
+            if staged.is_dir() or final.is_dir():  # a file replaces a file in one step
+                _remove(final)
         if staged.exists():
-            staged.rename(final)
+            staged.replace(final)
     finally:
         shutil.rmtree(staging, ignore_errors=True)
 
