@@ -231,8 +231,10 @@ class HirosNode(Node):
         OK again after a clean window (the counters keep the totals since start). What
         processed frames left out (a skeleton without joints, a duplicate track) is normal in
         a crowded scene: it shows in the counts and the message, at level OK. The values add
-        the input and output rates (messages per second over ``health.rate_window``) and the
-        callbacks' processing time percentiles (``latency_ms.*``).
+        the stage's own figures (``Accounted.diagnostics``: the tracker's restarts, frames a
+        bridge lost before reception), the input and output rates (messages per second over
+        ``health.rate_window``) and the callbacks' processing time percentiles
+        (``latency_ms.*``).
         """
         self.absorb_stage()
         totals = self._totals()
@@ -240,6 +242,8 @@ class HirosNode(Node):
         status = DiagnosticStatus(name=self.get_fully_qualified_name(), hardware_id="hiros")
         status.level, status.message = self._status(totals)
         values = {k: str(v) for k, v in self.counters.items()}
+        if self.accounted is not None:  # the stages' own figures (tracker restarts, ...)
+            values.update(self.accounted.diagnostics())
         values["input_rate_hz"] = f"{self.health.rate('received'):.2f}"
         values["output_rate_hz"] = f"{self.health.rate('published'):.2f}"
         for name, value in self.health.latency_ms().items():
