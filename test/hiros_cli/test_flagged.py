@@ -37,3 +37,24 @@ def test_run_refuses_a_flagged_camera_unless_told_to_accept_it(
     assert main([*args, "--accept-flagged"]) == 0
     assert "using flagged cameras" in capsys.readouterr().out
     assert out.exists()
+
+
+def test_run_with_calibration_auto_stops_on_a_flagged_result(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    from hiros_sim.presets import preset_params
+
+    # a noisier SDK and 15 s of one person: the two halves of the recording give poses
+    # degrees apart, so the calibration flags the camera as poorly determined
+    folder = tmp_path / "noisy"
+    scene = simulate(preset_params("noisy-sdk", seed=0, duration=15.0, n_cameras=2, n_people=1))
+    write_recording(scene, folder)
+    out = tmp_path / "out.mcap"
+    args = ["run", str(folder / "recording.mcap"), "--calibration", "auto", "--out", str(out)]
+    assert main(args) == 1
+    err = capsys.readouterr().err
+    assert "flags k02 as doubtful" in err
+    assert "poorly determined" in err
+    assert not out.exists()
+    written = load_calibration(out.with_suffix(".calib.yaml"))  # kept, for the user to read
+    assert "poorly determined" in written.cameras["k02"].flagged
