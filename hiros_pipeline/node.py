@@ -112,13 +112,17 @@ class PipelineNode(HirosNode):
         """One camera frame through the stages; publish what each stage produced.
 
         The counts are taken also when the bridge dropped the frame (``group`` None): a
-        camera sending only bad messages must show on /diagnostics at once.
+        camera sending only bad messages must show on /diagnostics at once. When the tracker
+        released frames with nobody in them, the empty outputs go out too (as the separate
+        nodes publish them): subscribers learn that nobody is there.
         """
         if group is not None:
+            processed = self.pipeline.tracker.processed
             outputs = self.pipeline.update(group)
+            released = self.pipeline.tracker.processed > processed
             for stage, result in reversed(list(zip(STAGES, outputs, strict=True))):
                 publisher = self.publishers_[stage]
-                if result.skeletons and publisher.get_subscription_count():
+                if (result.skeletons or released) and publisher.get_subscription_count():
                     self.publish_raw(publisher, encode_group(result))
         self.absorb_stage()
 

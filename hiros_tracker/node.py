@@ -107,10 +107,16 @@ class TrackerNode(HirosNode):
             self.get_logger().info(f"calibration: cameras {sorted(calibration.cameras)}")
 
     def on_group(self, data: bytes) -> None:
-        """Decode one camera frame, track, publish what the tracker released."""
+        """Decode one camera frame, track, publish what the tracker released.
+
+        Frames released with nobody in them go out too, as an empty group: the stages
+        downstream learn that nobody is there (a camera's empty frame reaches the tracker
+        as an empty group from the bridge). A frame only buffered publishes nothing.
+        """
+        released = self.tracker.processed
         result = self.tracker.update(decode_group(data))
         self._report_uncalibrated()
-        if result.skeletons:
+        if result.skeletons or self.tracker.processed > released:
             self.publish_raw(self.publisher, encode_group(result))
 
     def _report_uncalibrated(self) -> None:

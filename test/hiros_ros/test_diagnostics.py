@@ -93,3 +93,38 @@ def test_an_empty_room_is_nobody_in_view_not_a_drop(ros_context) -> None:
     values = {kv.key: kv.value for kv in status.values}
     assert values["processed"] == "3"
     assert not any(key.startswith("dropped") for key in values)
+
+
+@pytest.mark.ros
+def test_the_stages_downstream_learn_that_nobody_is_there(ros_context) -> None:
+    """The bridge's empty groups go on: the tracker publishes the frames it released with
+    nobody in them as empty groups, and the merger passes on an empty result."""
+    from hiros_core.calibration import Calibration, CameraCalibration
+    from hiros_core.codec import decode_group, encode_group
+    from hiros_core.model import SkeletonGroup
+    from hiros_merger.node import MergerNode
+    from hiros_tracker.node import TrackerNode
+
+    tracker, merger = TrackerNode(), MergerNode()
+    frame = "k01_depth_camera_link"
+    tracker.tracker.set_calibration(
+        Calibration(reference="k01", cameras={"k01": CameraCalibration(frame_id=frame)})
+    )
+    sent: dict[str, list] = {"tracker": [], "merger": []}
+    for name, node in (("tracker", tracker), ("merger", merger)):
+        node.publish_raw = lambda _publisher, data, name=name: sent[name].append(
+            decode_group(data)
+        )
+    try:
+        for k in range(10):  # a third of a second of an empty room at 30 Hz
+            tracker.on_group(encode_group(SkeletonGroup(1_000_000_000 + k * 33_000_000, frame, [])))
+        for group in sent["tracker"]:
+            merger.on_group(encode_group(group))
+    finally:
+        tracker.destroy_node()
+        merger.destroy_node()
+    assert len(sent["tracker"]) >= 8  # the frames released past the tracker's 50 ms wait
+    assert all(not group.skeletons for group in sent["tracker"])
+    assert len(sent["merger"]) == len(sent["tracker"])
+    assert all(not group.skeletons for group in sent["merger"])
+    assert tracker.tracker.processed == len(sent["tracker"])  # one group per released frame
