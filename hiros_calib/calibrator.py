@@ -53,7 +53,8 @@ class CalibratorParams(SyncParams, ExtrinsicsParams):
     """
 
     reference: str = ""
-    """Reference camera (its frame is the world); empty: the first camera by name."""
+    """Reference camera (the clock and the poses are relative to it; its view gives the world x
+    axis); empty: the first camera by name."""
     world_frame: str = "world"
     """Name of the world frame written to the calibration file."""
     world: str = "floor"
