@@ -92,6 +92,7 @@ CHOICES: dict[str, tuple[str, ...]] = {
     "input": ("driver", "skeletons"),
     "id_scheme": ("body_major", "joint_major"),
     "loss": ("soft_l1", "huber", "cauchy", "linear"),
+    "world": ("floor", "camera"),
 }
 """The values a string parameter may take, by (leaf) name."""
 
