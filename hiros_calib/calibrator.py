@@ -35,10 +35,13 @@ from hiros_calib.sync import (
 from hiros_calib.tracks import BodyTrack, extract_tracks
 from hiros_calib.world import align_to_floor, fit_floor
 from hiros_core.calibration import Calibration, CameraCalibration
-from hiros_core.errors import CalibrationError
+from hiros_core.errors import CalibrationError, ConfigError
 from hiros_core.model import SkeletonGroup
 
 __all__ = ["CalibrationResult", "Calibrator", "CalibratorParams"]
+
+WORLDS = ("floor", "camera")
+"""The world frames a calibration can be given in (``CalibratorParams.world``)."""
 
 Progress = Callable[[str, float], None]
 """Called with a stage description and the fraction (0..1) of the work done."""
@@ -95,6 +98,9 @@ class Calibrator:
 
     def __init__(self, params: CalibratorParams | None = None) -> None:
         self.params = params or CalibratorParams()
+        if self.params.world not in WORLDS:
+            msg = f"world must be one of {', '.join(WORLDS)}, not {self.params.world!r}"
+            raise ConfigError(msg)
         self.drops: Counter[str] = Counter()
         self.result: CalibrationResult | None = None
         self._groups: dict[str, list[SkeletonGroup]] = defaultdict(list)
