@@ -15,9 +15,14 @@ pair is refused with the candidate lags listed.
 
 Every camera's quality figures expose a wrong result: the rigid-fit residual at the chosen lag
 against the best other lag, and with three or more cameras how far the solved clocks and poses
-miss each pair's own measurement (loops that do not close). A camera that fails them is
-flagged: the file is written with the reason, the exit status is 3, and `hiros run` refuses
-the file unless given --accept-flagged.
+miss each pair's own measurement (loops that do not close), and how far apart two halves of
+the recording put each pose. A camera that fails them is flagged: the file is written with
+the reason, the exit status is 3, and `hiros run` refuses the file unless given
+--accept-flagged.
+
+The world is gravity-aligned (REP-103): z up and the floor at z = 0, found from where the
+people's feet rest, x along the reference camera's view, the origin on the floor below it.
+--world camera keeps the reference camera's own frame.
 
 Examples:
   hiros calibrate sample/recording.mcap --out calib.yaml
