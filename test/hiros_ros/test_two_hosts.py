@@ -1,8 +1,8 @@
-"""hiros across two hosts joined by a veth pair in network namespaces the test makes itself
-(two_hosts.sh): a camera PC with the driver's topics and the bridges, a stage PC with the
-consumers. The output is what one host gives: the offline bridge's groups message for message
-(as test_bridge_live on one host), and the stages' output as hiros run's, up to message timing
-(as test_pipeline/test_live on one host)."""
+"""hiros across hosts on one switch, network namespaces the test makes itself (hosts.sh): camera
+PCs with the driver's topics and the bridges, a stage PC with the consumers. The output is what
+one host gives: the offline bridge's groups message for message (as test_bridge_live on one
+host), and the stages' output as hiros run's, up to message timing (as test_pipeline/test_live
+on one host)."""
 
 from __future__ import annotations
 
@@ -36,13 +36,14 @@ def _client_module():
     return _module("bridge_client", CLIENT)
 
 
-def _two_hosts(host_a: str, host_b: str, env: dict[str, str]) -> subprocess.CompletedProcess:
+def _hosts(env: dict[str, str], *commands: str) -> subprocess.CompletedProcess:
+    """Run one shell command per host (the last one's status is the run's)."""
     if not (shutil.which("unshare") and shutil.which("nsenter") and shutil.which("ip")):
         pytest.skip("unshare, nsenter and ip are needed")
     if subprocess.run(["unshare", "-rn", "true"], check=False).returncode != 0:
         pytest.skip("this kernel does not allow private network namespaces")
     return subprocess.run(
-        ["unshare", "-rn", str(HERE / "two_hosts.sh"), host_a, host_b],
+        ["unshare", "-rn", str(HERE / "hosts.sh"), *commands],
         env=env, capture_output=True, text=True, timeout=300, check=False,
     )  # fmt: skip
 
@@ -54,7 +55,7 @@ def test_bridges_on_one_host_their_output_on_another(ros_env, tmp_path: Path) ->
         f"--ros-args -p 'cameras:=[k01, k02]' > {tmp_path}/bridges.log 2>&1"
     )
     consumer = f"{python} {shlex.quote(str(CLIENT))}"
-    run = _two_hosts(bridges, consumer, ros_env)
+    run = _hosts(ros_env, bridges, consumer)
     log = run.stderr + (tmp_path / "bridges.log").read_text()
     assert run.returncode == 0, log
     assert "Traceback" not in log
@@ -90,7 +91,7 @@ def test_bridges_on_a_camera_pc_stages_on_another_as_hiros_run(ros_env, tmp_path
     bin_dir, go, out = Path(sys.prefix) / "bin", tmp_path / "go", tmp_path / "live.bin"
     camera_pc = (  # the bridges, then the recording once the stage PC is listening
         f"{bin_dir}/azure_bridge --ros-args -p 'cameras:=[k01, k02]' 2>{tmp_path}/a.log & "
-        f"while [ ! -e {go} ]; do sleep 0.2; done; "
+        f"while [ ! -e {go} ]; do sleep 0.1; done; "
         f"{bin_dir}/hiros play {scene}/recording.mcap --no-clock --rate 0.5 --delay 10 "
         f">>{tmp_path}/a.log 2>&1; wait"
     )
@@ -100,7 +101,7 @@ def test_bridges_on_a_camera_pc_stages_on_another_as_hiros_run(ros_env, tmp_path
         f"{sys.executable} {RECORDER} {out} 3 150 pipeline | while read -r line; do "
         f'echo "$line"; case "$line" in "nodes ready"*) touch {go};; esac; done'
     )
-    run = _two_hosts(camera_pc, stage_pc, ros_env)
+    run = _hosts(ros_env, camera_pc, stage_pc)
     logs = run.stdout + run.stderr + (tmp_path / "a.log").read_text()
     logs += (tmp_path / "b.log").read_text()
     assert run.returncode == 0, logs
