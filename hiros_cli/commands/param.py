@@ -173,4 +173,5 @@ def _yaml_value(value: Any) -> str:
 
 
 def _bound(value: float) -> str:
-    return "any" if math.isinf(value) else f"{value:g}"
+    """A range end as a reader wants it: ``any`` for none (inf, or int32's largest)."""
+    return "any" if math.isinf(value) or abs(value) >= 2**31 - 1 else f"{value:g}"
