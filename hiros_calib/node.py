@@ -21,6 +21,7 @@ from pathlib import Path
 from typing import Any
 
 from hiros_skeleton_msgs.msg import SkeletonGroup as SkeletonGroupMsg
+from rcl_interfaces.msg import SetParametersResult
 from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, QoSProfile
 from std_srvs.srv import Trigger
@@ -123,6 +124,8 @@ class CalibNode(HirosNode):
     def __init__(self) -> None:
         super().__init__("calib")
         self.declare_params(CalibNodeParams, live=LIVE, apply=self._apply)
+        self._setting_results = False  # True while publish_result sets cameras.*
+        self.add_on_set_parameters_callback(self._on_set_results)
         self.live = LiveCalibrator(self.params, self._initial_calibration())
         # snapshots handed from the worker thread: the newest result, and the one to publish
         self._current = copy.deepcopy(self.live.calibration)
@@ -148,6 +151,23 @@ class CalibNode(HirosNode):
 
     def _apply(self, params: CalibNodeParams) -> None:
         self.live.params = params
+
+    def _on_set_results(self, parameters: list[Parameter]) -> SetParametersResult:
+        """Refuse a change of the results (``cameras.*``) from outside.
+
+        The calibration makes them: a value set by hand would be followed by the stages but
+        unknown to the calibration.
+        """
+        if self._setting_results:
+            return SetParametersResult(successful=True)
+        for parameter in parameters:
+            if parameter.name.startswith("cameras."):
+                reason = (
+                    f"{parameter.name} is a result of the calibration; to start from other "
+                    "values give calibration_file, to keep these call ~/save"
+                )
+                return SetParametersResult(successful=False, reason=reason)
+        return SetParametersResult(successful=True)
 
     def _initial_calibration(self) -> Calibration | None:
         path = self.params.calibration_file
@@ -210,10 +230,14 @@ class CalibNode(HirosNode):
             for name, value in values.items()
             if self._published.get(name) != value
         ]
-        for parameter in changed:
-            if not self.has_parameter(parameter.name):
-                self.declare_parameter(parameter.name, parameter.value)
-        self.set_parameters(changed)
+        self._setting_results = True
+        try:
+            for parameter in changed:
+                if not self.has_parameter(parameter.name):
+                    self.declare_parameter(parameter.name, parameter.value)
+            self.set_parameters(changed)
+        finally:
+            self._setting_results = False
         self._published.update(values)
         if self.params.publish_tf:
             mount = CameraMount(self.params.tf_frame_suffix, self.params.tf_base_suffix,

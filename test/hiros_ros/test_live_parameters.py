@@ -58,3 +58,24 @@ def test_calib_saves_where_save_file_says_now(ros_context, tmp_path: Path) -> No
     finally:
         node._stop.set()
         node.destroy_node()
+
+
+def test_calib_s_results_are_not_set_from_outside(ros_context) -> None:
+    from hiros_calib.node import CalibNode
+    from hiros_core.calibration import Calibration, CameraCalibration
+
+    node = CalibNode()
+    try:
+        frame = "k01_depth_camera_link"
+        node._latest = Calibration(
+            reference="k01", cameras={"k01": CameraCalibration(frame_id=frame, time_offset=0.5)}
+        )
+        node.publish_result()  # the node sets its own results
+        assert node.get_parameter("cameras.k01.time_offset").value == 0.5
+        refused = set_one(node, "cameras.k01.time_offset", 0.1)
+        assert not refused.successful
+        assert "is a result of the calibration" in refused.reason
+        assert node.get_parameter("cameras.k01.time_offset").value == 0.5
+    finally:
+        node._stop.set()
+        node.destroy_node()
