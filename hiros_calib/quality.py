@@ -46,9 +46,9 @@ class LoopTolerances:
     time_s: float = 0.05
     rotation_deg: float = 2.0
     translation_m: float = 0.10
-    uncertainty_deg: float = 1.0
+    uncertainty_deg: float = 1.5
     """Largest pose uncertainty (half the split-half spread of a pair's pose), degrees."""
-    uncertainty_m: float = 0.05
+    uncertainty_m: float = 0.075
     """Largest pose uncertainty in translation, metres."""
 
 
