@@ -44,10 +44,10 @@ def test_run_with_calibration_auto_stops_on_a_flagged_result(
 ) -> None:
     from hiros_sim.presets import preset_params
 
-    # a noisier SDK and 15 s of one person: the two halves of the recording give poses
+    # a noisier SDK and 10 s of one person: the two halves of the recording give poses
     # degrees apart, so the calibration flags the camera as poorly determined
     folder = tmp_path / "noisy"
-    scene = simulate(preset_params("noisy-sdk", seed=0, duration=15.0, n_cameras=2, n_people=1))
+    scene = simulate(preset_params("noisy-sdk", seed=0, duration=10.0, n_cameras=2, n_people=1))
     write_recording(scene, folder)
     out = tmp_path / "out.mcap"
     args = ["run", str(folder / "recording.mcap"), "--calibration", "auto", "--out", str(out)]
