@@ -115,11 +115,24 @@ def _is_number(cell: str) -> bool:
     return True
 
 
+MAX_CSV_BYTES = 256 << 20
+"""Largest CSV file read (half an hour of three cameras and two people, one row per joint);
+the rows are held as text while read, about ten times the file's size."""
+
+
 def read_table(path: str | Path, drops: Counter[str] | None = None) -> Table:
-    """Read a CSV file with a header row; rows of the wrong width are counted ``bad_row``."""
+    """Read a CSV file with a header row; rows of the wrong width are counted ``bad_row``.
+
+    Raises:
+        RecordingError: the file cannot be read, is empty or larger than ``MAX_CSV_BYTES``.
+
+    """
     path = Path(path)
     drops = drops if drops is not None else Counter()
     try:
+        if path.stat().st_size > MAX_CSV_BYTES:
+            msg = f"CSV file {path} is larger than {MAX_CSV_BYTES} bytes: not read (split it)"
+            raise RecordingError(msg)
         with path.open(newline="") as stream:
             reader = csv.reader(stream, skipinitialspace=True)
             header = next(reader, None)

@@ -79,3 +79,16 @@ def test_case15_camera_names_that_become_one_topic_are_refused(
     assert main(["convert", str(path), "--out", str(tmp_path / "out.mcap")]) == 1
     assert "both become the topic namespace 'cam_A'" in capsys.readouterr().err
     assert not (tmp_path / "out.mcap").exists()
+
+
+def test_a_csv_past_the_size_limit_is_refused_before_reading(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    from hiros_convert import _table
+
+    path = tmp_path / "big.csv"
+    rows = [f"k01,{k},1,Pelvis,0,0,2" for k in range(1000)]
+    path.write_text("camera,stamp_ns,body_id,joint,x,y,z\n" + "\n".join(rows) + "\n")
+    monkeypatch.setattr(_table, "MAX_CSV_BYTES", 10_000)
+    with pytest.raises(RecordingError, match="larger than 10000 bytes"):
+        read_streams(path, "csv")
