@@ -32,6 +32,7 @@ __all__ = [
     "is_hiros_recording",
     "only_holds",
     "refuse_inputs",
+    "staged_files",
     "staged_output",
 ]
 
@@ -139,6 +140,24 @@ def staged_output(final: Path, *, replace: bool = False) -> Iterator[Path]:
                 _remove(final)
         if staged.exists():
             staged.replace(final)
+    finally:
+        shutil.rmtree(staging, ignore_errors=True)
+
+
+@contextmanager
+def staged_files(folder: Path) -> Iterator[Path]:
+    """A new hidden folder to write files meant for ``folder`` in; on success they move in.
+
+    For outputs that go into a folder which may hold other things (``--plots``, ``--report``,
+    ``hiros export``): each file written replaces its namesake in ``folder`` in one rename,
+    the rest of ``folder`` is left alone; on an error or interrupt nothing reaches it.
+    """
+    folder.mkdir(parents=True, exist_ok=True)
+    staging = Path(_make_staging(folder / "files"))
+    try:
+        yield staging
+        for path in sorted(staging.iterdir()):
+            path.replace(folder / path.name)
     finally:
         shutil.rmtree(staging, ignore_errors=True)
 

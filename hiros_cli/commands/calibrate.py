@@ -99,7 +99,13 @@ def run(args: argparse.Namespace) -> int:
     from hiros_calib.calibrator import CalibratorParams
     from hiros_cli.commands.run import require_camera_topics
     from hiros_core.calibration import save_calibration
-    from hiros_core.outputs import check_output, is_calibration_file, refuse_inputs, staged_output
+    from hiros_core.outputs import (
+        check_output,
+        is_calibration_file,
+        refuse_inputs,
+        staged_files,
+        staged_output,
+    )
 
     console = Console()
     check_output(args.out, inputs=[args.recording], force=True, ours=is_calibration_file,
@@ -132,7 +138,8 @@ def run(args: argparse.Namespace) -> int:
         console.print("[yellow]hiros run refuses flagged cameras unless given --accept-flagged[/]")
         return FLAGGED_EXIT
     if args.plots:
-        written = write_plots(result, args.plots)
+        with staged_files(args.plots) as staging:
+            written = write_plots(result, staging)
         console.print(f"wrote {len(written)} plots to {args.plots}")
     return 0
 

@@ -154,8 +154,10 @@ def run(args: argparse.Namespace) -> int:
     print_warnings(console, problems)  # figures from a damaged output cover only what was read
     print_evaluation(console, evaluation)
     if args.report:
+        from hiros_core.outputs import staged_files
         from hiros_eval.report import write_report
 
-        path = write_report(evaluation, args.report, f"hiros evaluation of {args.output.name}")
-        console.print(f"report: {path}")
+        with staged_files(args.report) as staging:  # a cut report never replaces a whole one
+            path = write_report(evaluation, staging, f"hiros evaluation of {args.output.name}")
+        console.print(f"report: {args.report / path.name}")
     return 0

@@ -32,7 +32,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Read the stage, write three files per person."""
-    from hiros_core.outputs import refuse_inputs, staged_output
+    from hiros_core.outputs import refuse_inputs, staged_files
     from hiros_eval.export import person_series, write_angles_csv, write_positions_csv, write_trc
     from hiros_eval.run import read_run
 
@@ -55,13 +55,10 @@ def run(args: argparse.Namespace) -> int:
     for person, (times, positions) in sorted(people.items()):
         if len(times) < args.min_frames:
             continue
-        for name, write in (
-            (f"person_{person}_positions.csv", write_positions_csv),
-            (f"person_{person}.trc", write_trc),
-            (f"person_{person}_angles.csv", write_angles_csv),
-        ):
-            with staged_output(args.out / name, replace=True) as staged:  # whole or absent
-                write(staged, times, positions)
+        with staged_files(args.out) as staging:  # each file whole in args.out, or absent
+            write_positions_csv(staging / f"person_{person}_positions.csv", times, positions)
+            write_trc(staging / f"person_{person}.trc", times, positions)
+            write_angles_csv(staging / f"person_{person}_angles.csv", times, positions)
         console.print(f"person {person}: {len(times)} frames, {times[-1]:.1f} s")
         written += 1
     console.print(f"{written} people exported from /hiros/{args.stage} to {args.out}")
