@@ -40,8 +40,9 @@ class RosProcesses:
     everything they printed, so a test can assert that no node raised.
     """
 
-    def __init__(self, env: dict[str, str]) -> None:
+    def __init__(self, env: dict[str, str], cwd: Path | None = None) -> None:
         self.env = env
+        self.cwd = cwd  # node processes write files here (the calib node saves at shutdown)
         self.processes: list[subprocess.Popen] = []
 
     def node(self, module: str, *ros_args: str, function: str = "main") -> subprocess.Popen:
@@ -53,7 +54,12 @@ class RosProcesses:
     def command(self, command: list[str]) -> subprocess.Popen:
         """Start any command as one of the test's processes."""
         process = subprocess.Popen(
-            command, env=self.env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True
+            command,
+            env=self.env,
+            cwd=self.cwd,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.STDOUT,
+            text=True,
         )
         self.processes.append(process)
         return process
@@ -81,9 +87,9 @@ class RosProcesses:
 
 
 @pytest.fixture
-def ros_processes(ros_env: dict[str, str]):
-    """A RosProcesses for the test; whatever is still running is stopped afterwards."""
-    processes = RosProcesses(ros_env)
+def ros_processes(ros_env: dict[str, str], tmp_path: Path):
+    """A RosProcesses for the test, working in its tmp_path; stopped afterwards."""
+    processes = RosProcesses(ros_env, cwd=tmp_path)
     yield processes
     processes.stop()
 
