@@ -164,6 +164,7 @@ class LiveCalibrator(Accounted):
         processed: frames kept in the window.
         events: ``(receiver time ns, message)`` of what happened: cameras calibrated,
             estimates that failed, changes detected.
+        estimates: full calibrations of the window run so far.
 
     """
 
@@ -176,6 +177,7 @@ class LiveCalibrator(Accounted):
         )
         self.drops = Drops()
         self.events: list[tuple[int, str]] = []
+        self.estimates = 0
         self._frames: dict[str, deque[tuple[SkeletonGroup, int]]] = {}
         self._since: dict[str, int] = {}  # per camera: frames stamped earlier are ignored
         self._support: dict[str, int] = {}  # per camera: first stamp its estimate rests on
@@ -290,6 +292,7 @@ class LiveCalibrator(Accounted):
 
     def estimate(self, now_ns: int = 0) -> bool:
         """A full calibration of the window, merged into the current one; True if it changed."""
+        self.estimates += 1
         groups, arrivals = self._window()
         if len(groups) < 2:
             return False

@@ -33,6 +33,7 @@ from hiros_core.codec import decode_group
 from hiros_core.errors import CalibrationError
 from hiros_core.frames import AZURE_KINECT_MOUNT, CameraMount, camera_transforms
 from hiros_ros import HirosNode, run_node
+from hiros_ros.memory import release_freed_memory
 from hiros_ros.node import camera_qos
 from hiros_ros.tf import tf_message
 
@@ -209,9 +210,12 @@ class CalibNode(HirosNode):
     def _work(self) -> None:
         while not self._stop.wait(self.params.step_period):
             try:
+                estimates = self.live.estimates
                 if self.live.step(self.get_clock().now().nanoseconds):
                     self._current = copy.deepcopy(self.live.calibration)
                     self._latest = self._current
+                if self.live.estimates != estimates:
+                    release_freed_memory()  # an estimate's arrays would otherwise stay mapped
             except Exception as exc:  # the worker must survive a bad window
                 self.error(type(exc).__name__, f"calibration step: {exc}")
 
