@@ -32,10 +32,13 @@ lint: setup
 
 # The whole suite runs in a private network namespace holding only loopback, so that DDS
 # traffic of the ROS tests never leaves the machine (fallback: localhost-only discovery).
+# (Foxglove's npm libraries are installed first: the namespace cannot reach the registry.)
 test: lint
+	tools/install_npm_test_deps.sh
 	tools/netns.sh $(VENV)/bin/pytest -q
 
 test-fast: lint
+	tools/install_npm_test_deps.sh
 	tools/netns.sh $(VENV)/bin/pytest -q -m "not slow"
 
 demo: setup
