@@ -69,7 +69,9 @@ def _start_nodes(calibration: Path) -> dict[str, subprocess.Popen]:
     commands = {
         "pipeline": [_executable("pipeline"), *common, "-p", "input:=skeletons",
                      "-p", f"cameras:={cameras}", "-p", f"calibration_file:={calibration}"],
-        "calib": [_executable("calib"), *common, "-p", f"camera_names:={cameras}"],
+        # (it saves its calibration at shutdown: beside the soak's own file, not in the cwd)
+        "calib": [_executable("calib"), *common, "-p", f"camera_names:={cameras}",
+                  "-p", f"save_file:={calibration.with_name('calib_node.yaml')}"],
     }  # fmt: skip
     return {name: subprocess.Popen(c, stdout=subprocess.DEVNULL) for name, c in commands.items()}
 
