@@ -151,7 +151,8 @@ class Calibrator:
                 for c in groups
                 if arrival_ns and c in arrival_ns
             }
-        arrival_offsets, notes = arrival_offsets_from_delays(delays)
+        arrival_offsets, arrival_notes = arrival_offsets_from_delays(delays)
+        notes = list(arrival_notes)
         report = progress or (lambda _stage, _done: None)
         params = self.params
         if len(groups) < 2:
@@ -191,9 +192,9 @@ class Calibrator:
         }
         for camera, cal in calibration.cameras.items():
             cal.quality.update(_sync_quality(camera, sync_pairs))
-        if arrival_offsets or notes:
+        if arrival_offsets or arrival_notes:
             for cal in calibration.cameras.values():
-                cal.quality["arrival_times"] = "ignored" if notes else "used"
+                cal.quality["arrival_times"] = "ignored" if arrival_notes else "used"
         flag_cameras(calibration, sync_pairs, pose_pairs)
         if params.world == "floor":
             notes.extend(_align_to_floor(calibration, tracks))

@@ -43,6 +43,7 @@ from hiros_calib.calibrator import Calibrator, CalibratorParams
 from hiros_calib.extrinsics import Correspondences, pair_correspondences
 from hiros_calib.sync import CameraClock
 from hiros_calib.tracks import BodyTrack, extract_tracks
+from hiros_calib.world import place_in_world
 from hiros_core.accounting import Accounted, Drops
 from hiros_core.calibration import Calibration, CameraCalibration
 from hiros_core.errors import CalibrationError
@@ -137,13 +138,6 @@ def _agrees(old: CameraCalibration, new: CameraCalibration, params: LiveCalibrat
         and angle <= params.agree_rotation
         and distance <= params.agree_translation
     )
-
-
-def _place(estimate: Calibration, world_from_reference: RigidTransform) -> None:
-    """Re-express an estimate solved in its reference camera's frame in the current world."""
-    for cam in estimate.cameras.values():
-        placed = world_from_reference @ cam.extrinsics
-        cam.translation, cam.rotation = placed.translation, placed.quaternion
 
 
 def _clock(name: str, cam: CameraCalibration) -> CameraClock:
@@ -313,7 +307,7 @@ class LiveCalibrator(Accounted):
             self.events.append((now_ns, f"estimate failed: {exc}"))
             return False
         if reference is not None:
-            _place(estimate, reference.extrinsics)
+            place_in_world(estimate, reference.extrinsics)
         self.drops.update(calibrator.drops)
         changed = False
         if not self.calibration.reference:

@@ -200,6 +200,16 @@ Settle = Callable[[PairOffset, Callable[[float], PairOffset]], PairOffset]
 """A check of one pair's lag before the global solve: ``settle(pair, repin) -> pair``."""
 
 
+def _significance(correlation: Any, overlap: Any) -> Any:
+    """Fisher z of a correlation times the square root of its overlap (s), per element.
+
+    A high correlation over a few seconds of overlap is more often chance than a slightly
+    lower one over the whole recording; this weighs the two alike.
+    """
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return np.arctanh(np.clip(correlation, -0.999, 0.999)) * np.sqrt(overlap)
+
+
 # --------------------------------------------------------------------------- grid signals
 
 
@@ -298,7 +308,7 @@ class _Candidate:
     @property
     def significance(self) -> float:
         """Fisher z of the peak times the square root of the overlap (s)."""
-        return math.atanh(min(max(self.peak, -0.999), 0.999)) * math.sqrt(self.overlap)
+        return float(_significance(self.peak, self.overlap))
 
 
 def _peak(
@@ -319,9 +329,7 @@ def _peak(
         valid &= (lags >= search[0]) & (lags <= search[1])
     if valid.sum() < 5:
         return None
-    with np.errstate(invalid="ignore", divide="ignore"):
-        significance = np.arctanh(np.clip(r, -0.999, 0.999)) * np.sqrt(overlap)
-    significance = np.where(valid, significance, -np.inf)
+    significance = np.where(valid, _significance(r, overlap), -np.inf)
     best = int(np.argmax(significance))
     peak = float(r[best])
     spread = r[valid]
@@ -546,9 +554,7 @@ def estimate_pair_offset(
     work = work if work is not None else _TrackWork(params)
     names = {"camera_a": camera_a, "camera_b": camera_b}
     if around is not None:
-        reach = max(3 * params.grid_step, 2 * params.consensus_tolerance)
-        return _estimate(tracks_a, tracks_b, params, (around - reach, around + reach),
-                         work=work, **names)  # fmt: skip
+        return _estimate(tracks_a, tracks_b, params, _lobe(around, params), work=work, **names)
     anywhere = (-params.max_offset, params.max_offset) if params.max_offset > 0 else None
     free = _estimate(tracks_a, tracks_b, params, anywhere, work=work, **names)
     if prior is None:
@@ -569,17 +575,21 @@ def estimate_pair_offset(
     return free
 
 
-def _significance(pair: PairOffset) -> float:
-    """Fisher z of the pair's pooled peak times the square root of its overlap."""
-    peak = float(np.clip(pair.quality.get("peak", 0.0), -0.999, 0.999))
-    return math.atanh(peak) * math.sqrt(pair.quality.get("overlap_s", 0.0))
+def _lobe(lag: float, params: SyncParams) -> tuple[float, float]:
+    """The search range (s) of the correlation lobe around one candidate lag."""
+    reach = max(3 * params.grid_step, 2 * params.consensus_tolerance)
+    return lag - reach, lag + reach
 
 
 def _contradicts(free: PairOffset, near: PairOffset, params: SyncParams) -> bool:
     """Whether the best lag anywhere is far from, and far more significant than, the prior's."""
     if not free.ok or abs(free.offset - near.offset) <= params.prior_window:
         return False
-    return _significance(free) > params.prior_contradiction * _significance(near)
+
+    def strength(pair: PairOffset) -> float:
+        return float(_significance(pair.quality["peak"], pair.quality["overlap_s"]))
+
+    return strength(free) > params.prior_contradiction * strength(near)
 
 
 def _estimate(
@@ -634,9 +644,8 @@ def _estimate(
         near = [c for c in good if abs(c.lag_index - chosen) <= tolerance]
         used = _consensus(near, params) if near else []
         if not used:
-            reach = max(3 * params.grid_step, 2 * params.consensus_tolerance)
             pinned = _estimate(
-                tracks_a, tracks_b, params, (lags[0, 0] - reach, lags[0, 0] + reach),
+                tracks_a, tracks_b, params, _lobe(float(lags[0, 0]), params),
                 camera_a=camera_a, camera_b=camera_b, work=work,
             )  # fmt: skip
             pinned.candidates = lags
@@ -748,9 +757,7 @@ def _candidate_lags(
     valid = (overlap >= params.min_overlap) & np.isfinite(pooled)
     if search is not None:
         valid &= (lags >= search[0] - 1e-9) & (lags <= search[1] + 1e-9)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        significance = np.arctanh(np.clip(pooled, -0.999, 0.999)) * np.sqrt(overlap)
-    significance = np.where(valid, significance, -np.inf)
+    significance = np.where(valid, _significance(pooled, overlap), -np.inf)
     peaks = _local_maxima(significance, max(3, round(0.25 / step)))
     # a lag whose overlap is much shorter than the best one's rests on too little data to
     # rival it (the poses would judge it on a transform fitted to a few seconds)

@@ -32,7 +32,7 @@ from hiros_calib.tracks import BodyTrack
 from hiros_core.calibration import Calibration
 from hiros_core.geometry import RigidTransform
 
-__all__ = ["FOOT_JOINT_HEIGHT", "FloorFit", "align_to_floor", "fit_floor"]
+__all__ = ["FOOT_JOINT_HEIGHT", "FloorFit", "align_to_floor", "fit_floor", "place_in_world"]
 
 FOOT_JOINT_HEIGHT = {"Foot": 0.06, "Ankle": 0.09}
 """Height (m) of a resting foot's joint above the floor, by joint: the body-tracking SDKs'
@@ -205,9 +205,16 @@ def align_to_floor(calibration: Calibration, floor: FloorFit) -> None:
     below = floor.floor_height * up
     # (re-orthonormalised: x, y and up are orthogonal up to rounding)
     rotation = Rotation.from_matrix(rows)
-    world_from_reference = RigidTransform(rotation, -rotation.apply(below))
+    place_in_world(calibration, RigidTransform(rotation, -rotation.apply(below)))
+    reference = calibration.cameras[calibration.reference]
+    reference.quality.update(floor.quality())
+
+
+def place_in_world(calibration: Calibration, world_from_reference: RigidTransform) -> None:
+    """Re-express every pose of a calibration solved in its reference camera's frame (in place).
+
+    ``world_from_reference`` is where the reference camera's frame sits in the new world.
+    """
     for cam in calibration.cameras.values():
         placed = world_from_reference @ cam.extrinsics
         cam.translation, cam.rotation = placed.translation, placed.quaternion
-    reference = calibration.cameras[calibration.reference]
-    reference.quality.update(floor.quality())
