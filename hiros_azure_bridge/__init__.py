@@ -1,6 +1,9 @@
-"""hiros_azure_bridge: body-tracking drivers' MarkerArrays -> SkeletonGroup."""
+"""hiros_azure_bridge: the bridge nodes, body-tracking drivers' MarkerArrays -> SkeletonGroup.
 
-from hiros_azure_bridge.driver_format import (
+The conversion itself is ``hiros_core.driver`` (ROS-free); its public names are also here.
+"""
+
+from hiros_core.driver import (
     DriverBridge,
     DriverBridgeParams,
     group_to_driver_markers,

@@ -26,9 +26,9 @@ from typing import Any
 from hiros_skeleton_msgs.msg import SkeletonGroup as SkeletonGroupMsg
 from visualization_msgs.msg import MarkerArray
 
-from hiros_azure_bridge.driver_format import DriverBridge, DriverBridgeParams, load_bridge_params
 from hiros_core.accounting import Merged
 from hiros_core.codec import encode_group
+from hiros_core.driver import DriverBridge, DriverBridgeParams, load_bridge_params
 from hiros_ros import HirosNode, run_node
 from hiros_ros.node import camera_qos, pipeline_qos
 from hiros_ros.params import parameter_specs

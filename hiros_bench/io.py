@@ -29,9 +29,9 @@ from typing import Any
 
 import numpy as np
 
-from hiros_azure_bridge import DriverBridge, group_to_driver_markers
 from hiros_bench.timing import per_call_seconds
 from hiros_core.codec import encode_group, encode_marker_array
+from hiros_core.driver import DriverBridge, group_to_driver_markers
 from hiros_core.layouts import AZURE_KINECT
 from hiros_core.model import Skeleton, SkeletonGroup
 from hiros_core.recording import MARKER_ARRAY, RecordingWriter, iter_groups

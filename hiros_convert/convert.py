@@ -116,7 +116,7 @@ def convert(
         RecordingError: unreadable input or unwritable output.
 
     """
-    from hiros_azure_bridge import group_to_driver_markers
+    from hiros_core.driver import group_to_driver_markers
     from hiros_core.recording import RecordingWriter
 
     drops = drops if drops is not None else Counter()

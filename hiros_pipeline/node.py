@@ -83,8 +83,7 @@ class PipelineNode(HirosNode):
     def _subscribe(self, camera: str) -> None:
         qos = camera_qos(self.params.camera_qos)
         if self.params.input == "driver":
-            from hiros_azure_bridge import DriverBridge, DriverBridgeParams
-            from hiros_azure_bridge.driver_format import warm_up
+            from hiros_core.driver import DriverBridge, DriverBridgeParams, warm_up
 
             warm_up()  # numba is loaded (the stages'): the bridge's compiled path too
 

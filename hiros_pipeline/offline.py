@@ -24,11 +24,11 @@ from pathlib import Path
 
 import yaml
 
-from hiros_azure_bridge.driver_format import warm_up as bridge_warm_up
 from hiros_core.accounting import Drops
 from hiros_core.calibration import Calibration
 from hiros_core.cdr import PlanBuilder
 from hiros_core.codec import warm_up as codec_warm_up
+from hiros_core.driver import warm_up as bridge_warm_up
 from hiros_core.errors import ConfigError, RecordingError
 from hiros_core.frames import encode_tf_message, recording_transforms
 from hiros_core.model import SkeletonGroup

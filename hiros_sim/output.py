@@ -77,7 +77,7 @@ def write_recording(result: SimResult, out_dir: str | Path) -> Path:
         RecordingError: the folder cannot be written.
 
     """
-    from hiros_azure_bridge import group_to_driver_markers
+    from hiros_core.driver import group_to_driver_markers
     from hiros_core.recording import RecordingWriter
 
     out = save_truth(result, out_dir)

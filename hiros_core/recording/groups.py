@@ -14,19 +14,16 @@ import contextlib
 from collections import Counter
 from collections.abc import Iterable, Iterator
 from pathlib import Path
-from typing import TYPE_CHECKING
 
 import numpy as np
 
 from hiros_core.accounting import Drops
 from hiros_core.codec import decode_group
+from hiros_core.driver import DriverBridge, DriverBridgeParams
 from hiros_core.errors import CodecError
 from hiros_core.model import SkeletonGroup
 from hiros_core.recording.reader import UNCOUNTED_DROPS, MessageBatch, RecordingReader
 from hiros_core.recording.writer import MARKER_ARRAY, SKELETON_GROUP
-
-if TYPE_CHECKING:
-    from hiros_azure_bridge.driver_format import DriverBridge, DriverBridgeParams
 
 __all__ = [
     "DRIVER_TOPIC_SUFFIX",
@@ -182,8 +179,6 @@ def _batch_groups(
     drops: Drops,
 ) -> list[SkeletonGroup | None]:
     """The group of each message of ``batch`` (None: dropped, the reason counted)."""
-    from hiros_azure_bridge.driver_format import DriverBridge
-
     groups: list[SkeletonGroup | None] = [None] * len(batch)
     for channel, (topic, msgtype) in enumerate(zip(batch.topics, batch.msgtypes, strict=True)):
         rows = np.flatnonzero(batch.channels == channel)

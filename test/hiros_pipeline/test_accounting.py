@@ -13,10 +13,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from hiros_azure_bridge import DriverBridge, group_to_driver_markers
-from hiros_azure_bridge.driver_format import DELETE, DELETEALL
 from hiros_core.calibration import load_calibration
 from hiros_core.codec import MarkerArrayData
+from hiros_core.driver import DELETE, DELETEALL, DriverBridge, group_to_driver_markers
 from hiros_core.recording import iter_groups
 from hiros_pipeline import Pipeline
 

@@ -23,10 +23,9 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from hiros_azure_bridge import group_to_driver_markers
-from hiros_azure_bridge.driver_format import DriverBridge
 from hiros_convert import read_streams
 from hiros_core.codec import decode_group, decode_marker_fields, encode_group
+from hiros_core.driver import DriverBridge, group_to_driver_markers
 from hiros_core.errors import CodecError, ConfigError, HirosError
 from hiros_core.layouts import AZURE_KINECT
 from hiros_core.model import Skeleton, SkeletonGroup

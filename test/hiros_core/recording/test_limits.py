@@ -13,8 +13,8 @@ import pytest
 import zstandard
 from mcap.reader import make_reader
 
-from hiros_azure_bridge import group_to_driver_markers
 from hiros_core.codec import decode_group, decode_marker_array, encode_group
+from hiros_core.driver import group_to_driver_markers
 from hiros_core.errors import CodecError
 from hiros_core.layouts import AZURE_KINECT
 from hiros_core.limits import MAX_BODIES, MAX_CHUNK_BYTES, MAX_MARKERS
@@ -155,8 +155,8 @@ def test_case9_a_driver_message_of_too_many_markers_is_dropped_and_counted(
 
 
 def test_bodies_past_the_limit_from_a_driver_message_are_dropped() -> None:
-    from hiros_azure_bridge.driver_format import DriverBridge
     from hiros_core.codec import encode_marker_array
+    from hiros_core.driver import DriverBridge
 
     bridge = DriverBridge()
     crowd = group_to_driver_markers(_group(MAX_BODIES + 1, T0))

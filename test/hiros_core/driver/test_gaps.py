@@ -4,9 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from hiros_azure_bridge import group_to_driver_markers
-from hiros_azure_bridge.driver_format import DriverBridge
 from hiros_core.codec import encode_marker_array
+from hiros_core.driver import DriverBridge, group_to_driver_markers
 from hiros_core.layouts import AZURE_KINECT
 from hiros_core.model import Skeleton, SkeletonGroup
 

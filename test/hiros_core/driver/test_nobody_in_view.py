@@ -1,7 +1,7 @@
 """The Azure driver's empty MarkerArray, with its arrival time, is "nobody in view"."""
 
-from hiros_azure_bridge import DriverBridge, group_to_driver_markers
 from hiros_core.codec import MarkerArrayData
+from hiros_core.driver import DriverBridge, group_to_driver_markers
 from hiros_core.layouts import AZURE_KINECT
 from hiros_core.model import Skeleton, SkeletonGroup
 

@@ -3,14 +3,17 @@
 import numpy as np
 import pytest
 
-from hiros_azure_bridge import (
+from hiros_core.codec import MarkerArrayData, decode_marker_array, encode_marker_array
+from hiros_core.driver import (
+    ADD,
+    DELETE,
+    DELETEALL,
+    SPHERE,
     DriverBridge,
     DriverBridgeParams,
     group_to_driver_markers,
     load_bridge_params,
 )
-from hiros_azure_bridge.driver_format import ADD, DELETE, DELETEALL, SPHERE
-from hiros_core.codec import MarkerArrayData, decode_marker_array, encode_marker_array
 from hiros_core.errors import CodecError, ConfigError
 from hiros_core.layouts import AZURE_KINECT, KINECT_V2
 from hiros_core.model import Skeleton, SkeletonGroup
@@ -241,7 +244,7 @@ def test_bytes_path_equals_decoded_path_frame_after_frame():
 
 def test_compiled_frame_path_equals_the_numpy_path(monkeypatch):
     """The numba path for usual frames gives the numpy path's groups and drops."""
-    from hiros_azure_bridge import driver_format
+    from hiros_core.driver import bridge as driver_format
 
     frames = []
     for step in range(6):
@@ -339,7 +342,7 @@ def _one_at_a_time(bridge, frames):
 def test_batch_path_equals_message_after_message(params):
     """update_batch (compiled, a batch at a time) == update_bytes frame after frame."""
     pytest.importorskip("numba")
-    from hiros_azure_bridge import compiled
+    from hiros_core.driver import kernels as compiled
 
     frames = _batch_frames()
     ends = np.cumsum([len(f) for f in frames])
