@@ -153,8 +153,8 @@ def _kinect_multitrack_lines(console) -> list[str]:  # noqa: ANN001 - rich Conso
     """The real sessions' offsets, beside main's before this matrix existed."""
     import tempfile
 
-    from hiros_cli.commands.calibrate import read_camera_groups
     from hiros_convert import convert
+    from hiros_core.recording import read_camera_groups
 
     folder = Path(__file__).resolve().parents[2] / "shared" / "data" / "kinect_multitrack"
     if not folder.exists():

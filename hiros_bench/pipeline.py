@@ -39,13 +39,11 @@ def offline_throughput(
     followed by the CPU seconds of ``RunSummary.cpu`` as ``cpu main``, ``cpu writer`` and
     ``cpu child``.
     """
-    from hiros_cli.commands.run import OFFLINE_MERGE_RATE, load_pipeline_params
-    from hiros_pipeline import run_recording
+    from hiros_pipeline import load_pipeline_params, run_recording
     from hiros_pipeline.offline import OUTPUTS
     from hiros_sim import SimParams, simulate, write_recording
 
-    params = load_pipeline_params(None)  # what `hiros run` uses: config/ and its defaults
-    params.merger.output_rate = OFFLINE_MERGE_RATE
+    params = load_pipeline_params()  # what `hiros run` uses: config/ and its defaults
     results = []
     with tempfile.TemporaryDirectory() as folder:
         sim = Path(folder) / "sim"

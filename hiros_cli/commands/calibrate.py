@@ -33,8 +33,6 @@ Examples:
 from __future__ import annotations
 
 import argparse
-from collections import Counter, defaultdict
-from collections.abc import Iterator
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -97,7 +95,6 @@ def run(args: argparse.Namespace) -> int:
     from rich.console import Console
 
     from hiros_calib.calibrator import CalibratorParams
-    from hiros_cli.commands.run import require_camera_topics
     from hiros_core.calibration import save_calibration
     from hiros_core.outputs import (
         check_output,
@@ -106,6 +103,7 @@ def run(args: argparse.Namespace) -> int:
         staged_files,
         staged_output,
     )
+    from hiros_core.recording import require_camera_topics
 
     console = Console()
     check_output(args.out, inputs=[args.recording], force=True, ours=is_calibration_file,
@@ -144,38 +142,6 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def read_camera_groups(
-    recording: Path, drops: Counter[str] | None = None, problems: list[str] | None = None
-) -> tuple[dict[str, list[SkeletonGroup]], dict[str, list[int]]]:
-    """Per camera its SkeletonGroups and the log (arrival) time of each, in log order.
-
-    ``drops`` and ``problems`` receive the reader's (see ``iter_groups``).
-    """
-    from hiros_core.recording import RecordingReader, iter_groups
-
-    reader = RecordingReader(recording)
-    last_log_time = [0]
-    read_messages = reader.messages
-
-    def messages_noting_log_time(*args: object, **kwargs: object) -> Iterator[object]:
-        # iter_groups yields a camera's group right after reading its message, so the last
-        # log time read is that group's arrival time
-        for message in read_messages(*args, **kwargs):  # type: ignore[arg-type]
-            last_log_time[0] = message.log_time_ns
-            yield message
-
-    reader.messages = messages_noting_log_time  # type: ignore[method-assign]
-    groups: dict[str, list[SkeletonGroup]] = defaultdict(list)
-    arrivals: dict[str, list[int]] = defaultdict(list)
-    try:
-        for source, group in iter_groups(reader, drops=drops, problems=problems):
-            groups[source].append(group)
-            arrivals[source].append(last_log_time[0])
-    finally:
-        reader.close()
-    return dict(groups), dict(arrivals)
-
-
 def _log_times_are_stamps(
     groups: dict[str, list[SkeletonGroup]], arrivals: dict[str, list[int]]
 ) -> bool:
@@ -207,6 +173,7 @@ def calibrate_recording(
     from hiros_calib.calibrator import Calibrator
     from hiros_cli.progress import print_warnings
     from hiros_core.errors import RecordingError
+    from hiros_core.recording import read_camera_groups
 
     with Progress(
         TextColumn("{task.description:<24}"),

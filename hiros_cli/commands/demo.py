@@ -65,12 +65,11 @@ DEMO_FILES = ("sample", "calib.yaml", "out.mcap", "report")
 def _demo(args: argparse.Namespace, out: Path, console: Console) -> tuple:
     """Simulate, calibrate, run and evaluate into ``out``; the figures and the report path."""
     from hiros_cli.commands.calibrate import calibrate_recording
-    from hiros_cli.commands.run import OFFLINE_MERGE_RATE, load_pipeline_params
     from hiros_cli.progress import progress_bar
     from hiros_core.calibration import save_calibration
     from hiros_eval.report import write_report
     from hiros_eval.run import evaluate_run
-    from hiros_pipeline import run_recording
+    from hiros_pipeline import load_pipeline_params, run_recording
     from hiros_sim import sample_params, simulate, write_recording
 
     timings: dict[str, float] = {}
@@ -92,8 +91,7 @@ def _demo(args: argparse.Namespace, out: Path, console: Console) -> tuple:
     timings["calibrate"] = time.perf_counter() - start
 
     start = time.perf_counter()
-    demo_params = load_pipeline_params(None)
-    demo_params.merger.output_rate = OFFLINE_MERGE_RATE
+    demo_params = load_pipeline_params()
     with progress_bar(
         "running the pipeline", sum(map(len, result.camera_groups.values()))
     ) as advance:

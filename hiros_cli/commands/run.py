@@ -21,12 +21,9 @@ from rich.table import Table
 
 from hiros_cli.progress import print_warnings, progress_bar
 from hiros_core.calibration import Calibration, load_calibration, save_calibration
-from hiros_core.errors import CalibrationError, ConfigError, RecordingError
+from hiros_core.errors import CalibrationError, ConfigError
 
 HELP = "offline pipeline over a recording -> one MCAP with every stage's output"
-OFFLINE_MERGE_RATE = 30.0
-"""The merger's output rate offline, Hz: one fused output per camera period (live: on each
-camera frame)."""
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -60,7 +57,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--merge-rate",
         type=_rate,
-        default=OFFLINE_MERGE_RATE,
         help="merger output rate in Hz offline (default 30; 0: on every camera frame, as live)",
     )
     parser.add_argument(
@@ -105,33 +101,6 @@ def _rate(text: str) -> float:
         msg = f"{text!r} is not a rate in Hz (a number, 0 or more)"
         raise argparse.ArgumentTypeError(msg)
     return value
-
-
-def load_pipeline_params(path: Path | None):  # noqa: ANN201 - PipelineParams, imported lazily
-    """PipelineParams from config/pipeline.yaml (or ``path``), else the stages' defaults."""
-    from hiros_core.parameters import (
-        build_params,
-        dataclass_defaults,
-        load_config_defaults,
-        stage_config_defaults,
-    )
-    from hiros_pipeline import PipelineParams
-
-    values = dataclass_defaults(PipelineParams)
-    values.update({k: v for k, v in stage_config_defaults().items() if k in values})
-    file_values = load_config_defaults("pipeline", path)
-    node_only = {"cameras", "input", "camera_qos", "calibration_file", "calib_node"}
-    unknown = sorted(set(file_values) - set(values) - node_only)
-    if path is not None and unknown:
-        msg = f"{path}: unknown pipeline parameters {unknown}"
-        raise ConfigError(msg)
-    values.update({k: v for k, v in file_values.items() if k in values})
-    try:
-        return build_params(PipelineParams, values)
-    except ConfigError as exc:
-        where = path or "the stages' parameter files"
-        msg = f"{where}: {exc}"
-        raise ConfigError(msg) from exc
 
 
 def resolve_calibration(
@@ -186,38 +155,19 @@ def refuse_flagged(
     raise CalibrationError(msg)
 
 
-def require_camera_topics(recording: Path) -> None:
-    """Refuse, before any work or output, a recording that holds no camera skeleton topic.
-
-    Raises:
-        RecordingError: naming the topics the recording does hold.
-
-    """
-    from hiros_core.recording import RecordingReader, group_topics
-
-    with RecordingReader(recording) as reader:
-        topics = reader.topics
-    if not group_topics(topics):
-        msg = (
-            f"{recording} holds no camera skeletons (SkeletonGroup topics or Azure-driver "
-            f"MarkerArray topics /<camera>/body_tracking_data); its topics: {sorted(topics)}"
-        )
-        raise RecordingError(msg)
-
-
 def run(args: argparse.Namespace) -> int:
     """Run, then print the accounting table."""
     from hiros_core.outputs import check_output, is_hiros_recording, staged_output
-    from hiros_pipeline import run_recording
+    from hiros_core.recording import require_camera_topics
+    from hiros_pipeline import load_pipeline_params, run_recording
     from hiros_pipeline.offline import OUTPUTS, message_count
 
     console = Console()
     inputs = [args.recording, args.params, None if args.calibration == "auto" else args.calibration]
     check_output(args.out, inputs=[p for p in inputs if p is not None], force=args.force,
                  ours=is_hiros_recording, what="recording")  # fmt: skip
-    params = load_pipeline_params(args.params)
+    params = load_pipeline_params(args.params, merge_rate=args.merge_rate)
     require_camera_topics(args.recording)
-    params.merger.output_rate = args.merge_rate
     calibration = resolve_calibration(
         args.calibration, args.recording, args.out, console, accept_flagged=args.accept_flagged
     )

@@ -4,6 +4,8 @@ from hiros_core.recording.groups import (
     group_topics,
     iter_groups,
     iter_logged_groups,
+    read_camera_groups,
+    require_camera_topics,
     source_name,
 )
 from hiros_core.recording.msgdefs import message_definition
@@ -21,5 +23,7 @@ __all__ = [
     "iter_groups",
     "iter_logged_groups",
     "message_definition",
+    "read_camera_groups",
+    "require_camera_topics",
     "source_name",
 ]

@@ -11,7 +11,7 @@ gives the groups of a message-by-message reading, in the same order.
 from __future__ import annotations
 
 import contextlib
-from collections import Counter
+from collections import Counter, defaultdict
 from collections.abc import Iterable, Iterator
 from pathlib import Path
 
@@ -20,7 +20,7 @@ import numpy as np
 from hiros_core.accounting import Drops
 from hiros_core.codec import decode_group
 from hiros_core.driver import DriverBridge, DriverBridgeParams
-from hiros_core.errors import CodecError
+from hiros_core.errors import CodecError, RecordingError
 from hiros_core.model import SkeletonGroup
 from hiros_core.recording.reader import UNCOUNTED_DROPS, MessageBatch, RecordingReader
 from hiros_core.recording.writer import MARKER_ARRAY, SKELETON_GROUP
@@ -30,6 +30,8 @@ __all__ = [
     "group_topics",
     "iter_groups",
     "iter_logged_groups",
+    "read_camera_groups",
+    "require_camera_topics",
     "source_name",
 ]
 
@@ -108,12 +110,7 @@ def iter_logged_groups(
     drops: Counter[str] | None = None,
     problems: list[str] | None = None,
 ) -> Iterator[tuple[str, SkeletonGroup, int]]:
-    """``iter_groups`` with each group's log time (when the recorder received it), in ns.
-
-    A reader whose ``messages`` method was replaced on the instance (to watch each message
-    go by) is read through it, one message at a time, so that it sees each message just
-    before its group is yielded.
-    """
+    """``iter_groups`` with each group's log time (when the recorder received it), in ns."""
     reader = recording if isinstance(recording, RecordingReader) else RecordingReader(recording)
     lost = Drops()
     wanted = (
@@ -122,11 +119,7 @@ def iter_logged_groups(
         else {t: reader.topics[t] for t in topics if t in reader.topics}
     )
     bridges: dict[str, DriverBridge] = {}
-    batches = (
-        (MessageBatch.of([message]) for message in reader.messages(wanted))
-        if "messages" in vars(reader)
-        else reader.batches(wanted, transient=True)  # each batch is read before the next
-    )
+    batches = reader.batches(wanted, transient=True)  # each batch is read before the next
     try:
         for batch in _first_split(batches):
             groups = _batch_groups(batch, bridges, bridge_params, lost)
@@ -147,6 +140,43 @@ def iter_logged_groups(
             problems.extend(reader.problems)
         if reader is not recording:
             reader.close()
+
+
+def read_camera_groups(
+    recording: str | Path | RecordingReader,
+    drops: Counter[str] | None = None,
+    problems: list[str] | None = None,
+) -> tuple[dict[str, list[SkeletonGroup]], dict[str, list[int]]]:
+    """Per camera its SkeletonGroups and the log (arrival) time of each, ns, in log order.
+
+    What a calibration reads (``iter_logged_groups`` gathered by source); ``drops`` and
+    ``problems`` receive the reader's (see ``iter_groups``).
+    """
+    groups: dict[str, list[SkeletonGroup]] = defaultdict(list)
+    arrivals: dict[str, list[int]] = defaultdict(list)
+    logged = iter_logged_groups(recording, drops=drops, problems=problems)
+    with contextlib.closing(logged):
+        for source, group, log_time in logged:
+            groups[source].append(group)
+            arrivals[source].append(log_time)
+    return dict(groups), dict(arrivals)
+
+
+def require_camera_topics(recording: str | Path) -> None:
+    """Refuse, before any work or output, a recording that holds no camera skeleton topic.
+
+    Raises:
+        RecordingError: naming the topics the recording does hold.
+
+    """
+    with RecordingReader(recording) as reader:
+        topics = reader.topics
+    if not group_topics(topics):
+        msg = (
+            f"{recording} holds no camera skeletons (SkeletonGroup topics or Azure-driver "
+            f"MarkerArray topics /<camera>/body_tracking_data); its topics: {sorted(topics)}"
+        )
+        raise RecordingError(msg)
 
 
 _FIRST_MESSAGES = 8

@@ -13,8 +13,8 @@ import numpy as np
 import pytest
 
 from hiros_calib.calibrator import Calibrator, CalibratorParams
-from hiros_cli.commands.calibrate import read_camera_groups
 from hiros_convert import convert
+from hiros_core.recording import read_camera_groups
 
 pytestmark = pytest.mark.slow
 DATA = Path(__file__).resolve().parents[3] / "shared" / "data" / "kinect_multitrack"

@@ -107,7 +107,7 @@ def test_case14_nan_or_negative_parameters_are_refused_naming_file_and_field(
 
 
 def test_case14_load_pipeline_params(tmp_path: Path) -> None:
-    from hiros_cli.commands.run import load_pipeline_params
+    from hiros_pipeline import load_pipeline_params
 
     params = tmp_path / "params.yaml"
     params.write_text("pipeline:\n  ros__parameters:\n    tracker:\n      max_delay: .nan\n")
