@@ -28,7 +28,7 @@ from visualization_msgs.msg import MarkerArray
 
 from hiros_core.accounting import Merged
 from hiros_core.codec import encode_group
-from hiros_core.driver import DriverBridge, DriverBridgeParams, load_bridge_params
+from hiros_core.driver import DriverBridge, DriverBridgeParams, load_bridge_params, warm_up
 from hiros_ros import HirosNode, run_node
 from hiros_ros.node import camera_qos, pipeline_qos
 from hiros_ros.params import parameter_specs
@@ -67,6 +67,7 @@ class BridgeNode(HirosNode):
         bridge_params = DriverBridgeParams(
             **{k: v for k, v in dataclasses.asdict(self.params).items() if k in bridge_fields}
         )
+        warm_up()  # the compiled frame path, loaded before the first camera message
         self.bridges: dict[str, DriverBridge] = {}
         self._empty: dict[str, bool] = {}  # camera -> its last group had nobody
         for camera in self.params.cameras:

@@ -17,7 +17,6 @@ from __future__ import annotations
 
 import hashlib
 import struct
-import sys
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import NamedTuple
@@ -468,12 +467,9 @@ def encode_group(group: SkeletonGroup) -> bytes:
 def warm_up() -> None:
     """Load the compiled encoder now (numba's disk cache, ~15 ms), not on the first group.
 
-    Only where numba is loaded already (the stages load it): the encoder takes its compiled
-    path then, and a writer or a node would otherwise load it while its clock runs. Cheap
-    after the first call (numba keeps what it loaded).
+    A writer or a node would otherwise load it while its clock runs. Cheap after the first
+    call (numba keeps what it loaded).
     """
-    if "numba" not in sys.modules:
-        return
     encode_group(warm_up_group())
 
 
@@ -482,13 +478,13 @@ def encode_group_into(group: SkeletonGroup, space: Callable[[int], tuple[np.ndar
 
     For writers that keep messages in a buffer of their own (``RecordingWriter`` writes
     straight into its MCAP chunk): no ``bytes`` object is made. Nothing is written when the
-    group cannot be encoded (``CodecError`` before ``space`` is called). With numba loaded,
-    a group whose skeletons are the rows of one ``SkeletonRows`` stack (what the stages
-    make) is copied from that stack, keyed by it, with no per-skeleton array work.
+    group cannot be encoded (``CodecError`` before ``space`` is called). A group whose
+    skeletons are the rows of one ``SkeletonRows`` stack (what the stages make) is copied
+    from that stack, keyed by it, with no per-skeleton array work. Float64 values (all the
+    model makes) are copied by the compiled ``fill.fill_runs``, others by its numpy form.
     """
     skeletons = group.skeletons
-    compiled = "numba" in sys.modules
-    stack = shared_stack(skeletons) if compiled and skeletons else None
+    stack = shared_stack(skeletons) if skeletons else None
     if stack is not None:
         plan = _stack_plan(group, stack)
         if plan is not None:
@@ -502,7 +498,7 @@ def encode_group_into(group: SkeletonGroup, space: Callable[[int], tuple[np.ndar
         [a for s in skeletons for a in (s.bounding_box, s.markers, s.links)], axis=None
     ) if skeletons else _NO_VALUES  # fmt: skip
     out, at = space(plan.size)
-    if compiled and values.dtype == np.float64:
+    if values.dtype == np.float64:
         _fill_compiled(out, at, plan, packed, values)
     else:
         _fill_numpy(plan, packed, values, out, at)

@@ -1,9 +1,19 @@
 """Compiled (numba) forms of hiros_core's per-frame numpy helpers, same results bit for bit.
 
+How hiros chooses between compiled and numpy code, one rule for the whole code base:
+
+1. numba is a hard dependency. A helper that has a compiled kernel always runs it: the same
+   call takes the same path whatever else the process has imported (a branch on the input,
+   such as float64 rows or the driver's usual message, is the only choice left).
+2. A kernel's numpy form is kept as the reference its test holds it equal to, bit for bit,
+   and for the inputs the kernel does not take; never as a switch.
+3. ``hiros_core`` is imported by every command, and numba's import costs ~1 s: its callers
+   import kernel modules (this one, ``fill``, ``driver.kernels``) inside the function, at the
+   first call, not at module level. Live nodes and runs load them before their first
+   message (the ``warm_up`` functions); ``make setup`` compiles them into numba's disk cache.
+
 ``model.link_rows`` runs for every person of every frame in the bridge and in most stages; its
-dozen small numpy calls cost ~40 us where the arithmetic is a few hundred flops. This module
-imports numba, so nothing imports it at start-up: ``model.link_rows`` calls it only when numba
-is already loaded (the pipeline's stages load it), which keeps light commands light. Kernels
+dozen small numpy calls cost ~40 us where the arithmetic is a few hundred flops. Kernels
 compile on first call and are cached on disk (``cache=True``).
 """
 

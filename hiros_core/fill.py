@@ -6,9 +6,8 @@ runs of float64 rows (a box, a marker or link row: 22 or 20 floats each), read f
 group's ``SkeletonRows`` stack when its skeletons are one, else from their concatenation.
 Copying them run by run in numpy would be hundreds of calls; one scatter needs an 8-byte
 aligned target, which a message inside an MCAP chunk is not. This kernel copies the template
-and every run in one call, into any uint8 buffer at any offset. Like ``hiros_core.compiled``,
-it imports numba, so callers import it only when numba is loaded already (the pipeline's
-stages load it).
+and every run in one call, into any uint8 buffer at any offset. It imports numba, so the
+codec imports it at its first call (the rule: ``hiros_core.compiled``).
 """
 
 from __future__ import annotations

@@ -15,7 +15,6 @@ Stamps are integer nanoseconds so that messages round-trip exactly.
 from __future__ import annotations
 
 import math
-import sys
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import NamedTuple
@@ -90,12 +89,12 @@ def link_rows(
     NaN. Any leading shape (one skeleton or a stack of them) in one pass: a fixed dozen numpy
     calls, so stages rebuild the links of all their people at once. When the link ids form
     one run (every built-in layout: all joints but the root), the rows are written in place
-    through a slice instead of gathered and scattered. When numba is loaded already (the
-    pipeline's stages load it), the compiled form in ``hiros_core.compiled`` does the same in
-    one call, bit for bit.
+    through a slice instead of gathered and scattered. Float64 rows (all the model makes)
+    take the compiled form in ``hiros_core.compiled``, the same in one call, bit for bit;
+    other dtypes the numpy form.
     """
     parents, children = layout.link_parents, layout.link_children
-    if "numba" in sys.modules and markers.dtype == np.float64:
+    if markers.dtype == np.float64:
         from hiros_core import compiled
 
         return compiled.link_rows(markers, marker_present, parents, children)

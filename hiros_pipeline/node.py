@@ -85,7 +85,7 @@ class PipelineNode(HirosNode):
         if self.params.input == "driver":
             from hiros_core.driver import DriverBridge, DriverBridgeParams, warm_up
 
-            warm_up()  # numba is loaded (the stages'): the bridge's compiled path too
+            warm_up()  # the bridge's compiled path, before the first camera message
 
             bridge = DriverBridge(DriverBridgeParams(), default_frame=f"{camera}_depth_camera_link")
             self._bridges[camera] = bridge

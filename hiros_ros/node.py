@@ -141,8 +141,8 @@ class HirosNode(Node):
     def create_raw_publisher(self, msg_type: type, topic: str, qos: QoSProfile) -> Any:
         """A publisher whose ``publish`` takes CDR bytes (rclpy publishes them as they are).
 
-        Loads the compiled group encoder now if the node's stage loaded numba (made before
-        its publisher), so that the first message does not wait for it (``codec.warm_up``).
+        Loads the compiled group encoder now, so that the first message does not wait for it
+        (``codec.warm_up``).
         """
         codec_warm_up()
         return self.create_publisher(msg_type, topic, qos)

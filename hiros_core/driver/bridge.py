@@ -8,7 +8,6 @@ compiled kernels of ``hiros_core.driver.kernels``; every other message the numpy
 from __future__ import annotations
 
 import math
-import sys
 from collections import deque
 from dataclasses import dataclass, field
 from functools import cache
@@ -110,23 +109,13 @@ def load_bridge_params(path: str | Path) -> tuple[DriverBridgeParams, dict[str, 
     return params, {k: v for k, v in spec.items() if k not in known}
 
 
-def _compiled_available() -> bool:
-    """Whether the compiled frame path is used: when numba is loaded already.
-
-    The pipeline's stages load it; the bridge node and light commands never import it.
-    """
-    return "numba" in sys.modules
-
-
 def warm_up() -> None:
-    """Load the compiled frame paths (live and recording) before the first frame, with numba.
+    """Load the compiled frame paths (live and recording) before the first frame.
 
-    From numba's disk cache this takes ~20 ms; the very first time after an install or a
-    change of the kernel, ~2 s of compilation, which a live node should not spend on its
-    first camera message.
+    From numba's disk cache this takes ~20 ms (with numba's import, ~1 s in a process that
+    has not loaded it yet); the very first time after an install or a change of the kernel,
+    ~2 s of compilation, which a live node should not spend on its first camera message.
     """
-    if not _compiled_available():
-        return
     markers = group_to_driver_markers(warm_up_group())
     DriverBridge().update(markers)
     raw = encode_marker_array(markers)  # the batch kernels of recordings
@@ -246,14 +235,12 @@ class DriverBridge(Accounted):
     ) -> list[SkeletonGroup | None]:
         """``update_bytes`` of the messages ``buffer[starts[i]:ends[i]]``, in order, at once.
 
-        For a recording: with numba loaded, the batch's usual driver messages (see
-        ``kernels.driver_people``) are read by two compiled calls and their people built in
-        one set of arrays; every other message takes ``update_bytes``. Same groups and drops
+        For a recording: the batch's usual driver messages (see ``kernels.driver_people``)
+        are read by two compiled calls and their people built in one set of arrays; every
+        other message takes ``update_bytes``. Same groups and drops
         as ``update_bytes`` message after message, except that bytes the codec rejects give
         None and count ``undecodable`` here instead of raising.
         """
-        if not _compiled_available():
-            return [self._update_counted(buffer[a:b]) for a, b in zip(starts, ends, strict=True)]
         over = marker_counts(buffer, starts, ends) > MAX_MARKERS
         if over.any():  # dropped before the compiled reading allocates for them
             out: list[SkeletonGroup | None] = [None] * len(starts)
@@ -412,7 +399,7 @@ class DriverBridge(Accounted):
         usual message (ids increasing, no duplicates, whole bodies) skips the sorting and
         scattering the general case needs.
         """
-        if rows is None and _compiled_available():
+        if rows is None:
             made = self._compiled_rows(data)
             if made is not None:
                 layout, arranged, markers, present = made
@@ -449,8 +436,8 @@ class DriverBridge(Accounted):
     ) -> tuple[Layout, _Arrangement, np.ndarray, np.ndarray] | None:
         """The usual message's people in one compiled call, or None (take the general path).
 
-        Same rows as ``_kept_markers`` + ``_skeletons`` give (``hiros_core.driver.kernels``);
-        used when numba is loaded already, so the bridge node never imports it.
+        Same rows as ``_kept_markers`` + ``_skeletons`` give (``hiros_core.driver.kernels``,
+        imported at the first call: see ``hiros_core.compiled`` for the rule).
         """
         from hiros_core.driver import kernels
 

@@ -9,8 +9,8 @@ no Python work per marker and next to none per message.
 Offsets named ``r`` are relative to a message's first byte; its CDR payload starts at 4, so
 4-alignment is ``r``'s own and 8-alignment is ``r - 4``'s. The small helpers are inlined
 (``inline="always"``): called per field of every marker, their calls cost a third of the walk.
-Imported only when numba is loaded already (the pipeline's stages load it), so the bridge node
-and light commands never pay numba's import; compiled on first call, cached on disk.
+Always the bridge's path for usual messages; imported at the bridge's first call, compiled on
+first use and cached on disk (the rule: ``hiros_core.compiled``).
 """
 
 from __future__ import annotations

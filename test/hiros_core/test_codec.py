@@ -139,23 +139,32 @@ def test_group_bytes_match_rclpy_and_round_trip(group: SkeletonGroup) -> None:
 def test_group_encoded_into_a_buffer_compiled_and_numpy_alike(
     group: SkeletonGroup, offset: int
 ) -> None:
-    """``encode_group_into`` at any (unaligned) offset: its bytes alone, by either filler."""
-    import sys
+    """``encode_group_into`` at any (unaligned) offset: its bytes alone, the numpy form's.
 
-    import numba  # noqa: F401 - the compiled filler runs when numba is loaded
-
-    reference = encode_group(group)
-    for compiled in (True, False):
+    The compiled filler (from the group's values, or from a stack of them) against its numpy
+    form, ``codec._fill_numpy``.
+    """
+    for alike in (group, *restacked(group)):
+        reference = _numpy_encoding(alike)
         buffer = np.full(len(reference) + 32, 0xA5, dtype=np.uint8)
-        saved = None if compiled else sys.modules.pop("numba")
-        try:
-            size = encode_group_into(group, lambda n, b=buffer: (b, offset))
-        finally:
-            if saved is not None:
-                sys.modules["numba"] = saved
+        size = encode_group_into(alike, lambda n, b=buffer: (b, offset))
         assert size == len(reference)
         assert buffer[offset : offset + size].tobytes() == reference
         assert (np.delete(buffer, np.arange(offset, offset + size)) == 0xA5).all()
+
+
+def _numpy_encoding(group: SkeletonGroup) -> bytes:
+    """The group's bytes by the numpy form of the filler."""
+    from hiros_core import codec
+
+    plan = codec._plan_of(group)
+    skeletons = group.skeletons
+    values = np.concatenate(
+        [a for s in skeletons for a in (s.bounding_box, s.markers, s.links)], axis=None
+    ) if skeletons else np.empty(0)  # fmt: skip
+    out = np.empty(plan.size, dtype=np.uint8)
+    codec._fill_numpy(plan, codec._pack(plan, group), values, out, 0)
+    return out.tobytes()
 
 
 def restacked(group: SkeletonGroup) -> tuple[SkeletonGroup, SkeletonGroup]:

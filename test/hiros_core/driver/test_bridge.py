@@ -3,7 +3,12 @@
 import numpy as np
 import pytest
 
-from hiros_core.codec import MarkerArrayData, decode_marker_array, encode_marker_array
+from hiros_core.codec import (
+    MarkerArrayData,
+    decode_marker_array,
+    decode_marker_fields,
+    encode_marker_array,
+)
 from hiros_core.driver import (
     ADD,
     DELETE,
@@ -244,8 +249,6 @@ def test_bytes_path_equals_decoded_path_frame_after_frame():
 
 def test_compiled_frame_path_equals_the_numpy_path(monkeypatch):
     """The numba path for usual frames gives the numpy path's groups and drops."""
-    from hiros_core.driver import bridge as driver_format
-
     frames = []
     for step in range(6):
         group = _group(2, stamp=STAMP + step * 33_000_000, seed=10 + step)
@@ -264,8 +267,11 @@ def test_compiled_frame_path_equals_the_numpy_path(monkeypatch):
             )  # fmt: skip
         frames.append(encode_marker_array(data))
     results = {}
+    compiled_rows = DriverBridge._compiled_rows
+    assert compiled_rows(DriverBridge(), decode_marker_fields(frames[0])) is not None
     for compiled in (False, True):
-        monkeypatch.setattr(driver_format, "_compiled_available", lambda c=compiled: c)
+        # without the compiled rows, every frame takes the general (numpy) path
+        monkeypatch.setattr(DriverBridge, "_compiled_rows", compiled_rows if compiled else _none)
         for scale in (1.0, 0.001):
             bridge = DriverBridge(DriverBridgeParams(position_scale=scale))
             groups = [bridge.update_bytes(raw) for raw in frames + frames[4:5]]
@@ -276,6 +282,10 @@ def test_compiled_frame_path_equals_the_numpy_path(monkeypatch):
         assert fast_drops["nan_position"] == 1
         for a, b in zip(fast, slow, strict=True):
             assert (a is None and b is None) or a.same_as(b)
+
+
+def _none(*_args: object) -> None:
+    return None
 
 
 def _batch_frames():
@@ -341,7 +351,6 @@ def _one_at_a_time(bridge, frames):
 )
 def test_batch_path_equals_message_after_message(params):
     """update_batch (compiled, a batch at a time) == update_bytes frame after frame."""
-    pytest.importorskip("numba")
     from hiros_core.driver import kernels as compiled
 
     frames = _batch_frames()
