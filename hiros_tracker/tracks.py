@@ -24,6 +24,10 @@ Per track (``J`` joints, ``C`` cameras, ``R`` record slots):
 - per camera, whether its SDK is in a front/back flip episode for the track: ``flip_state``
   ``(C, 2)`` P(flipped) if the track's sides are right / reversed, at ``flip_ns`` ``(C,)``,
   ``flip_known`` ``(C,)`` once the camera has seen the track (``kernels._episode_evidence``);
+- ``limbs`` ``(J,)``: the mean length of the link ending at each joint over the track's
+  detections (0 before a detection shows it), ``limb_count`` ``(J,)`` how many it averages,
+  capped at ``LIMB_MEMORY`` (a running mean that still follows a slow change): the body's
+  shape, which tells a person returning from another one (``Tracker``'s re-identification);
 - ``votes``/``mirrored``: Python, for the mirror-vote fallback only (camera -> (ns, flips)).
 """
 
@@ -38,8 +42,12 @@ __all__ = ["TrackTable"]
 _RECORDS = 32
 """Initial record slots per track (3 cameras x 30 Hz fill ~23 in a 0.25 s window)."""
 
+LIMB_MEMORY = 300
+"""Detections a track's limb lengths average at most (10 s of one camera at 30 Hz)."""
+
 _FLOAT_FIELDS = (
     "positions", "orientations", "velocities", "velocity", "facing", "sums", "flip_state",
+    "limbs", "limb_count",
 )  # fmt: skip
 _INT_FIELDS = (
     "ids", "born_ns", "time_ns", "last_hit_ns", "epoch_ns", "facing_ns", "hits", "n_cameras",
@@ -64,7 +72,8 @@ class TrackTable:
             "velocity": (3,), "sums": (cameras, joints, 9), "body_ids": (cameras,),
             "seen": (cameras,), "record_ns": (records,), "record_camera": (records,),
             "record_terms": (records, joints, 9), "flip_state": (cameras, 2),
-            "flip_ns": (cameras,), "flip_known": (cameras,),
+            "flip_ns": (cameras,), "flip_known": (cameras,), "limbs": (joints,),
+            "limb_count": (joints,),
         }  # fmt: skip
         for name in _ROW_FIELDS:
             dtype = float if name in _FLOAT_FIELDS or name == "record_terms" else np.int64
@@ -96,6 +105,8 @@ class TrackTable:
     flip_state: np.ndarray
     flip_ns: np.ndarray
     flip_known: np.ndarray
+    limbs: np.ndarray
+    limb_count: np.ndarray
 
     @property
     def capacity(self) -> int:
@@ -161,6 +172,28 @@ class TrackTable:
             self.record_start, self.record_count, self.facing, self.facing_ns,
             self.flip_state, self.flip_ns, self.flip_known, self.confirmed, self.ids,
         )  # fmt: skip
+
+    def learn_limbs(self, rows: np.ndarray, positions: np.ndarray, parents: np.ndarray) -> None:
+        """Fold detections' link lengths into their tracks' running means.
+
+        Args:
+            rows: ``(U,)`` distinct track rows.
+            positions: ``(U, J, 3)`` their detections (NaN where absent), in any labelling:
+                the left and right links of a body are alike, and a mirrored detection only
+                exchanges them.
+            parents: ``(J,)`` each joint's parent, ``-1`` at the root.
+
+        """
+        has_parent = parents >= 0
+        lengths = np.full(positions.shape[:2], np.nan)
+        lengths[:, has_parent] = np.linalg.norm(
+            positions[:, has_parent] - positions[:, parents[has_parent]], axis=-1
+        )
+        seen = np.isfinite(lengths)
+        count = np.minimum(self.limb_count[rows] + seen, LIMB_MEMORY)
+        step = np.where(seen, (lengths - self.limbs[rows]) / np.maximum(count, 1), 0.0)
+        self.limbs[rows] += step
+        self.limb_count[rows] = count
 
     def relabel(self, row: int, permutation: np.ndarray) -> None:
         """Reorder a track's joints (swap the sides of some parts); votes are the caller's."""
