@@ -32,7 +32,8 @@ from __future__ import annotations
 import dataclasses
 import math
 import threading
-from collections import deque
+import time
+from collections import Counter, deque
 from dataclasses import dataclass
 from typing import Any
 
@@ -50,7 +51,18 @@ from hiros_core.errors import CalibrationError
 from hiros_core.geometry import RigidTransform
 from hiros_core.model import SkeletonGroup
 
-__all__ = ["LiveCalibrator", "LiveCalibratorParams"]
+__all__ = ["EVENTS_KEPT", "MAX_FRAME_RATE", "LiveCalibrator", "LiveCalibratorParams"]
+
+EVENTS_KEPT = 500
+"""The newest events a :class:`LiveCalibrator` keeps. A node logs each as it comes; one that
+runs for weeks must not keep every "not calibrated yet" of every estimate (a few kB each,
+six a minute)."""
+
+MAX_FRAME_RATE = 120.0
+"""Frames per second of ``buffer_length`` a camera's window holds at most (twice the fastest
+body-tracking rate we know of). The window is otherwise bounded by stamps only: a camera
+whose stamps crept forward by microseconds would fill it without end, and an estimate's
+arrays grow with it. The oldest frames beyond it leave the window (``window_over_rate``)."""
 
 
 @dataclass
@@ -156,9 +168,14 @@ class LiveCalibrator(Accounted):
         drops: counted drop reasons of the frames (frames: no frame id, out of order) and
             of the estimates (not frames: see ``Accounted``).
         processed: frames kept in the window.
-        events: ``(receiver time ns, message)`` of what happened: cameras calibrated,
-            estimates that failed, changes detected.
+        events: ``(receiver time ns, message)`` of what happened (cameras calibrated,
+            estimates that failed, changes detected), the newest ``EVENTS_KEPT``;
+            :meth:`events_since` hands out those not yet seen.
+        event_count: events so far, kept or not.
+        tally: events so far by kind: ``calibrated``, ``replaced``, ``moved``,
+            ``restarted``, ``silent``.
         estimates: full calibrations of the window run so far.
+        estimate_seconds: how long the last one took (wall time).
 
     """
 
@@ -170,8 +187,12 @@ class LiveCalibrator(Accounted):
             reference=self.params.reference, world_frame=self.params.world_frame
         )
         self.drops = Drops()
-        self.events: list[tuple[int, str]] = []
+        self.events: deque[tuple[int, str]] = deque(maxlen=EVENTS_KEPT)
+        self.event_count = 0
+        self.tally: Counter[str] = Counter()
         self.estimates = 0
+        self.estimate_seconds = 0.0
+        self._events_lock = threading.Lock()  # events come from the input and worker threads
         self._frames: dict[str, deque[tuple[SkeletonGroup, int]]] = {}
         self._since: dict[str, int] = {}  # per camera: frames stamped earlier are ignored
         self._support: dict[str, int] = {}  # per camera: first stamp its estimate rests on
@@ -206,9 +227,12 @@ class LiveCalibrator(Accounted):
             self.processed += 1
             if camera in self._silent:
                 gap = (arrival_ns - self._silent.pop(camera)) * 1e-9
-                self.events.append((arrival_ns, f"{camera}: frames again after {gap:.1f} s"))
+                self._event(arrival_ns, f"{camera}: frames again after {gap:.1f} s")
             while frames and frames[0][0].stamp_ns < group.stamp_ns - horizon:
                 frames.popleft()
+            if len(frames) > self.params.buffer_length * MAX_FRAME_RATE:
+                frames.popleft()
+                self.drops["window_over_rate"] += 1
             if self._first_arrival is None:
                 self._first_arrival = arrival_ns
         return group
@@ -226,8 +250,10 @@ class LiveCalibrator(Accounted):
         frames.clear()
         self._since.pop(camera, None)
         self.drops["stamps_went_back"] += 1
-        self.events.append(
-            (arrival_ns, f"{camera}: stamps went back {back * 1e-9:.3g} s, buffer restarted")
+        self._event(
+            arrival_ns,
+            f"{camera}: stamps went back {back * 1e-9:.3g} s, buffer restarted",
+            "restarted",
         )
         return True
 
@@ -260,8 +286,8 @@ class LiveCalibrator(Accounted):
         for camera, arrival in sorted(newest.items()):
             if camera not in self._silent and now_ns - arrival > limit:
                 self._silent[camera] = arrival
-                self.events.append(
-                    (now_ns, f"{camera}: no frames for {(now_ns - arrival) * 1e-9:.1f} s")
+                self._event(
+                    now_ns, f"{camera}: no frames for {(now_ns - arrival) * 1e-9:.1f} s", "silent"
                 )
 
     @staticmethod
@@ -287,6 +313,13 @@ class LiveCalibrator(Accounted):
     def estimate(self, now_ns: int = 0) -> bool:
         """A full calibration of the window, merged into the current one; True if it changed."""
         self.estimates += 1
+        started = time.monotonic()
+        try:
+            return self._estimate(now_ns)
+        finally:
+            self.estimate_seconds = time.monotonic() - started
+
+    def _estimate(self, now_ns: int) -> bool:
         groups, arrivals = self._window()
         if len(groups) < 2:
             return False
@@ -304,7 +337,7 @@ class LiveCalibrator(Accounted):
             estimate = calibrator.calibrate(groups, arrival_ns=arrivals)
         except CalibrationError as exc:
             self.drops["estimate_failed"] += 1
-            self.events.append((now_ns, f"estimate failed: {exc}"))
+            self._event(now_ns, f"estimate failed: {exc}")
             return False
         if reference is not None:
             place_in_world(estimate, reference.extrinsics)
@@ -317,7 +350,7 @@ class LiveCalibrator(Accounted):
             first = groups[camera][0].stamp_ns
             changed |= self._merge(camera, new, first, tracks=tracks, now_ns=now_ns)
         for camera, reason in (calibrator.result.refused if calibrator.result else {}).items():
-            self.events.append((now_ns, f"{camera}: not calibrated yet ({reason})"))
+            self._event(now_ns, f"{camera}: not calibrated yet ({reason})")
         self._baseline = {pair: distance for pair, (distance, _) in self._residuals(tracks).items()}
         return changed
 
@@ -340,7 +373,7 @@ class LiveCalibrator(Accounted):
             # a doubtful estimate is never used: the last good calibration (or none) stays
             self.drops["estimate_flagged"] += 1
             kept = "keeping the last good calibration" if old is not None else "not calibrated"
-            self.events.append((now_ns, f"{camera}: estimate flagged ({new.flagged}); {kept}"))
+            self._event(now_ns, f"{camera}: estimate flagged ({new.flagged}); {kept}")
             return False
         # while the window still holds every frame the current estimate rests on (it is
         # refilling after a start or a recalibration) the new estimate, on more of the same
@@ -349,7 +382,7 @@ class LiveCalibrator(Accounted):
         grown = camera in self._support and first <= self._support[camera]
         if old is None or camera in self._changed:
             self._changed.discard(camera)
-            self.events.append((now_ns, f"{camera}: calibrated"))
+            self._event(now_ns, f"{camera}: calibrated", "calibrated")
         elif _agrees(old, new, self.params):
             if not grown:
                 new = _blend(old, new, self.params.blend)
@@ -381,12 +414,11 @@ class LiveCalibrator(Accounted):
             else f"{self.params.replace_after} estimates in a row"
         )
         clock, angle, distance = _difference(old, new)
-        self.events.append(
-            (
-                now_ns,
-                f"{camera}: replaced, {who} disagreed with it by {angle:.1f} deg, "
-                f"{100 * distance:.0f} cm, {1e3 * clock:.0f} ms{fit}",
-            )
+        self._event(
+            now_ns,
+            f"{camera}: replaced, {who} disagreed with it by {angle:.1f} deg, "
+            f"{100 * distance:.0f} cm, {1e3 * clock:.0f} ms{fit}",
+            "replaced",
         )
         return True
 
@@ -460,7 +492,7 @@ class LiveCalibrator(Accounted):
                 self._changed_at[camera] = now_ns
         for camera in sorted(flagged):
             self.calibration.cameras[camera].quality["status"] = "recalibrating"
-            self.events.append((now_ns, f"{camera}: moved or clock jumped, recalibrating"))
+            self._event(now_ns, f"{camera}: moved or clock jumped, recalibrating", "moved")
         return True
 
     def _tracks(self, groups: dict[str, list]) -> dict[str, list[BodyTrack]]:
@@ -499,6 +531,27 @@ class LiveCalibrator(Accounted):
                         float(np.linalg.norm(np.median(vectors, axis=0))),
                     )
         return out
+
+    def _event(self, at_ns: int, message: str, kind: str = "") -> None:
+        with self._events_lock:
+            self.events.append((at_ns, message))
+            self.event_count += 1
+            if kind:
+                self.tally[kind] += 1
+
+    def events_since(self, count: int) -> tuple[list[tuple[int, str]], int]:
+        """The events after the first ``count`` that are still kept, and ``event_count``."""
+        with self._events_lock:
+            new = min(self.event_count - count, len(self.events))
+            return list(self.events)[len(self.events) - new :], self.event_count
+
+    def diagnostics(self) -> dict[str, str]:
+        """Estimates run, the last one's duration, and the events by kind (``tally``)."""
+        return {
+            "estimates": str(self.estimates),
+            "estimate_s": f"{self.estimate_seconds:.2f}",
+            **{f"events.{kind}": str(n) for kind, n in sorted(self.tally.items())},
+        }
 
     def snapshot(self) -> dict[str, Any]:
         """Counts for diagnostics: frames buffered per camera, cameras waiting or silent, drops."""

@@ -221,10 +221,13 @@ class CalibNode(HirosNode):
 
     def publish_result(self) -> None:
         """Apply a new result (parameters, TF) and log what happened since the last call."""
-        events = self.live.events
-        for _, message in events[self._logged_events :]:
+        events, count = self.live.events_since(self._logged_events)
+        if count - self._logged_events > len(events):
+            missed = count - self._logged_events - len(events)
+            self.get_logger().info(f"{missed} older events not logged (only the newest are kept)")
+        for _, message in events:
             self.get_logger().info(message)
-        self._logged_events = len(events)
+        self._logged_events = count
         latest, self._latest = self._latest, None
         if latest is None or not latest.cameras:
             return

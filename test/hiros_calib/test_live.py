@@ -5,7 +5,13 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from hiros_calib.extrinsics import relative_error
-from hiros_calib.live import LiveCalibrator, LiveCalibratorParams, _matched_residuals
+from hiros_calib.live import (
+    EVENTS_KEPT,
+    MAX_FRAME_RATE,
+    LiveCalibrator,
+    LiveCalibratorParams,
+    _matched_residuals,
+)
 from hiros_calib.sync import CameraClock
 from hiros_calib.tracks import BodyTrack
 from hiros_core.calibration import Calibration, CameraCalibration
@@ -292,3 +298,37 @@ def test_the_check_follows_a_person_whose_id_changed_in_one_camera():
     )
     assert len(vectors) == 90 * 19
     assert np.abs(vectors).max() < 1e-9
+
+
+def test_the_events_kept_are_bounded_and_handed_out_once():
+    """A node running for weeks logs each event as it comes; the calibrator keeps only the
+    newest ``EVENTS_KEPT`` of them, and counts every one by kind."""
+
+    live = LiveCalibrator(LiveCalibratorParams())
+    second = 1_000_000_000
+    restarts = EVENTS_KEPT + 20
+    for k in range(restarts + 1):  # each frame 2 s before the last: the buffer restarts
+        live.update(SkeletonGroup((10 * restarts - 2 * k) * second, "cam0"), k)
+    assert len(live.events) == EVENTS_KEPT
+    assert live.event_count == restarts
+    assert live.tally == {"restarted": restarts}
+    assert live.diagnostics()["events.restarted"] == str(restarts)
+    newest, count = live.events_since(restarts - 3)
+    assert count == restarts
+    assert newest == list(live.events)[-3:]
+    assert live.events_since(0)[0] == list(live.events)  # the older ones are gone
+    assert live.events_since(count) == ([], count)
+
+
+def test_a_camera_stamping_too_fast_does_not_grow_the_window():
+    """Stamps 1 ms apart (a clock creeping forward) would put 60 000 frames in a 60 s window;
+    the window keeps ``MAX_FRAME_RATE`` frames per second of it and counts the rest."""
+
+    live = LiveCalibrator(LiveCalibratorParams(buffer_length=2.0))
+    frames = 1000
+    for k in range(frames):
+        live.update(SkeletonGroup(k * 1_000_000, "cam0"), k)
+    kept = round(2.0 * MAX_FRAME_RATE)
+    assert live.snapshot()["buffered"] == {"cam0": kept}
+    assert live.drops["window_over_rate"] == frames - kept
+    assert live.processed == frames
