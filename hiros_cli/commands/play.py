@@ -6,6 +6,10 @@ carries the recording's log time, so nodes started with use_sim_time:=true run o
 recording's clock. Needs the ROS 2 environment (make setup). Only types of known message
 packages are played (``KNOWN_PACKAGES``: ours, the Azure driver's and standard ROS ones); a
 type name in a recording is never imported as such, other topics are skipped and counted.
+Topics a live hiros graph latches (``/tf_static``, ``/hiros/calibration``: offered
+transient-local, as hiros's recordings also say in their channels' QoS) are published latched,
+so that a node started after the replay began still gets the camera transforms and the
+calibration.
 
 Examples:
   hiros play sample.mcap                           # everything, real time, /clock
@@ -28,6 +32,7 @@ from typing import Any, TypeVar
 
 from hiros_core.errors import ConfigError, RecordingError
 from hiros_core.recording import RecordedMessage, RecordingReader
+from hiros_core.recording.writer import offered_qos
 
 T = TypeVar("T")
 
@@ -134,6 +139,14 @@ def message_class(msgtype: str) -> tuple[type | None, str]:
     return cls, ""
 
 
+def latched(topic: str) -> bool:
+    """Whether a live hiros graph offers ``topic`` transient-local (kept for late subscribers).
+
+    The same table gives the offered QoS the recordings' channels carry.
+    """
+    return any(profile["durability"] == "transient_local" for profile in offered_qos(topic))
+
+
 class Player:
     """Publishes a recording's messages on time, and /clock in between."""
 
@@ -152,7 +165,7 @@ class Player:
                 node.get_logger().warning(f"skipping {topic}: {msgtype} ({_SKIPPED[reason]})")
                 continue
             qos = QoSProfile(depth=100)
-            if topic == "/tf_static":
+            if latched(topic):
                 qos.durability = DurabilityPolicy.TRANSIENT_LOCAL
             self.publishers[topic] = node.create_publisher(cls, self.remaps.get(topic, topic), qos)
         self.clock = None if args.no_clock else node.create_publisher(Clock, "/clock", 10)

@@ -9,12 +9,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from hiros_cli.commands.play import parse_remaps, playback_schedule
+from hiros_cli.commands.play import latched, parse_remaps, playback_schedule
 from hiros_core.codec import encode_group
 from hiros_core.errors import ConfigError
 from hiros_core.layouts import AZURE_KINECT
 from hiros_core.model import Skeleton, SkeletonGroup
-from hiros_core.recording import RecordingWriter
+from hiros_core.recording import SKELETON_GROUP, RecordingWriter
 
 HERE = Path(__file__).resolve().parent
 T0 = 1_700_000_000_000_000_000
@@ -128,3 +128,44 @@ def test_case6_play_imports_no_module_a_schema_names() -> None:
     group, reason = message_class("hiros_skeleton_msgs/msg/SkeletonGroup")
     assert reason == ""
     assert group.__name__ == "SkeletonGroup"
+
+
+def test_the_topics_hiros_latches_are_played_latched():
+    assert latched("/hiros/calibration")
+    assert latched("/tf_static")
+    assert not latched("/k01/skeletons")
+    assert not latched("/hiros/filter")
+
+
+@pytest.mark.ros
+@pytest.mark.slow
+def test_a_late_subscriber_gets_the_played_calibration(tmp_path, ros_env):
+    """``/hiros/calibration`` is logged once, at the start: a node subscribing after it went
+    out gets it all the same, as from the live graph."""
+    pytest.importorskip("hiros_skeleton_msgs.msg")
+    from rclpy.serialization import serialize_message
+    from std_msgs.msg import String
+
+    recording = tmp_path / "take.mcap"
+    calibration = "reference: k01"
+    with RecordingWriter(recording) as writer:
+        writer.write("/hiros/calibration", "std_msgs/msg/String",
+                     serialize_message(String(data=calibration)), T0)  # fmt: skip
+        for index in range(60):
+            raw = encode_group(_group(index, "k01"))
+            writer.write("/k01/skeletons", SKELETON_GROUP, raw, T0 + index * 50_000_000)
+    listener = subprocess.Popen(
+        [sys.executable, str(HERE / "play_late_listener.py"), "10", "/k01/skeletons"],
+        env=ros_env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+    )  # fmt: skip
+    assert listener.stdout.readline().strip() == "ready"
+    play = subprocess.run(
+        [sys.executable, "-m", "hiros_cli.main", "play", str(recording), "--delay", "3"],
+        env=ros_env, capture_output=True, text=True, timeout=60, check=False,
+    )  # fmt: skip
+    out, err = listener.communicate(timeout=90)
+    assert play.returncode == 0, play.stderr
+    assert "/hiros/calibration: 1 messages" in play.stdout
+    frames = int(next(line for line in out.splitlines() if line.startswith("frames")).split()[-1])
+    assert frames >= 10, err  # it subscribed after the calibration had gone out
+    assert f"calibration {calibration}" in out.splitlines(), out + err
