@@ -11,6 +11,7 @@ from rosbags.rosbag2 import StoragePlugin
 from rosbags.rosbag2 import Writer as Rosbag2Writer
 
 from hiros_core.codec import decode_group, decode_marker_array, encode_group
+from hiros_core.driver import DriverBridge
 from hiros_core.errors import RecordingError
 from hiros_core.recording import (
     MARKER_ARRAY,
@@ -19,6 +20,8 @@ from hiros_core.recording import (
     RecordingWriter,
     iter_groups,
     iter_logged_groups,
+    read_camera_groups,
+    source_name,
 )
 
 
@@ -158,7 +161,7 @@ def test_chunk_reading_keeps_the_mcap_readers_order(tmp_path, samples):
     assert some == only_k02
 
 
-def test_logged_groups_and_a_reader_watched_message_by_message(tmp_path, driver_frames):
+def test_logged_groups_and_the_camera_groups_of_a_calibration(tmp_path, driver_frames):
     path = tmp_path / "take.mcap"
     _write(path, driver_frames)
     with RecordingReader(path) as reader:
@@ -167,20 +170,28 @@ def test_logged_groups_and_a_reader_watched_message_by_message(tmp_path, driver_
     assert [t for _, _, t in logged] == log_times
     plain = list(iter_groups(path, topics=["/k01/body_tracking_data"]))
     assert all(a[1].same_as(b[1]) for a, b in zip(logged, plain, strict=True))
-    # a reader whose ``messages`` is replaced sees each message just before its group
-    reader = RecordingReader(path)
-    seen = []
-    read_messages = reader.messages
+    groups, arrivals = read_camera_groups(path)
+    every = list(iter_logged_groups(path))
+    assert sorted(groups) == ["k01", "k02"]
+    for camera in groups:
+        mine = [(group, t) for source, group, t in every if source == camera]
+        assert arrivals[camera] == [t for _, t in mine]
+        assert all(a.same_as(b) for a, (b, _) in zip(groups[camera], mine, strict=True))
 
-    def watching(*args, **kwargs):
-        for message in read_messages(*args, **kwargs):
-            seen.append(message.log_time_ns)
-            yield message
 
-    reader.messages = watching
-    with reader:
-        for _, _, log_time in iter_logged_groups(reader):
-            assert seen[-1] == log_time
+def _one_message_at_a_time(path):
+    """``iter_logged_groups`` of ``path`` by the codec and a bridge per topic, message after
+    message (the reference the batch reading is held to)."""
+    bridges, out = {}, []
+    with RecordingReader(path) as reader:
+        for message in reader.messages():
+            if message.msgtype == SKELETON_GROUP:
+                group = decode_group(message.data)
+            else:
+                group = bridges.setdefault(message.topic, DriverBridge()).update_bytes(message.data)
+            if group is not None:
+                out.append((source_name(message.topic), group, message.log_time_ns))
+    return out
 
 
 def test_the_first_batch_read_in_growing_pieces_gives_every_group_once(tmp_path, driver_frames):
@@ -192,10 +203,7 @@ def test_the_first_batch_read_in_growing_pieces_gives_every_group_once(tmp_path,
         whole = list(next(reader.batches()).messages())
         assert [m for batch in (head, tail) for m in batch.messages()] == whole
     in_pieces = list(iter_logged_groups(path))
-    reader = RecordingReader(path)
-    reader.messages = reader.messages  # read one message at a time: no pieces
-    with reader:
-        one_by_one = list(iter_logged_groups(reader))
+    one_by_one = _one_message_at_a_time(path)
     assert [(s, t) for s, _, t in in_pieces] == [(s, t) for s, _, t in one_by_one]
     assert all(a[1].same_as(b[1]) for a, b in zip(in_pieces, one_by_one, strict=True))
 
