@@ -142,7 +142,7 @@ def test_group_encoded_into_a_buffer_compiled_and_numpy_alike(
     """``encode_group_into`` at any (unaligned) offset: its bytes alone, the numpy form's.
 
     The compiled filler (from the group's values, or from a stack of them) against its numpy
-    form, ``codec._fill_numpy``.
+    form, ``group_encode._fill_numpy``.
     """
     for alike in (group, *restacked(group)):
         reference = _numpy_encoding(alike)
@@ -155,15 +155,15 @@ def test_group_encoded_into_a_buffer_compiled_and_numpy_alike(
 
 def _numpy_encoding(group: SkeletonGroup) -> bytes:
     """The group's bytes by the numpy form of the filler."""
-    from hiros_core import codec
+    from hiros_core.codec import group_encode, group_plans
 
-    plan = codec._plan_of(group)
+    plan = group_plans._plan_of(group)
     skeletons = group.skeletons
     values = np.concatenate(
         [a for s in skeletons for a in (s.bounding_box, s.markers, s.links)], axis=None
     ) if skeletons else np.empty(0)  # fmt: skip
     out = np.empty(plan.size, dtype=np.uint8)
-    codec._fill_numpy(plan, codec._pack(plan, group), values, out, 0)
+    group_encode._fill_numpy(plan, group_encode._pack(plan, group), values, out, 0)
     return out.tobytes()
 
 
@@ -358,7 +358,7 @@ def test_fast_walk_of_new_shapes_reads_as_the_field_reader(data, media) -> None:
     reader, whatever the padding bytes hold; media attachments and bad bytes go the reader's
     way (same columns, same errors).
     """
-    from hiros_core.codec import _parse_marker_array, _walk_marker_array
+    from hiros_core.codec.marker_array import _parse_marker_array, _walk_marker_array
 
     if not media:
         data.attachments = []

@@ -1,0 +1,384 @@
+"""The SkeletonGroup codec's plans: where each field of a group's message goes, and their caches.
+
+A skeleton's block plan (``cdr.BlockPlans``, keyed by frame, layout and present ids) is laid out
+once; a group's plan joins its skeletons' blocks behind the header, and a reading adds what
+decoding needs to recognise a known message by its constant bytes. ``group_encode`` and
+``group_decode`` fill and read them.
+"""
+
+from __future__ import annotations
+
+import struct
+from dataclasses import dataclass, field
+from typing import NamedTuple
+
+import numpy as np
+
+from hiros_core.cdr import HEADER_SIZE, BlockPlans, Plan, PlanBuilder, PlanCache
+from hiros_core.codec.fields import _c_string
+from hiros_core.layouts import Layout
+from hiros_core.model import BOX_WIDTH, STATE_WIDTH, Skeleton, SkeletonGroup
+
+_HEAD_STRUCT = struct.Struct("<iiI")
+_STAMP_STRUCT = struct.Struct("<iI")
+_MAXES_STRUCT = struct.Struct("<II")
+_CONFIDENCE_STRUCT = struct.Struct("<d")
+_ROW_BYTES = STATE_WIDTH * 8
+_BOX, _MARKERS, _LINKS = 0, 1, 2  # sources of a plan's float runs (``fill.fill_runs``)
+_BOX_FLOATS = 1 + BOX_WIDTH  # skeleton confidence + bounding box
+
+
+@dataclass(frozen=True)
+class _SkeletonShape:
+    """What a block plan fixes about one skeleton: frame, layout and which ids it carries.
+
+    For encoding, where its fields go in the block: byte offsets of the id/stamp and of the
+    two max fields, and the float64 positions (in 8-byte units from the payload start, less
+    the block's ``(start - phase) / 8``) of the confidence + box, marker rows and link rows.
+    """
+
+    src_frame: str
+    layout: Layout
+    marker_ids: np.ndarray
+    link_ids: np.ndarray
+    head_at: int = 0
+    maxes_at: int = 0
+    floats: tuple[np.ndarray, ...] = ()
+
+
+# Each skeleton is its own block (plans reused whatever the other people in the group), so a
+# tracker output mixing cameras and people costs no more plans than the cameras' own frames.
+_SKELETON_PLANS = BlockPlans()
+_GROUP_HEADER = PlanCache(capacity=64)
+
+
+def _skeleton_key(skeleton: Skeleton, phase: int) -> tuple:
+    return (
+        skeleton.src_frame,
+        skeleton.layout,
+        skeleton.marker_present.tobytes(),
+        skeleton.link_present.tobytes(),
+        phase,
+    )
+
+
+def _build_skeleton_plan(skeleton: Skeleton, payload_offset: int) -> Plan:
+    builder = PlanBuilder(payload_offset)
+    layout = skeleton.layout
+    marker_ids = np.flatnonzero(skeleton.marker_present)
+    link_ids = np.flatnonzero(skeleton.link_present)
+    builder.slot("head", 12, 4)
+    builder.string(skeleton.src_frame)
+    builder.slot("maxes", 8, 4)
+    builder.slot("box", _BOX_FLOATS * 8, 8)
+    builder.u32(marker_ids.size)
+    for marker_id in marker_ids:
+        builder.i32(int(marker_id))
+        builder.string(layout.joint_names[marker_id])
+        builder.slot("markers", _ROW_BYTES, 8)
+    builder.u32(link_ids.size)
+    for link_id in link_ids:
+        builder.i32(int(link_id))
+        builder.string(layout.link_names[link_id])
+        builder.i32(layout.parents[link_id])
+        builder.i32(int(link_id))
+        builder.slot("links", _ROW_BYTES, 8)
+
+    def floats(kind: str, width: int) -> np.ndarray:
+        offsets = np.asarray(builder.slots.get(kind, []), dtype=np.intp) + payload_offset
+        return (offsets[:, None] // 8 + np.arange(width)).ravel()
+
+    return builder.build(
+        _SkeletonShape(
+            _c_string(skeleton.src_frame),
+            layout,
+            marker_ids,
+            link_ids,
+            builder.slots["head"][0],
+            builder.slots["maxes"][0],
+            (
+                floats("box", _BOX_FLOATS),
+                floats("markers", STATE_WIDTH),
+                floats("links", STATE_WIDTH),
+            ),
+        )
+    )
+
+
+def _group_header(group: SkeletonGroup) -> Plan:
+    key = (group.frame_id, len(group.skeletons))
+    plan = _GROUP_HEADER.get(key)
+    if plan is None:
+        builder = PlanBuilder()
+        builder.slot("stamp", 8, 4)
+        builder.string(group.frame_id)
+        builder.u32(len(group.skeletons))
+        plan = _GROUP_HEADER.put(key, builder.build())
+    return plan
+
+
+@dataclass(frozen=True)
+class _GroupPlan:
+    """A whole group's encoding: template, and where each skeleton's values go.
+
+    ``floats`` indexes a float64 view of the payload for the concatenation, per skeleton, of
+    its bounding box ``(22,)``, all ``J`` marker rows and all ``L`` link rows: rows the
+    skeleton does not carry point into a scratch row past the message end, so encoding
+    needs no per-skeleton selection of present rows. The template starts with ``_LEAD``
+    spare bytes so that the payload, and so the float view, is 8-byte aligned in memory
+    (numpy scatters into unaligned views several times slower).
+    """
+
+    template: np.ndarray
+    size: int
+    stamp_at: int
+    fields: tuple[tuple[int, int, int], ...]  # per skeleton: head, maxes, confidence offsets
+    floats: np.ndarray
+    packer: struct.Struct  # the group's integer fields and confidences, in ``field_runs`` order
+    field_index: np.ndarray  # template byte of each packed byte (the numpy encoder's scatter)
+    field_runs: np.ndarray  # (F, 3) message offset, packed offset, bytes (the compiled copy)
+    runs: np.ndarray  # (R, 4) message offset, source, float offset in the values, floats
+    stack_runs: np.ndarray | None  # ``runs`` with offsets in SkeletonRows fields (same sizes)
+    layouts: tuple[Layout, ...] = ()  # kept alive: encode_group's cache keys hold their ids
+    message: np.ndarray = field(init=False)  # the template's message bytes (no lead, scratch)
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "message", self.template[_LEAD : _LEAD + self.size])
+
+
+@dataclass(frozen=True)
+class _GroupReading:
+    """What decoding needs beyond a ``_GroupPlan``: how to recognise the message and rebuild it.
+
+    ``words``/``mask``: the template and its constant bytes as 8-byte words (``cdr.Plan``'s
+    ``matches_aligned`` idea over the whole group); ``skeletons``: per skeleton its layout,
+    source frame, presence masks and where its box, marker and link rows start in the
+    gathered floats.
+    """
+
+    plan: _GroupPlan
+    frame_id: str
+    words: np.ndarray
+    mask: np.ndarray
+    scratch: int  # float64 position of the scratch row (filled with NaN when decoding)
+    skeletons: tuple[tuple[Layout, str, np.ndarray, np.ndarray, int], ...]
+    stack: _StackReading | None = None  # when every skeleton has one layout
+
+
+class _StackReading(NamedTuple):
+    """How a group of one layout is decoded as one ``SkeletonRows``.
+
+    ``floats``: the plan's float indices reordered field by field (every box, then every
+    skeleton's marker rows, then every link rows), so one gather gives the three fields as
+    contiguous blocks; the presence masks and source frames of the skeletons.
+    """
+
+    layout: Layout
+    floats: np.ndarray
+    marker_present: np.ndarray  # (P, J)
+    link_present: np.ndarray  # (P, L)
+    frames: list[str]
+
+
+_GROUP_READINGS: dict[int, list[_GroupReading]] = {}  # by message size, most recent first
+
+
+def _group_reading(group: SkeletonGroup, size: int) -> _GroupReading | None:
+    """The reading of messages shaped like ``group`` (just decoded from ``size`` bytes)."""
+    keys = [
+        (s.src_frame, s.layout, s.marker_present.tobytes(), s.link_present.tobytes())
+        for s in group.skeletons
+    ]
+    header = _group_header(group)
+    offset = header.size - HEADER_SIZE
+    blocks = []
+    for skeleton, key in zip(group.skeletons, keys, strict=True):
+        phase = offset % 8
+        plan = _SKELETON_PLANS.get((*key, phase)) or _SKELETON_PLANS.put(
+            (*key, phase), _build_skeleton_plan(skeleton, phase), phase
+        )
+        blocks.append((offset, plan))
+        offset += plan.size
+    if offset + HEADER_SIZE != size:
+        return None  # the message is laid out otherwise (never met: the reader would fail)
+    phased = [(*key, start % 8) for key, (start, _) in zip(keys, blocks, strict=True)]
+    plan = _build_group_plan(group, phased)
+    constant = [header.constant]
+    constant += [block.constant + start + HEADER_SIZE for start, block in blocks]
+    mask = np.zeros(plan.template.size + (-plan.template.size) % 8, dtype=np.uint8)
+    mask[np.concatenate(constant) + _LEAD] = 0xFF
+    words = np.zeros_like(mask)
+    words[: plan.template.size] = plan.template
+    skeletons, start = [], 0
+    for skeleton in group.skeletons:
+        n_markers, n_links = skeleton.layout.n_joints, skeleton.layout.n_links
+        skeletons.append(
+            (
+                skeleton.layout,
+                skeleton.src_frame,
+                skeleton.marker_present.copy(),
+                skeleton.link_present.copy(),
+                start,
+            )
+        )
+        start += BOX_WIDTH + (n_markers + n_links) * STATE_WIDTH
+    return _GroupReading(
+        plan,
+        group.frame_id,
+        words.view("<u8"),
+        mask.view("<u8"),
+        (offset + (-offset) % 8) // 8,  # as _build_group_plan places it
+        tuple(skeletons),
+        _stack_reading(group, plan),
+    )
+
+
+def _stack_reading(group: SkeletonGroup, plan: _GroupPlan) -> _StackReading | None:
+    """The stack decoding of messages shaped like ``group`` (None: mixed layouts, or none)."""
+    skeletons = group.skeletons
+    if not skeletons or any(s.layout is not skeletons[0].layout for s in skeletons):
+        return None
+    layout = skeletons[0].layout
+    marker_floats = layout.n_joints * STATE_WIDTH
+    per_person = plan.floats.reshape(len(skeletons), -1)
+    fields = np.split(per_person, [BOX_WIDTH, BOX_WIDTH + marker_floats], axis=1)
+    return _StackReading(
+        layout,
+        np.concatenate([field.ravel() for field in fields]),
+        np.array([s.marker_present for s in skeletons]),
+        np.array([s.link_present for s in skeletons]),
+        [s.src_frame for s in skeletons],
+    )
+
+
+_GROUP_PLANS: dict[tuple, _GroupPlan] = {}
+_GROUP_PLAN_CAPACITY = 256
+_LEAD = 8 - HEADER_SIZE  # template bytes before the CDR header: aligns the payload
+
+
+def _build_group_plan(group: SkeletonGroup, keys: list[tuple]) -> _GroupPlan:
+    header = _group_header(group)
+    offset = header.size - HEADER_SIZE
+    templates = [np.zeros(_LEAD, dtype=np.uint8), header.template]
+    fields, indices, runs = [], [], []
+    stamp_at = int(header.slots["stamp"][0]) + _LEAD
+    packed = [(stamp_at, _STAMP_STRUCT)]
+    blocks = []
+    for skeleton, key in zip(group.skeletons, keys, strict=True):
+        phase = offset % 8
+        plan = _SKELETON_PLANS.get(key) or _SKELETON_PLANS.put(
+            key, _build_skeleton_plan(skeleton, phase), phase
+        )
+        blocks.append((offset, phase, plan, skeleton))
+        templates.append(plan.template)
+        offset += plan.size
+    size = offset + HEADER_SIZE
+    scratch = (-(offset)) % 8 + offset  # payload offset of the scratch row, 8-aligned
+    templates.append(np.zeros(scratch - offset + _ROW_BYTES, dtype=np.uint8))
+    dump = np.arange(STATE_WIDTH) + scratch // 8
+    values_at = 0  # where the skeleton's box, marker and link rows start in the values
+    for person, (start, phase, plan, skeleton) in enumerate(blocks):
+        shape: _SkeletonShape = plan.meta  # type: ignore[assignment]
+        at = start + HEADER_SIZE + _LEAD
+        box_at = int(plan.slots["box"][0]) + at
+        fields.append((at + shape.head_at, at + shape.maxes_at, box_at))
+        packed += [(at + shape.head_at, _HEAD_STRUCT), (at + shape.maxes_at, _MAXES_STRUCT)]
+        packed.append((box_at, _CONFIDENCE_STRUCT))
+        shift = (start - phase) // 8
+        box_index, marker_index, link_index = shape.floats
+        markers = np.tile(dump, (skeleton.layout.n_joints, 1))
+        markers[shape.marker_ids] = (marker_index + shift).reshape(-1, STATE_WIDTH)
+        links = np.tile(dump, (skeleton.layout.n_links, 1))
+        links[shape.link_ids] = (link_index + shift).reshape(-1, STATE_WIDTH)
+        indices += [box_index[1:] + shift, markers.ravel(), links.ravel()]
+        runs += _value_runs(
+            box_index[1] + shift, markers[:, 0], links[:, 0], dump[0], values_at, person
+        )
+        values_at += BOX_WIDTH + (skeleton.layout.n_joints + skeleton.layout.n_links) * STATE_WIDTH
+    floats = np.concatenate(indices) if indices else np.empty(0, dtype=np.intp)
+    all_runs = np.array(runs, dtype=np.int64).reshape(-1, 5)
+    stackable = len({(s.layout.n_joints, s.layout.n_links) for s in group.skeletons}) <= 1
+    return _GroupPlan(
+        np.concatenate(templates),
+        size,
+        stamp_at,
+        tuple(fields),
+        floats,
+        struct.Struct("<" + "".join(kind.format[1:] for _, kind in packed)),
+        np.concatenate([np.arange(at, at + kind.size) for at, kind in packed]),
+        _field_runs(packed),
+        np.ascontiguousarray(all_runs[:, :4]),
+        np.ascontiguousarray(all_runs[:, [0, 1, 4, 3]]) if stackable else None,
+        tuple(skeleton.layout for skeleton in group.skeletons),
+    )
+
+
+def _field_runs(packed: list[tuple[int, struct.Struct]]) -> np.ndarray:
+    """``(F, 3)`` message offset, packed offset and length of each packed field."""
+    runs, at = [], 0
+    for template_at, kind in packed:
+        runs.append((template_at - _LEAD, at, kind.size))
+        at += kind.size
+    return np.array(runs, dtype=np.int64).reshape(-1, 3)
+
+
+def _value_runs(  # noqa: PLR0917 - one skeleton's positions, all needed
+    box: int, markers: np.ndarray, links: np.ndarray, dump: int, values_at: int, person: int
+) -> list[tuple[int, int, int, int, int]]:
+    """One skeleton's float runs (present rows only), as tuples of five.
+
+    Each run: message offset, source, values offset, floats, stack offset. ``box``,
+    ``markers`` and ``links`` are payload float positions of the box and of each row's first
+    float (``dump`` for rows the skeleton does not carry). ``source`` says which of the
+    box, marker or link rows a run copies (``_BOX``, ``_MARKERS``, ``_LINKS``); the values
+    offset is where the run starts in the concatenated values of ``encode_group_into``, the
+    stack offset where it starts in that source's ``SkeletonRows`` field (``person`` being the
+    skeleton's row there).
+    """
+    runs = [(HEADER_SIZE + 8 * int(box), _BOX, values_at, BOX_WIDTH, person * BOX_WIDTH)]
+    at = values_at + BOX_WIDTH
+    for source, rows in ((_MARKERS, markers), (_LINKS, links)):
+        stack_at = person * rows.size * STATE_WIDTH
+        for row, first in enumerate(rows.tolist()):
+            if first != dump:
+                offset = row * STATE_WIDTH
+                runs.append(
+                    (HEADER_SIZE + 8 * first, source, at + offset, STATE_WIDTH, stack_at + offset)
+                )
+        at += rows.size * STATE_WIDTH
+    return runs
+
+
+_STACK_PLANS: dict[tuple, tuple[Layout, _GroupPlan | None]] = {}  # (layout kept alive, plan)
+
+
+def _plan_of(group: SkeletonGroup) -> _GroupPlan:
+    """The group's cached plan, built on first use (keyed by frames, layouts, presence)."""
+    skeletons = group.skeletons
+    keys = [
+        (s.src_frame, id(s.layout), s.marker_present.tobytes(), s.link_present.tobytes())
+        for s in skeletons
+    ]
+    group_key = (group.frame_id, *keys)
+    plan = _GROUP_PLANS.get(group_key)
+    if plan is None:
+        if len(_GROUP_PLANS) >= _GROUP_PLAN_CAPACITY:
+            _GROUP_PLANS.clear()
+        header = _group_header(group)
+        offset = header.size - HEADER_SIZE
+        phased = []
+        for skeleton, (frame, _, markers, links) in zip(skeletons, keys, strict=True):
+            key = (frame, skeleton.layout, markers, links)
+            phased.append((*key, offset % 8))
+            offset += _skeleton_block_size(skeleton, key, offset % 8)
+        plan = _GROUP_PLANS[group_key] = _build_group_plan(group, phased)
+    return plan
+
+
+def _skeleton_block_size(skeleton: Skeleton, key: tuple, phase: int) -> int:
+    """Bytes of one skeleton's block at alignment ``phase`` (its plan, built if new)."""
+    key = (*key, phase)
+    plan = _SKELETON_PLANS.get(key) or _SKELETON_PLANS.put(
+        key, _build_skeleton_plan(skeleton, phase), phase
+    )
+    return plan.size
