@@ -35,7 +35,7 @@ from hiros_core.model import SkeletonGroup
 from hiros_core.recording import MARKER_ARRAY, RecordingWriter, iter_groups
 from hiros_pipeline.pipeline import STAGES, Pipeline, PipelineParams, StageOutputs
 from hiros_tracker import Tracker
-from hiros_visualizer import Drawing
+from hiros_visualizer import Drawing, OverlayParams
 from hiros_visualizer.markers import warm_up as markers_warm_up
 
 __all__ = [
@@ -172,11 +172,13 @@ def run_recording(
     keep_outputs: bool = False,
     processes: int | None = None,
     write: Iterable[str] = OUTPUTS,
+    overlays: OverlayParams | None = None,
 ) -> RunSummary:
     """Run the pipeline over ``recording``; write ``out`` (MCAP); return the summary.
 
     ``write`` picks what goes into ``out`` beside the calibration (``OUTPUTS``; e.g. only
     ``filter``: a fifth of the bytes); the summary counts every stage whatever is written.
+    ``overlays`` are drawn into the markers beside the skeletons (none by default).
 
     ``keep_outputs`` also keeps every stage's groups in ``summary.outputs`` (what the demo
     evaluates, without reading the MCAP back). ``processes`` 2 reads and tracks in a child
@@ -194,7 +196,7 @@ def run_recording(
     cpu_started = time.thread_time(), time.process_time(), _children_cpu()
     processes = default_processes() if processes is None else processes
     clock, parts = time.perf_counter, {"stages": 0.0, "write": 0.0}
-    drawings = {stage: Drawing(stage) for stage in DRAWN_STAGES}
+    drawings = {stage: Drawing(stage, overlays=overlays) for stage in DRAWN_STAGES}
     with (
         _frozen_heap(),
         _tracking(recording, pipeline.tracker, processes) as tracked,

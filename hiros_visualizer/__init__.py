@@ -6,7 +6,12 @@ from hiros_visualizer.markers import (
     id_color,
     skeleton_markers,
 )
-from hiros_visualizer.overlays import Drawing, OverlayParams, joint_transforms
+from hiros_visualizer.overlays import (
+    Drawing,
+    OverlayParams,
+    joint_transforms,
+    overlays_from_names,
+)
 
 __all__ = [
     "Drawing",
@@ -16,6 +21,7 @@ __all__ = [
     "id_color",
     "joint_transforms",
     "main",
+    "overlays_from_names",
     "skeleton_markers",
 ]
 

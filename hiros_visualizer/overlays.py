@@ -14,12 +14,13 @@ Each kind of marker has its own namespace (``<ns>``, ``<ns>/velocity``,
 
 from __future__ import annotations
 
+from collections.abc import Iterable
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from hiros_core.codec import MarkerArrayData, encode_marker_array
-from hiros_core.errors import LayoutError
+from hiros_core.errors import ConfigError, LayoutError
 from hiros_core.frames import StaticTransform
 from hiros_core.layouts import Layout
 from hiros_core.model import Skeleton, SkeletonGroup
@@ -35,6 +36,7 @@ __all__ = [
     "angle_markers",
     "arrow_markers",
     "joint_transforms",
+    "overlays_from_names",
 ]
 
 ARROW, TEXT_VIEW_FACING = 0, 9
@@ -55,6 +57,31 @@ class OverlayParams:
     """s: an arrow reaches where the joint would be after this time (``v t``, ``a t^2`` m)."""
     joint_angles: list[str] = field(default_factory=list)
     """Angles to print beside their joint, by name (``knee_left``, ``elbow_right``, ...)."""
+
+
+def overlays_from_names(names: Iterable[str]) -> OverlayParams:
+    """The overlays of a list of names, as a command line gives them.
+
+    A name is ``velocity`` or ``acceleration`` (arrows), a joint angle's (``knee_left``: its
+    value beside the joint) or ``angles`` (every angle): ``hiros run --overlays
+    velocity,knee_left``. The visualizer node takes the same choices as its parameters.
+
+    Raises:
+        ConfigError: a name that is none of these, with the choices.
+
+    """
+    names = list(dict.fromkeys(names))  # in order, once each
+    choices = ["velocity", "acceleration", "angles", *JOINT_ANGLES]
+    unknown = [n for n in names if n not in choices]
+    if unknown:
+        msg = f"unknown overlays {', '.join(unknown)}: choose among {', '.join(choices)}"
+        raise ConfigError(msg)
+    angles = list(JOINT_ANGLES) if "angles" in names else [n for n in names if n in JOINT_ANGLES]
+    return OverlayParams(
+        velocity_arrows="velocity" in names,
+        acceleration_arrows="acceleration" in names,
+        joint_angles=angles,
+    )
 
 
 def _slot(skeleton_id: int, index: int, slots: int = _JOINT_SLOTS) -> int:

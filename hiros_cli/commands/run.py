@@ -15,6 +15,7 @@ from __future__ import annotations
 import argparse
 import math
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from rich.console import Console
 from rich.table import Table
@@ -22,6 +23,9 @@ from rich.table import Table
 from hiros_cli.progress import print_warnings, progress_bar
 from hiros_core.calibration import Calibration, load_calibration, save_calibration
 from hiros_core.errors import CalibrationError, ConfigError
+
+if TYPE_CHECKING:
+    from hiros_visualizer import OverlayParams
 
 HELP = "offline pipeline over a recording -> one MCAP with every stage's output"
 
@@ -69,6 +73,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "stream and its drawing: about a fifth of the bytes)",
     )
     parser.add_argument(
+        "--overlays",
+        type=_overlays,
+        metavar="WHAT",
+        help="draw into the markers beside the skeletons, comma-separated: velocity, "
+        "acceleration (arrows), a joint angle's name (knee_left, elbow_right, ...: its value "
+        "as text) or angles (all of them); default: none",
+    )
+    parser.add_argument(
         "--processes",
         type=int,
         choices=(1, 2),
@@ -89,6 +101,16 @@ def _outputs(text: str) -> frozenset[str]:
         pass
     msg = f"{text!r}: give one or more of {', '.join(OUTPUTS)}, comma-separated"
     raise argparse.ArgumentTypeError(msg)
+
+
+def _overlays(text: str) -> OverlayParams:
+    """``--overlays``: names for ``overlays_from_names``, comma-separated."""
+    from hiros_visualizer import overlays_from_names
+
+    try:
+        return overlays_from_names(name.strip() for name in text.split(",") if name.strip())
+    except ConfigError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
 
 
 def _rate(text: str) -> float:
@@ -177,7 +199,7 @@ def run(args: argparse.Namespace) -> int:
     ):
         summary = run_recording(
             args.recording, calibration, staged, params, advance, processes=args.processes,
-            write=args.write or OUTPUTS,
+            write=args.write or OUTPUTS, overlays=args.overlays,
         )  # fmt: skip
     print_summary(console, summary, args.out)
     return 0

@@ -100,3 +100,31 @@ def test_the_table_gives_each_persons_time_to_accept_the_limb_lengths(
     assert _run(sim, sim / "recording.mcap", tmp_path / "out.mcap", "--processes", "1") == 0
     printed = " ".join(capsys.readouterr().out.split())
     assert re.search(r"limb lengths: person \d+ │ accepted after \d\.\d s", printed), printed
+
+
+def _marker_namespaces(out: Path) -> set[str]:
+    from hiros_core.codec import decode_marker_array
+
+    with RecordingReader(out) as reader:
+        return {
+            namespace
+            for message in reader.messages({"/hiros/filter/markers"})
+            for namespace in decode_marker_array(message.data).namespaces
+        }
+
+
+def test_overlays_go_into_the_output_markers(
+    sim: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    plain, drawn = tmp_path / "plain.mcap", tmp_path / "drawn.mcap"
+    common = ("--processes", "1", "--write", "filter,markers")
+    assert _run(sim, sim / "recording.mcap", plain, *common) == 0
+    assert _run(sim, sim / "recording.mcap", drawn, *common,
+                "--overlays", "velocity,acceleration,knee_left") == 0  # fmt: skip
+    assert not {n for n in _marker_namespaces(plain) if "/" in n}
+    assert {"filter/velocity", "filter/acceleration", "filter/angles"} <= _marker_namespaces(drawn)
+    capsys.readouterr()
+    with pytest.raises(SystemExit) as exit_:
+        _run(sim, sim / "recording.mcap", tmp_path / "x.mcap", "--overlays", "speed")
+    assert exit_.value.code == 2
+    assert "unknown overlays speed: choose among velocity" in capsys.readouterr().err

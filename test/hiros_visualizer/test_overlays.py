@@ -4,10 +4,11 @@ import numpy as np
 import pytest
 
 from hiros_core.codec import decode_marker_array
+from hiros_core.errors import ConfigError
 from hiros_core.layouts import AZURE_KINECT, KINECT_V2
 from hiros_core.model import Skeleton, SkeletonGroup
-from hiros_eval.body import joint_angles
-from hiros_visualizer import Drawing, OverlayParams, joint_transforms
+from hiros_eval.body import JOINT_ANGLES, joint_angles
+from hiros_visualizer import Drawing, OverlayParams, joint_transforms, overlays_from_names
 from hiros_visualizer.overlays import ARROW, DELETE, DELETEALL, angle_markers, arrow_markers
 
 
@@ -87,3 +88,15 @@ def test_per_joint_frames():
     np.testing.assert_allclose(pelvis.translation, a.positions[0])
     name = AZURE_KINECT.joint_names[4]
     np.testing.assert_allclose(edges[f"hiros/person_5/{name}"].rotation, [0, 0, 0, 1])
+
+
+def test_overlays_from_names():
+    params = overlays_from_names(["velocity", "knee_left", "elbow_right", "knee_left"])
+    assert params == OverlayParams(velocity_arrows=True, joint_angles=["knee_left", "elbow_right"])
+    every = overlays_from_names(["acceleration", "angles"])
+    assert every.acceleration_arrows
+    assert not every.velocity_arrows
+    assert every.joint_angles == list(JOINT_ANGLES)
+    assert overlays_from_names([]) == OverlayParams()
+    with pytest.raises(ConfigError, match="unknown overlays speed, knee: choose among velocity"):
+        overlays_from_names(["speed", "velocity", "knee"])
