@@ -198,8 +198,7 @@ def test_a_ros1_bag_chunk_past_the_limit_is_not_inflated(
     from rosbags.typesys import Stores, get_typestore
 
     from hiros_core.errors import RecordingError
-    from hiros_core.recording import RecordingReader
-    from hiros_core.recording import reader as reader_module
+    from hiros_core.recording import RecordingReader, rosbags_source
 
     store = get_typestore(Stores.ROS1_NOETIC)
     bag = tmp_path / "take.bag"
@@ -212,6 +211,6 @@ def test_a_ros1_bag_chunk_past_the_limit_is_not_inflated(
     assert bag.stat().st_size < 1 << 20
     with RecordingReader(bag) as recording:
         assert len(next(iter(recording)).data) > 3 << 20  # read whole within the limit
-    monkeypatch.setattr(reader_module, "MAX_CHUNK_BYTES", 1 << 20)
+    monkeypatch.setattr(rosbags_source, "MAX_CHUNK_BYTES", 1 << 20)
     with RecordingReader(bag) as recording, pytest.raises(RecordingError, match="more than the"):
         list(recording)
