@@ -7,15 +7,14 @@ which reads its usual messages with two compiled calls (``kernels.driver_message
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
+from collections.abc import Callable
 
 import numpy as np
 
 from hiros_core.driver import kernels
+from hiros_core.driver.params import DriverBridgeParams
+from hiros_core.layouts import Layout
 from hiros_core.model import BOX_WIDTH, Skeleton, SkeletonRows, link_rows
-
-if TYPE_CHECKING:
-    from hiros_core.driver.bridge import DriverBridge
 
 __all__ = ["BatchPeople"]
 
@@ -30,17 +29,22 @@ class BatchPeople:
     """
 
     def __init__(
-        self, bridge: DriverBridge, buffer: bytes, starts: np.ndarray, ends: np.ndarray
+        self,
+        params: DriverBridgeParams,
+        lookup: Callable[[str], tuple[Layout, np.ndarray | None]],
+        buffer: bytes,
+        starts: np.ndarray,
+        ends: np.ndarray,
     ) -> None:
+        """Read the batch; ``lookup`` is the bridge's namespace -> (layout, joint table)."""
         raw = np.frombuffer(buffer, dtype=np.uint8)
-        params = bridge.params
         parsed = kernels.driver_messages(raw, starts, ends, float(params.position_scale))
         first, usual, mixed, _, stamps, spans = parsed[:6]
         self.buffer, self.spans, self.first = buffer, spans, first[:-1].tolist()
         self.texts: dict[bytes, str] = {}
         found = np.flatnonzero(usual)
         namespace = spans[first[found[0]], 2:] if len(found) else np.zeros(2, dtype=np.int64)
-        self.layout, table = bridge._lookup(self._text(*namespace.tolist()))
+        self.layout, table = lookup(self._text(*namespace.tolist()))
         made, people, bodies, markers, present = kernels.driver_people(
             raw, parsed, namespace, self.layout.n_joints, params.id_stride,
             params.id_scheme == "joint_major",

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import math
 from collections import deque
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from functools import cache
 from pathlib import Path
 from typing import Any
@@ -25,6 +25,7 @@ from hiros_core.codec import (
     encode_marker_array,
 )
 from hiros_core.driver.markers import ADD, DELETE, DELETEALL, group_to_driver_markers
+from hiros_core.driver.params import DriverBridgeParams
 from hiros_core.errors import CodecError, ConfigError, LayoutError
 from hiros_core.layouts import Layout, get_layout
 from hiros_core.limits import MAX_BODIES, MAX_MARKERS, marker_counts
@@ -38,36 +39,6 @@ from hiros_core.model import (
 __all__ = ["DriverBridge", "DriverBridgeParams", "load_bridge_params", "warm_up"]
 
 _ID_SCHEMES = ("body_major", "joint_major")
-
-
-@dataclass
-class DriverBridgeParams:
-    """How a driver numbers its markers; field names are the bridge nodes' ROS parameters.
-
-    Attributes:
-        layout: built-in layout name (``azure_kinect``, ``kinect_v2``) or a layout YAML file.
-        id_stride: ids are ``body * id_stride + joint`` (``body_major``) or
-            ``joint * id_stride + body`` (``joint_major``).
-        id_scheme: ``body_major`` (the Azure driver) or ``joint_major``.
-        joint_names: the driver's joint order by layout joint name, when it differs from the
-            layout's order; empty means driver joint index = layout marker id.
-        position_scale: metres per driver unit (0.001 for a driver publishing millimetres).
-        confidence_levels: the driver's highest confidence level; model confidence is
-            ``level / confidence_levels``.
-        frame_id: frame written to the groups; empty keeps the markers' frame.
-        reset_after_backwards: a stamp that jumps back by more than this many seconds is a
-            restarted source (a replay looping), not a late message: the bridge starts over.
-
-    """
-
-    layout: str = "azure_kinect"
-    id_stride: int = 100
-    id_scheme: str = "body_major"
-    joint_names: list[str] = field(default_factory=list)
-    position_scale: float = 1.0
-    confidence_levels: int = 3
-    frame_id: str = ""
-    reset_after_backwards: float = 1.0
 
 
 def load_bridge_params(path: str | Path) -> tuple[DriverBridgeParams, dict[str, Any]]:
@@ -252,7 +223,7 @@ class DriverBridge(Accounted):
             return out
         from hiros_core.driver.batch import BatchPeople
 
-        people = BatchPeople(self, buffer, starts, ends)
+        people = BatchPeople(self.params, self._lookup, buffer, starts, ends)
         out: list[SkeletonGroup | None] = []
         for m, (start, end) in enumerate(zip(starts.tolist(), ends.tolist(), strict=True)):
             if not people.made[m]:
