@@ -242,17 +242,30 @@ def encode_marker_array(data: MarkerArrayData) -> bytes:
     )
 
 
-def decode_marker_array(data: bytes | bytearray | memoryview) -> MarkerArrayData:
-    """Columns of a ``visualization_msgs/MarkerArray`` from CDR bytes; CodecError on bad bytes."""
+def _known_shape(data: bytes | bytearray | memoryview) -> tuple[np.ndarray, Plan] | MarkerArrayData:
+    """The message's aligned bytes and the plan of its shape; a new shape's columns, walked.
+
+    A new shape is walked once (``_walk_marker_array``) and its plan learnt, so the next
+    message of that shape is gathered. Raises CodecError on bad bytes.
+    """
     check_marker_array(data)  # past hiros_core.limits: refused before anything is made
     size = len(memoryview(data).cast("B"))
     buffer = aligned_copy(data)
     plan = _MARKER_PLANS.find_aligned(buffer, size)
-    if plan is None:
-        markers = _walk_marker_array(data)
-        texts = _text_bytes(markers.texts)
-        _MARKER_PLANS.put(_marker_key(markers, texts), _build_marker_plan(markers, texts))
-        return markers
+    if plan is not None:
+        return buffer, plan
+    markers = _walk_marker_array(data)
+    texts = _text_bytes(markers.texts)
+    _MARKER_PLANS.put(_marker_key(markers, texts), _build_marker_plan(markers, texts))
+    return markers
+
+
+def decode_marker_array(data: bytes | bytearray | memoryview) -> MarkerArrayData:
+    """Columns of a ``visualization_msgs/MarkerArray`` from CDR bytes; CodecError on bad bytes."""
+    found = _known_shape(data)
+    if isinstance(found, MarkerArrayData):
+        return found
+    buffer, plan = found
     shape: _MarkerShape = plan.meta  # type: ignore[assignment]
     ita = plan.gather_aligned(buffer, "ita", _ITA).ravel()
     pose_scale = plan.gather_aligned(buffer, "pose_scale", "<f8").reshape(-1, 10)
@@ -301,16 +314,13 @@ def decode_marker_fields(data: bytes | bytearray | memoryview) -> MarkerFields:
     Skips colours, scales, points, lifetimes and media: about half the decoding of a driver
     message.
     """
-    check_marker_array(data)  # past hiros_core.limits: refused before anything is made
-    size = len(memoryview(data).cast("B"))
-    buffer = aligned_copy(data)
-    plan = _MARKER_PLANS.find_aligned(buffer, size)
-    if plan is None:
-        full = decode_marker_array(data)
+    found = _known_shape(data)
+    if isinstance(found, MarkerArrayData):
         return MarkerFields(
-            full.stamps_ns, full.frame_ids, full.namespaces, full.ids, full.actions, full.poses,
-            full.texts,
+            found.stamps_ns, found.frame_ids, found.namespaces, found.ids, found.actions,
+            found.poses, found.texts,
         )  # fmt: skip
+    buffer, plan = found
     shape: _MarkerShape = plan.meta  # type: ignore[assignment]
     ita = plan.gather_aligned(buffer, "ita", _ITA).ravel()
     return MarkerFields(

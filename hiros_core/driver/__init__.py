@@ -28,7 +28,7 @@ a recording's driver messages a chunk at a time.
 
 from __future__ import annotations
 
-from hiros_core.driver.bridge import DriverBridge, DriverBridgeParams, load_bridge_params, warm_up
+from hiros_core.driver.bridge import DriverBridge, load_bridge_params, warm_up
 from hiros_core.driver.markers import (
     ADD,
     DELETE,
@@ -38,6 +38,7 @@ from hiros_core.driver.markers import (
     SPHERE,
     group_to_driver_markers,
 )
+from hiros_core.driver.params import DriverBridgeParams
 
 __all__ = [
     "ADD",

@@ -28,6 +28,18 @@ _MAX_LEVEL_DIGITS = 9
 
 
 @njit(cache=True, inline="always")
+def _finite_position(pose: np.ndarray, position_scale: float) -> bool:
+    """Whether the scaled position is finite (as ``_fill_row`` requires)."""
+    for k in range(3):
+        value = pose[k]
+        if position_scale != 1.0:
+            value *= position_scale
+        if not math.isfinite(value):
+            return False
+    return True
+
+
+@njit(cache=True, inline="always")
 def _fill_row(
     row: np.ndarray, pose: np.ndarray, level: float, position_scale: float, levels: float
 ) -> bool:
@@ -35,15 +47,12 @@ def _fill_row(
 
     ``pose`` is position and orientation (x, y, z, w); the orientation stays NaN when its
     squared norm is not positive (zero or NaN: the driver's "unknown"). False, with the row
-    partly written, when a scaled position is not finite.
+    untouched, when a scaled position is not finite.
     """
+    if not _finite_position(pose, position_scale):
+        return False
     for k in range(3):
-        value = pose[k]
-        if position_scale != 1.0:
-            value *= position_scale
-        if not math.isfinite(value):
-            return False
-        row[1 + k] = value
+        row[1 + k] = pose[k] * position_scale if position_scale != 1.0 else pose[k]
     norm = 0.0
     for k in range(3, 7):
         norm += pose[k] * pose[k]
@@ -172,18 +181,6 @@ def _media(buf: np.ndarray, start: int, r: int, size: int) -> int:
             return size + 1
         r += 4
     return r
-
-
-@njit(cache=True, inline="always")
-def _finite_position(pose: np.ndarray, position_scale: float) -> bool:
-    """Whether the scaled position is finite (as ``_fill_row`` requires)."""
-    for k in range(3):
-        value = pose[k]
-        if position_scale != 1.0:
-            value *= position_scale
-        if not math.isfinite(value):
-            return False
-    return True
 
 
 @njit(cache=True, inline="always")
