@@ -13,21 +13,26 @@ shows that). Its people vary each repetition of their mocap clips (``LOOP_VARIAT
 repeated exactly make every lag that is a multiple of a clip's length look like the cameras'
 clock offset, which no live scene does either.
 
-Every ``SAMPLE_SECONDS`` it prints each node's resident memory (``VmRSS``) and its peak since
-the last sample (``VmHWM``, reset at each sample), the outputs received on ``/hiros/filter``
+Every ``SAMPLE_SECONDS`` it prints each node's resident memory (``VmRSS``), its peak since the
+last sample (``VmHWM``, reset at each sample) and its lowest reading since then (read every
+``PROBE_SECONDS``), the outputs received on ``/hiros/filter``
 and the ``calib`` node's estimates and events (from its ``/diagnostics``). Then: the latency
 percentiles (receive time minus the output's stamp), whether the output ever stopped (a
 sampling window without output), and each node's memory growth after its first two minutes
 (the issue 21 target: under 5 %), like for like: the ``calib`` node is several hundred MB
 larger while it solves an estimate (every ``update_period``, 10 s) than between estimates,
-so a single reading depends on when it falls. The growth compares the first and the last
-whole period of the feed (the same frames): the highest peak of each, and the lowest reading.
+so a single reading depends on when it falls (the estimates come every ~10.2 s, the readings
+every 10 s: for minutes on end they fall between estimates, then within them). The growth
+compares the first and the last whole period of the feed after settling (the same frames):
+the highest peak of each (its largest estimate), and the lowest reading (between estimates).
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
 import itertools
+import math
 import os
 import subprocess
 import sys
@@ -45,6 +50,8 @@ FEED_SECONDS = 60.0
 LOOP_VARIATION = 0.1
 """Per-repetition variation of the people's mocap clips (``SimParams.loop_variation``)."""
 SAMPLE_SECONDS = 10.0
+PROBE_SECONDS = 1.0
+"""Seconds between readings of the nodes' memory within a sample window (for its lowest)."""
 SETTLE_SECONDS = 120.0
 """Memory growth is measured from this time on (start-up and the first calibrations)."""
 GROWTH_TARGET = 0.05
@@ -54,19 +61,39 @@ def _executable(name: str) -> str:
     return str(Path(sys.prefix) / "bin" / name)
 
 
-def _memory_mb(pid: int) -> tuple[float, float]:
-    """Resident memory of a process now and its peak since the last call, MB (0 once ended).
-
-    The peak (``VmHWM``) is reset to the current size after reading (``clear_refs`` 5), so
-    that the next call gives the peak of the next window.
-    """
-    status = Path(f"/proc/{pid}/status")
+def _status_mb(pid: int, *keys: str) -> list[float]:
+    """Fields of a process's ``/proc/<pid>/status`` in MB (0 once it has ended)."""
     try:
-        values = dict(line.split(":", 1) for line in status.read_text().splitlines())
-        Path(f"/proc/{pid}/clear_refs").write_text("5")
-    except (OSError, ValueError):
-        return 0.0, 0.0
-    return tuple(int(values[key].split()[0]) / 1024 for key in ("VmRSS", "VmHWM"))  # type: ignore[return-value]
+        lines = Path(f"/proc/{pid}/status").read_text().splitlines()
+        values = dict(line.split(":", 1) for line in lines)
+        return [int(values[key].split()[0]) / 1024 for key in keys]
+    except (OSError, ValueError, KeyError):
+        return [0.0] * len(keys)
+
+
+class _Memory:
+    """A node's resident memory over each sampling window: now, its peak and its lowest.
+
+    The peak is the kernel's (``VmHWM``), reset to the current size at each sample
+    (``clear_refs`` 5); the lowest is that of the probes (``PROBE_SECONDS`` apart) and the
+    sample, which catch the node between two estimates.
+    """
+
+    def __init__(self, pid: int) -> None:
+        self.pid = pid
+        self.low = math.inf
+
+    def probe(self) -> None:
+        (rss,) = _status_mb(self.pid, "VmRSS")
+        self.low = min(self.low, rss)
+
+    def sample(self) -> tuple[float, float, float]:
+        """``(resident, peak, lowest)`` MB of the window now ending; the next one starts."""
+        rss, peak = _status_mb(self.pid, "VmRSS", "VmHWM")
+        with contextlib.suppress(OSError):
+            Path(f"/proc/{self.pid}/clear_refs").write_text("5")
+        low, self.low = min(self.low, rss), math.inf
+        return rss, peak, low
 
 
 def _recording() -> tuple[list[tuple[int, str, object]], Path]:
@@ -176,7 +203,8 @@ class _Feeder:
 
     def close(self) -> None:
         self.node.destroy_node()
-        self.rclpy.shutdown()
+        if self.rclpy.ok():  # (a SIGINT or SIGTERM shut rclpy down already)
+            self.rclpy.shutdown()
 
 
 Feed = list[tuple[int, int, str, object]]
@@ -222,14 +250,21 @@ def _publish(feeder: _Feeder, camera: str, group: Any, stamp_ns: int) -> None:
 
 
 def _loop(
-    feeder: _Feeder, passes: tuple[Feed, Feed], seconds: float, on_sample: Callable[[float], None]
+    feeder: _Feeder,
+    passes: tuple[Feed, Feed],
+    seconds: float,
+    on_sample: Callable[[float], None],
+    on_probe: Callable[[], None],
 ) -> None:
     """Publish the passes in turn for ``seconds``, each restamped to the wall clock."""
     start = time.monotonic()
-    next_sample = start + SAMPLE_SECONDS
+    next_sample, next_probe = start + SAMPLE_SECONDS, start + PROBE_SECONDS
     for turn in itertools.count():
         wall_ns, pass_start = time.time_ns(), time.monotonic()
         for publish_ns, stamp_ns, camera, group in passes[turn % 2]:
+            if time.monotonic() >= next_probe:
+                on_probe()
+                next_probe = time.monotonic() + PROBE_SECONDS
             while time.monotonic() >= next_sample:
                 on_sample(next_sample - start)
                 next_sample += SAMPLE_SECONDS
@@ -239,8 +274,8 @@ def _loop(
             _publish(feeder, camera, group, wall_ns + stamp_ns)
 
 
-Sample = tuple[float, dict[str, tuple[float, float]], int]
-"""``(seconds since the start, node -> (resident MB, peak MB in the window), outputs)``."""
+Sample = tuple[float, dict[str, tuple[float, float, float]], int]
+"""``(seconds since the start, node -> (resident, peak, lowest) MB of the window, outputs)``."""
 
 
 def soak(minutes: float) -> int:
@@ -249,16 +284,20 @@ def soak(minutes: float) -> int:
     passes = feed_passes(frames)
     period = 2 * (max(p for p, *_ in passes[0]) * 1e-9)
     nodes = _start_nodes(calibration)
+    memories = {name: _Memory(process.pid) for name, process in nodes.items()}
     feeder = _Feeder()
     samples: list[Sample] = []
     counted = [0]
     dropped: dict[str, int] = {}
 
     def on_sample(at: float) -> None:
-        memory = {name: _memory_mb(process.pid) for name, process in nodes.items()}
+        memory = {name: tracked.sample() for name, tracked in memories.items()}
         outputs, counted[0] = feeder.outputs - counted[0], feeder.outputs
         samples.append((at, memory, outputs))
-        shown = ", ".join(f"{n} {mb:.0f} MB (peak {peak:.0f})" for n, (mb, peak) in memory.items())
+        shown = ", ".join(
+            f"{n} {mb:.0f} MB (peak {peak:.0f}, low {low:.0f})"
+            for n, (mb, peak, low) in memory.items()
+        )
         now = feeder.dropped()
         new = {k: n - dropped.get(k, 0) for k, n in now.items() if n > dropped.get(k, 0)}
         dropped.update(now)
@@ -277,13 +316,14 @@ def soak(minutes: float) -> int:
             if time.monotonic() > deadline:
                 print("soak: the nodes were not discovered", file=sys.stderr)
                 return 2
-        _loop(feeder, passes, minutes * 60.0, on_sample)
+        probe = lambda: [tracked.probe() for tracked in memories.values()]  # noqa: E731
+        _loop(feeder, passes, minutes * 60.0, on_sample, probe)
     finally:
-        feeder.close()
-        for process in nodes.values():
+        for process in nodes.values():  # first: an interrupted soak leaves no node running
             process.terminate()
         for process in nodes.values():
             process.wait(timeout=30)
+        feeder.close()
     print(f"soak calib events: {feeder.calib_figures()}")
     return _summary(samples, feeder.latencies, period)
 
@@ -295,11 +335,12 @@ def memory_growth(
 
     Returns ``((start, end) s of the first period, (start, end) of the last), (highest peak
     of the first, of the last) MB, (lowest reading of the first, of the last) MB``, or None
-    with fewer than two whole periods. A sample at ``t`` covers the window ``t - SAMPLE_SECONDS
-    .. t``; a period starts at ``SETTLE_SECONDS + k * period``.
+    with fewer than two whole periods. The highest peak is the largest estimate's, the
+    lowest reading the node between estimates. A sample at ``t`` covers the window
+    ``t - SAMPLE_SECONDS .. t``; a period starts at ``SETTLE_SECONDS + k * period``.
     """
     per_period = max(1, round(period / SAMPLE_SECONDS))
-    periods: dict[int, list[tuple[float, float]]] = {}
+    periods: dict[int, list[tuple[float, float, float]]] = {}
     for at, memory, _ in samples:
         window_start = at - SAMPLE_SECONDS
         if window_start >= SETTLE_SECONDS - 1e-6:
@@ -316,8 +357,8 @@ def memory_growth(
 
     return (
         (bounds(whole[0]), bounds(whole[-1])),
-        (max(p for _, p in first), max(p for _, p in last)),
-        (min(r for r, _ in first), min(r for r, _ in last)),
+        (max(peak for _, peak, _ in first), max(peak for _, peak, _ in last)),
+        (min(low for _, _, low in first), min(low for _, _, low in last)),
     )  # type: ignore[return-value]
 
 

@@ -57,17 +57,17 @@ def test_memory_growth_compares_whole_periods_like_for_like():
 
     period = 60.0
 
-    def steady(t):  # every third reading mid-estimate, whenever that falls
-        return (460.0, 470.0) if int(t / SAMPLE_SECONDS) % 3 == 0 else (260.0, 470.0)
+    def steady(t):  # a reading mid-estimate or not, whenever it falls; a probe between two
+        return (460.0, 470.0, 260.0) if int(t / SAMPLE_SECONDS) % 3 else (260.0, 470.0, 255.0)
 
     (first, last), peaks, lows = memory_growth(_samples(period, steady), "calib", period)
     assert first == (SETTLE_SECONDS, SETTLE_SECONDS + period)
     assert last == (SETTLE_SECONDS + 5 * period, SETTLE_SECONDS + 6 * period)
     assert peaks == (470.0, 470.0)
-    assert lows == (260.0, 260.0)
+    assert lows == (255.0, 255.0)
 
     def creeping(t):
-        return (260.0 + 0.1 * t, 470.0 + 0.1 * t)
+        return (460.0 + 0.1 * t, 470.0 + 0.1 * t, 260.0 + 0.1 * t)
 
     _, peaks, lows = memory_growth(_samples(period, creeping), "calib", period)
     assert lows[1] - lows[0] == pytest.approx(0.1 * 5 * period)
@@ -75,5 +75,5 @@ def test_memory_growth_compares_whole_periods_like_for_like():
 
 
 def test_memory_growth_needs_two_whole_periods():
-    samples = [(t, {"calib": (250.0, 400.0)}, 1) for t in range(10, 250, 10)]
+    samples = [(t, {"calib": (250.0, 400.0, 240.0)}, 1) for t in range(10, 250, 10)]
     assert memory_growth(samples, "calib", 120.0) is None
