@@ -2,19 +2,18 @@
 
 Encoding fills a plan per message shape (frames, namespaces, text lengths, point counts); a
 message of a known shape is decoded by one gather per kind of field, and a new one walked once
-(``_walk``, or ``_parse_marker_array``'s field reader for anything unusual), which teaches its
-plan. ``decode_marker_fields`` reads only the columns a driver bridge needs.
+(``marker_walk``; ``_parse_marker_array``'s field reader for anything unusual), which teaches
+its plan. ``decode_marker_fields`` reads only the columns a driver bridge needs.
 """
 
 from __future__ import annotations
 
-import struct
 from dataclasses import dataclass, field
 from typing import NamedTuple
 
 import numpy as np
 
-from hiros_core.cdr import HEADER_SIZE, CdrReader, Plan, PlanBuilder, PlanCache, aligned_copy
+from hiros_core.cdr import CdrReader, Plan, PlanBuilder, PlanCache, aligned_copy
 from hiros_core.codec.fields import _NS, _TIME, _c_string, _checked, _join_ns, _rows, _split_ns
 from hiros_core.errors import CodecError
 from hiros_core.limits import check_marker_array
@@ -365,132 +364,80 @@ def _gather_texts(plan: Plan, buffer: np.ndarray, shape: _MarkerShape) -> list[s
     return texts
 
 
-class _IrregularError(Exception):
-    """The fast walk met something it leaves to ``_parse_marker_array`` (which names it)."""
-
-
-_I32_U32 = struct.Struct("<iI")
-_U32 = struct.Struct("<I")
-_ITA_STRUCT = struct.Struct("<iii")
-_POSE_SCALE_STRUCT = struct.Struct("<10d")
-_COLOR_STRUCT = struct.Struct("<4f")
-# "" resource, (0, 0) stamp, "" frame, "" format, no data, no uv (x: padding, not compared)
-_MEDIA_STRUCT = struct.Struct("<IB3xiIIB3xIB3xII")
-_NO_MEDIA = (1, 0, 0, 0, 1, 0, 1, 0, 0, 0)
-# "" mesh resource, "" mesh file, no mesh data, then mesh_use_embedded_materials
-_MESH_STRUCT = struct.Struct("<IB3xIB3xIB")
-_NO_MESH = (1, 0, 1, 0, 0)
-
-
 def _walk_marker_array(data: bytes | bytearray | memoryview) -> MarkerArrayData:
-    """``_parse_marker_array`` for well-formed messages, a few times faster.
+    """``_parse_marker_array`` for regular messages (``marker_walk``), a few times faster.
 
     A message of a new shape is walked once before its plan exists; with ~15 fields per
-    marker, the reader's per-field calls cost ~10 ms per driver message. Here positions are
-    plain integers and fixed runs are unpacked together; anything unusual (truncation, bad
-    strings, media attachments) is left to ``_parse_marker_array``, so errors and odd
-    messages read exactly as before.
+    marker, the reader's per-field calls cost ~10 ms per driver message. The compiled walk
+    finds every field (the same walk reads a recording's driver messages); anything it does
+    not take (truncation, media attachments, booleans past 1) and text that is not UTF-8 are
+    left to ``_parse_marker_array``, so errors and odd messages read exactly as before.
     """
+    from hiros_core.codec import marker_walk
+
     raw = bytes(data)
+    buf = np.frombuffer(raw, dtype=np.uint8)
+    ends = np.array([len(raw)], dtype=np.int64)
+    _, regular, table = marker_walk.walk_markers(buf, np.zeros(1, dtype=np.int64), ends)
+    if not regular[0]:
+        return _parse_marker_array(raw)
     try:
-        return _walk(raw)
-    except (_IrregularError, struct.error, IndexError, UnicodeDecodeError):
+        return _walked(raw, buf, table)
+    except UnicodeDecodeError:
         return _parse_marker_array(raw)
 
 
-def _walk(raw: bytes) -> MarkerArrayData:  # noqa: PLR0915 - one flat loop on purpose
-    size = len(raw)
-    if size < HEADER_SIZE + 4 or raw[0] != 0 or raw[1] != 1:
-        raise _IrregularError
-    u32, i32_u32 = _U32.unpack_from, _I32_U32.unpack_from
+def _walked(raw: bytes, buf: np.ndarray, table: np.ndarray) -> MarkerArrayData:
+    """The columns of a regular message from its ``marker_walk`` table."""
+    from hiros_core.codec.marker_walk import (
+        EMBEDDED,
+        FRAME,
+        ID,
+        LIFETIME,
+        LOCKED,
+        NAMESPACE,
+        POINT_COLORS,
+        POINTS,
+        POSE,
+        STAMP,
+        TEXT,
+    )
 
-    def string(pos: int) -> tuple[str, int]:
-        pos += -pos % 4  # payload offset = pos - 4: same residue mod 4
-        (n,) = u32(raw, pos)
-        end = pos + 4 + n
-        if n == 0 or end > size or raw[end - 1] != 0:
-            raise _IrregularError
-        return raw[pos + 4 : end - 1].split(b"\x00", 1)[0].decode("utf-8"), end
+    def texts(column: int) -> list[str]:
+        spans = table[:, column : column + 2].tolist()
+        return [raw[a:b].split(b"\x00", 1)[0].decode("utf-8") for a, b in spans]
 
-    (n,) = u32(raw, 4)
-    if n * 150 > size - 8:
-        raise _IrregularError
-    pos = 8
-    stamps, lifetimes, frames, namespaces, itas, pose_scales, colors, locked = (
-        [], [], [], [], [], [], [], []
-    )  # fmt: skip
-    points, point_colors, texts, embedded = [], [], [], []
-    for _ in range(n):
-        pos += -pos % 4
-        sec, nanosec = i32_u32(raw, pos)
-        stamps.append(sec * _NS + nanosec)
-        frame, pos = string(pos + 8)
-        namespace, pos = string(pos)
-        frames.append(frame)
-        namespaces.append(namespace)
-        pos += -pos % 4
-        itas.append(_ITA_STRUCT.unpack_from(raw, pos))
-        pos += 12
-        pos += (4 - pos) % 8  # 8-aligned in the payload
-        pose_scales.append(_POSE_SCALE_STRUCT.unpack_from(raw, pos))
-        pos += 80  # 8-aligned, so the colour needs no padding
-        colors.append(_COLOR_STRUCT.unpack_from(raw, pos))
-        sec, nanosec = i32_u32(raw, pos + 16)
-        lifetimes.append(sec * _NS + nanosec)
-        locked.append(raw[pos + 24])
-        pos += 25
-        pos += -pos % 4
-        (count,) = u32(raw, pos)
-        pos += 4
-        pos += (4 - pos) % 8
-        if count * 24 > size - pos:
-            raise _IrregularError
-        points.append(np.frombuffer(raw, "<f8", 3 * count, pos).reshape(-1, 3))
-        pos += 24 * count
-        pos += -pos % 4
-        (count,) = u32(raw, pos)
-        pos += 4
-        if count * 16 > size - pos:
-            raise _IrregularError
-        point_colors.append(np.frombuffer(raw, "<f4", 4 * count, pos).reshape(-1, 4))
-        pos += 16 * count
-        # texture resource, stamp, frame, format, data and uv coordinates, all empty (else
-        # the reader's way, which keeps them as attachments); padding bytes are not compared
-        pos += -pos % 4
-        if _MEDIA_STRUCT.unpack_from(raw, pos) != _NO_MEDIA:
-            raise _IrregularError
-        text, pos = string(pos + _MEDIA_STRUCT.size)
-        texts.append(text)
-        pos += -pos % 4
-        *mesh, flag = _MESH_STRUCT.unpack_from(raw, pos)
-        if tuple(mesh) != _NO_MESH:
-            raise _IrregularError
-        embedded.append(flag)
-        pos += _MESH_STRUCT.size
-    if size - pos > 3:
-        raise _IrregularError
-    if any(b > 1 for b in locked) or any(b > 1 for b in embedded):
-        raise _IrregularError  # let the reader decide what such bytes mean
-    ita = np.array(itas, dtype=np.int32).reshape(-1, 3)
-    pose_scale = np.array(pose_scales, dtype=np.float64).reshape(-1, 10)
+    pose_scale = _gathered(buf, table[:, POSE], 10, np.float64)
     return MarkerArrayData(
-        stamps_ns=np.array(stamps, dtype=np.int64),
-        frame_ids=frames,
-        namespaces=namespaces,
-        ids=ita[:, 0].copy(),
-        types=ita[:, 1].copy(),
-        actions=ita[:, 2].copy(),
+        stamps_ns=table[:, STAMP].copy(),
+        frame_ids=texts(FRAME),
+        namespaces=texts(NAMESPACE),
+        ids=table[:, ID].astype(np.int32),
+        types=table[:, ID + 1].astype(np.int32),
+        actions=table[:, ID + 2].astype(np.int32),
         poses=pose_scale[:, :7].copy(),
         scales=pose_scale[:, 7:].copy(),
-        colors=np.array(colors, dtype=np.float32).reshape(-1, 4),
-        lifetimes_ns=np.array(lifetimes, dtype=np.int64),
-        frame_locked=np.array(locked, dtype=bool),
-        points=[p.copy() for p in points],
-        point_colors=[c.copy() for c in point_colors],
-        texts=texts,
-        attachments=[_NO_ATTACHMENTS] * n,
-        mesh_use_embedded_materials=np.array(embedded, dtype=bool),
+        colors=_gathered(buf, table[:, POSE] + 80, 4, np.float32),
+        lifetimes_ns=table[:, LIFETIME].copy(),
+        frame_locked=table[:, LOCKED].astype(bool),
+        points=[
+            np.frombuffer(raw, "<f8", 3 * count, at).reshape(-1, 3).copy()
+            for at, count in table[:, POINTS : POINTS + 2].tolist()
+        ],
+        point_colors=[
+            np.frombuffer(raw, "<f4", 4 * count, at).reshape(-1, 4).copy()
+            for at, count in table[:, POINT_COLORS : POINT_COLORS + 2].tolist()
+        ],
+        texts=texts(TEXT),
+        attachments=[_NO_ATTACHMENTS] * len(table),
+        mesh_use_embedded_materials=table[:, EMBEDDED].astype(bool),
     )
+
+
+def _gathered(buf: np.ndarray, starts: np.ndarray, width: int, dtype: type) -> np.ndarray:
+    """``(n, width)`` values of ``dtype`` stored from each of the byte offsets ``starts``."""
+    size = width * np.dtype(dtype).itemsize
+    return buf[starts[:, None] + np.arange(size)].view(dtype)
 
 
 def _parse_marker_array(data: bytes | bytearray | memoryview) -> MarkerArrayData:

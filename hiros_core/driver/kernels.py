@@ -3,14 +3,12 @@
 The driver's usual message (every marker an ADD of a known joint, ids in increasing order, as
 the ids of earlier messages showed) turns into marker rows by a dozen small numpy calls per
 message in ``DriverBridge._kept_markers``/``_skeletons``; ``driver_rows`` does it in one call.
-``driver_messages`` goes further for a recording: it reads the driver's MarkerArray CDR bytes
-of many messages at once (a whole MCAP chunk) straight into marker rows, so that decoding costs
-no Python work per marker and next to none per message.
-Offsets named ``r`` are relative to a message's first byte; its CDR payload starts at 4, so
-4-alignment is ``r``'s own and 8-alignment is ``r - 4``'s. The small helpers are inlined
-(``inline="always"``): called per field of every marker, their calls cost a third of the walk.
-Always the bridge's path for usual messages; imported at the bridge's first call, compiled on
-first use and cached on disk (the rule: ``hiros_core.compiled``).
+``driver_messages`` goes further for a recording: it walks the driver's MarkerArray CDR bytes
+of many messages at once (a whole MCAP chunk) with the codec's walk (``codec.marker_walk``),
+and ``driver_people`` turns the usual ones straight into marker rows, so that decoding costs
+no Python work per marker and next to none per message. The small helpers are inlined
+(``inline="always"``). Always the bridge's path for usual messages; imported at the bridge's
+first call, compiled on first use and cached on disk (the rule: ``hiros_core.compiled``).
 """
 
 from __future__ import annotations
@@ -20,10 +18,12 @@ import math
 import numpy as np
 from numba import njit
 
+from hiros_core.codec import marker_walk
+from hiros_core.codec.marker_walk import FRAME, ID, NAMESPACE, POSE, STAMP, TEXT, walk_markers
+from hiros_core.compiled import refresh_stale_caches
+
 __all__ = ["driver_messages", "driver_people", "driver_rows"]
 
-_MIN_MARKER_BYTES = 150
-"""The codec's lower bound on a Marker's CDR size: more markers than this allows is bad data."""
 _MAX_LEVEL_DIGITS = 9
 
 
@@ -93,38 +93,6 @@ def driver_rows(  # noqa: PLR0917 - a compiled kernel takes plain positional val
 
 
 @njit(cache=True, inline="always")
-def _u32(buf: np.ndarray, at: int) -> int:
-    value = np.int64(buf[at]) | (np.int64(buf[at + 1]) << 8) | (np.int64(buf[at + 2]) << 16)
-    return value | (np.int64(buf[at + 3]) << 24)
-
-
-@njit(cache=True, inline="always")
-def _i32(buf: np.ndarray, at: int) -> int:
-    value = _u32(buf, at)
-    return value - (1 << 32) if value >= (1 << 31) else value
-
-
-@njit(cache=True, inline="always")
-def _string(buf: np.ndarray, start: int, r: int, size: int) -> tuple[int, int, int]:
-    """A CDR string at relative offset ``r`` (4-aligned here): its byte span and the next offset.
-
-    The span is (-1, -1) unless the string is plain ASCII without NULs before its terminator
-    (what every driver writes; anything else is left to the codec, which names the problem).
-    """
-    r += -r & 3
-    if r + 4 > size:
-        return -1, -1, size + 1
-    n = _u32(buf, start + r)
-    end = r + 4 + n
-    if n == 0 or end > size or buf[start + end - 1] != 0:
-        return -1, -1, size + 1
-    for k in range(start + r + 4, start + end - 1):
-        if buf[k] == 0 or buf[k] >= 0x80:
-            return -1, -1, size + 1
-    return start + r + 4, start + end - 1, end
-
-
-@njit(cache=True, inline="always")
 def _level(buf: np.ndarray, first: int, stop: int) -> tuple[float, bool]:
     """The confidence level written in a marker's text: NaN when empty; False unless digits."""
     if first == stop:
@@ -141,146 +109,71 @@ def _level(buf: np.ndarray, first: int, stop: int) -> tuple[float, bool]:
 
 
 @njit(cache=True, inline="always")
-def _empty_string(buf: np.ndarray, start: int, r: int, size: int) -> int:
-    """Skip an empty CDR string ("": length 1, one NUL); ``size + 1`` when it is not empty."""
-    r += -r & 3
-    if r + 5 > size or _u32(buf, start + r) != 1 or buf[start + r + 4] != 0:
-        return size + 1
-    return r + 5
-
-
-@njit(cache=True, inline="always")
-def _sequence(  # noqa: PLR0917 - a compiled kernel takes plain positional values
-    buf: np.ndarray, start: int, r: int, size: int, item: int, align: int
-) -> int:
-    """Skip a CDR sequence of ``item``-byte values aligned to ``align``; ``size + 1`` if cut."""
-    r += -r & 3
-    if r + 4 > size:
-        return size + 1
-    n = _u32(buf, start + r)
-    r += 4
-    if align == 8:
-        r += (4 - r) & 7
-    r += n * item
-    return r if r <= size else size + 1
-
-
-@njit(cache=True, inline="always")
-def _media(buf: np.ndarray, start: int, r: int, size: int) -> int:
-    """Skip the texture fields, which drivers leave empty; ``size + 1`` when they are not.
-
-    texture_resource "", texture (stamp 0, frame "", format "", no data), no uv coordinates.
-    """
-    r = _empty_string(buf, start, r, size)
-    if r + 8 > size or _u32(buf, start + r) != 0 or _u32(buf, start + r + 4) != 0:
-        return size + 1
-    r = _empty_string(buf, start, _empty_string(buf, start, r + 8, size), size)
-    for _ in range(2):  # texture data (uint8[]) and uv_coordinates: both empty
-        r += -r & 3
-        if r + 4 > size or _u32(buf, start + r) != 0:
-            return size + 1
-        r += 4
-    return r
-
-
-@njit(cache=True, inline="always")
-def _marker(  # noqa: PLR0911, PLR0917 - one flat walk over a Marker's fields
-    buf: np.ndarray,
-    start: int,
-    r: int,
-    size: int,
-    out: int,
-    ids: np.ndarray,
-    stamps: np.ndarray,
-    spans: np.ndarray,
-    poses: np.ndarray,
-    levels: np.ndarray,
-    position_scale: float,
-) -> int:
-    """Read the marker at relative offset ``r`` into row ``out``; the next offset, or -1.
-
-    Row ``out`` of ``ids``, ``stamps``, ``spans`` (byte spans of frame and namespace),
-    ``poses`` (where its 7 pose floats start in ``buf``) and ``levels`` (its confidence level,
-    NaN: none). -1 also when the marker is not a usual driver joint (not an ADD, texture or mesh
-    fields set, non-ASCII strings, a text that is no level, a position that is not finite):
-    the caller leaves such a message to the codec and the bridge.
-    """
-    r += -r & 3
-    if r + 8 > size:
-        return -1
-    stamps[out] = np.int64(_i32(buf, start + r)) * 1_000_000_000 + _u32(buf, start + r + 4)
-    frame_first, frame_stop, r = _string(buf, start, r + 8, size)
-    ns_first, ns_stop, r = _string(buf, start, r, size)
-    r += -r & 3
-    if frame_first < 0 or ns_first < 0 or r + 12 > size:
-        return -1
-    spans[out, 0], spans[out, 1], spans[out, 2], spans[out, 3] = (
-        frame_first, frame_stop, ns_first, ns_stop
-    )  # fmt: skip
-    ids[out] = _i32(buf, start + r)
-    if _i32(buf, start + r + 8) != 0:  # action: not ADD
-        return -1
-    r += 12
-    r += (4 - r) & 7  # the pose is 8-aligned in the payload (which starts at offset 4)
-    if r + 105 > size or buf[start + r + 104] > 1:  # pose, scale, colour, lifetime, locked
-        return -1
-    poses[out] = start + r
-    if not _finite_position(buf[start + r : start + r + 24].view(np.float64), position_scale):
-        return -1
-    r = _sequence(buf, start, r + 105, size, 24, 8)  # points
-    r = _sequence(buf, start, r, size, 16, 4)  # colors
-    text_first, text_stop, r = _string(buf, start, _media(buf, start, r, size), size)
-    r = _empty_string(buf, start, _empty_string(buf, start, r, size), size)  # mesh resource, file
-    r += -r & 3
-    if text_first < 0 or r + 5 > size or _u32(buf, start + r) != 0 or buf[start + r + 4] > 1:
-        return -1  # mesh data empty, mesh_use_embedded_materials a bool
-    levels[out], ok = _level(buf, text_first, text_stop)
-    return r + 5 if ok else -1
+def _ascii(buf: np.ndarray, first: int, stop: int) -> bool:
+    """Whether ``buf[first:stop]`` is plain ASCII without NULs (what every driver writes)."""
+    for k in range(first, stop):  # noqa: SIM110 - a compiled loop, no generator
+        if buf[k] == 0 or buf[k] >= 0x80:
+            return False
+    return True
 
 
 @njit(cache=True)
+def _usual_markers(
+    buf: np.ndarray, walked: tuple[np.ndarray, np.ndarray, np.ndarray], position_scale: float
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Which walked messages are usual driver messages, which of those mix stamps, and levels.
+
+    Usual: regular (``walk_markers``), at least one marker, and every marker an ADD with
+    ASCII frame and namespace, a text that is a level (see ``_level``) and a finite scaled
+    position. Returns ``usual`` ``(M,)``, ``mixed`` ``(M,)`` (its markers' stamps differ) and
+    per marker ``levels`` (NaN: none).
+    """
+    first, regular, table = walked
+    n_messages = first.size - 1
+    usual = np.zeros(n_messages, dtype=np.bool_)
+    mixed = np.zeros(n_messages, dtype=np.bool_)
+    levels = np.full(table.shape[0], np.nan)
+    for m in range(n_messages):
+        usual[m] = regular[m] and first[m + 1] > first[m]
+        for i in range(first[m], first[m + 1] if usual[m] else 0):
+            row = table[i]
+            pose = buf[row[POSE] : row[POSE] + 24].view(np.float64)
+            levels[i], level_ok = _level(buf, row[TEXT], row[TEXT + 1])
+            if not (
+                row[ID + 2] == 0  # action ADD
+                and _ascii(buf, row[FRAME], row[FRAME + 1])
+                and _ascii(buf, row[NAMESPACE], row[NAMESPACE + 1])
+                and level_ok
+                and _finite_position(pose, position_scale)
+            ):
+                usual[m] = False
+                break
+            mixed[m] |= row[STAMP] != table[first[m], STAMP]
+        if not usual[m]:
+            mixed[m] = False
+    return usual, mixed, levels
+
+
 def driver_messages(
     buf: np.ndarray, starts: np.ndarray, ends: np.ndarray, position_scale: float
 ) -> tuple[np.ndarray, ...]:
-    """Read many driver MarkerArrays (CDR bytes ``buf[starts[m]:ends[m]]``) in one call.
+    """Read many driver MarkerArrays (CDR bytes ``buf[starts[m]:ends[m]]``) in two calls.
 
-    Returns per message ``first`` ``(M + 1,)`` (message ``m``'s markers are rows
-    ``first[m]:first[m + 1]``), ``usual`` ``(M,)``: every marker read as a usual driver joint
-    (see ``_marker``) and at least one, and ``mixed`` ``(M,)``: its markers' stamps differ;
-    per marker ``ids``, ``stamps`` (ns), ``spans`` ``(N, 4)``, ``poses`` and ``levels`` as
-    ``_marker`` writes them. The rows of a message that is not usual mean nothing: the caller
-    hands such a message to the codec and the bridge.
+    The codec's walk (``codec.marker_walk.walk_markers``) finds every field; ``_usual_markers``
+    picks the usual driver messages. Returns per message ``first`` ``(M + 1,)`` (message
+    ``m``'s markers are rows ``first[m]:first[m + 1]``), ``usual`` ``(M,)`` and ``mixed``
+    ``(M,)`` (its markers' stamps differ); per marker ``ids``, ``stamps`` (ns), ``spans``
+    ``(N, 4)`` (the byte spans of frame and namespace), ``poses`` (where its 7 pose floats
+    start in ``buf``) and ``levels`` (NaN: none). The rows of a message that is not usual mean
+    nothing: the caller hands such a message to the codec and the bridge.
     """
-    n_messages = starts.size
-    first = np.zeros(n_messages + 1, dtype=np.int64)
-    for m in range(n_messages):
-        start, size = starts[m], ends[m] - starts[m]
-        n = 0
-        if size >= 8 and buf[start] == 0 and buf[start + 1] == 1:  # the CDR header, LE
-            n = _u32(buf, start + 4)
-            if n * _MIN_MARKER_BYTES > size - 8:
-                n = 0
-        first[m + 1] = first[m] + n
-    total = first[n_messages]
-    ids = np.zeros(total, dtype=np.int32)
-    stamps = np.zeros(total, dtype=np.int64)
-    spans = np.zeros((total, 4), dtype=np.int64)
-    poses = np.zeros(total, dtype=np.int64)
-    levels = np.zeros(total)
-    usual = np.zeros(n_messages, dtype=np.bool_)
-    mixed = np.zeros(n_messages, dtype=np.bool_)
-    for m in range(n_messages):
-        start, size = starts[m], ends[m] - starts[m]
-        r = 8
-        for out in range(first[m], first[m + 1]):
-            r = _marker(buf, start, r, size, out, ids, stamps, spans, poses, levels,
-                        position_scale)  # fmt: skip
-            if r < 0:
-                break
-        usual[m] = first[m + 1] > first[m] and r >= 0 and size - r <= 3
-        for out in range(first[m] + 1, first[m + 1] if usual[m] else 0):
-            mixed[m] |= stamps[out] != stamps[first[m]]
-    return first, usual, mixed, ids, stamps, spans, poses, levels
+    walked = walk_markers(buf, starts, ends)
+    usual, mixed, levels = _usual_markers(buf, walked, position_scale)
+    first, _, table = walked
+    return (
+        first, usual, mixed, table[:, ID].copy(), table[:, STAMP].copy(),
+        table[:, FRAME : NAMESPACE + 2].copy(), table[:, POSE].copy(), levels,
+    )  # fmt: skip
 
 
 @njit(cache=True, inline="always")
@@ -387,3 +280,7 @@ def driver_people(  # noqa: PLR0917 - a compiled kernel takes plain positional v
             _fill_row(markers[person, joint], pose, levels[i], position_scale, confidence_levels)
             present[person, joint] = True
     return made, people, bodies, markers, present
+
+
+# the kernels above read the walk's column numbers, which numba compiles in as constants
+refresh_stale_caches(globals(), marker_walk)
