@@ -93,6 +93,9 @@ __all__ = [
     "solve_poses",
 ]
 
+SPLIT_BLOCK = 2.0
+"""Length (s) of the alternating spans of time that make the two halves of a pose's check."""
+
 
 @dataclass
 class ExtrinsicsParams:
@@ -236,20 +239,6 @@ def _joint_tables(layout: Layout, names: list[str]) -> tuple[np.ndarray, np.ndar
     return joints, mirror, groups
 
 
-def _interpolate(track: BodyTrack, times: np.ndarray, max_gap: float) -> tuple[np.ndarray, ...]:
-    """Track positions ``(N, J, 3)`` and weights ``(N, J)`` at ``times`` (camera clock)."""
-    t = track.times
-    idx = np.clip(np.searchsorted(t, times, side="right") - 1, 0, len(t) - 2)
-    gap = t[idx + 1] - t[idx]
-    frac = (times - t[idx]) / gap
-    inside = (times >= t[0]) & (times <= t[-1]) & (gap <= max_gap)
-    frac = np.clip(frac, 0.0, 1.0)[:, None, None]
-    positions = track.positions[idx] * (1 - frac) + track.positions[idx + 1] * frac
-    weights = np.minimum(track.weights[idx], track.weights[idx + 1])
-    weights = np.where(inside[:, None] & np.isfinite(positions).all(axis=2), weights, 0.0)
-    return positions, weights
-
-
 def pair_correspondences(
     track_a: BodyTrack,
     track_b: BodyTrack,
@@ -260,7 +249,7 @@ def pair_correspondences(
     """Same-instant joint pairs of two tracks of the same person, None when they never meet."""
     joints, mirror, groups = _joint_tables(track_a.layout, params.pose_joints)
     t_b = clock_b.from_reference(clock_a.to_reference(track_a.times))
-    positions_b, weights_b = _interpolate(track_b, np.asarray(t_b), params.max_interpolation_gap)
+    positions_b, weights_b = track_b.at(np.asarray(t_b), params.max_interpolation_gap)
     weights = np.minimum(track_a.weights[:, joints], weights_b[:, joints]) ** 2
     frames = weights.sum(axis=1) > 0
     if frames.sum() < 3:
@@ -335,7 +324,7 @@ def associate(
 
 
 def _at(track: BodyTrack, times: np.ndarray, params: ExtrinsicsParams) -> tuple[np.ndarray, ...]:
-    positions, weights = _interpolate(track, times, params.max_interpolation_gap)
+    positions, weights = track.at(times, params.max_interpolation_gap)
     return times, positions, weights
 
 
@@ -819,7 +808,8 @@ class _Block:
     """One camera pair's correspondences in the joint solve.
 
     ``label`` numbers the (body pair, joint) each row belongs to; ``offsets (L, 3)`` are the
-    fixed disagreements (world frame, m) the two SDKs have about that joint of that person.
+    fixed disagreements (world frame, m) the two SDKs have about that joint of that person;
+    ``times`` is each row's instant (s, camera a's clock).
     """
 
     pair: PairPose
@@ -829,21 +819,23 @@ class _Block:
     joint: np.ndarray
     label: np.ndarray
     offsets: np.ndarray
+    times: np.ndarray
 
     def difference(self, poses: dict[str, RigidTransform]) -> np.ndarray:
         """``(N, 3)`` T_a p_a - T_b p_b - offset, world frame."""
         pose_a, pose_b = poses[self.pair.camera_a], poses[self.pair.camera_b]
         return pose_a.apply(self.points_a) - pose_b.apply(self.points_b) - self.offsets[self.label]
 
-    def terms(self) -> _Terms:
-        """The block as terms of :func:`_robust_solve` (offsets at their current values)."""
+    def terms(self, rows: np.ndarray | None = None) -> _Terms:
+        """The block (or its ``rows``) as terms of :func:`_robust_solve`, offsets as they are."""
+        rows = slice(None) if rows is None else rows
         return _Terms(
             self.pair.camera_a,
             self.pair.camera_b,
-            self.points_a,
-            self.points_b,
-            self.weights,
-            self.offsets[self.label],
+            self.points_a[rows],
+            self.points_b[rows],
+            self.weights[rows],
+            self.offsets[self.label[rows]],
         )
 
     def update_offsets(
@@ -914,11 +906,53 @@ def solve_poses(
             poses = _robust_solve(
                 poses, unknown, [b.terms() for b in blocks], loss=params.loss, scale=scale
             )
+    spreads = _split_half_spreads(poses, unknown, blocks, scale, params)
     for camera, transform in poses.items():
         pose = out[camera]
         pose.status, pose.transform = "ok", transform
         pose.quality = _pose_quality(camera, blocks, poses, params)
+        if camera in spreads:
+            pose.quality["pose_split_deg"] = round(spreads[camera][0], 3)
+            pose.quality["pose_split_cm"] = round(100 * spreads[camera][1], 2)
     return out
+
+
+def _split_half_spreads(
+    poses: dict[str, RigidTransform],
+    unknown: list[str],
+    blocks: list[_Block],
+    scale: float,
+    params: ExtrinsicsParams,
+) -> dict[str, tuple[float, float]]:
+    """How far apart (deg, m) each camera's pose lies when solved on two halves of the data.
+
+    The halves are alternating ``SPLIT_BLOCK`` spans of time, so each sees the recording's
+    variety; each is solved like the whole (every pair at once, the SDKs' joint offsets as
+    the whole found them), starting from the whole's poses. Each half's error is about
+    sqrt(2) times the whole's and their difference sqrt(2) times a half's, so half the spread
+    estimates the error of the camera's final pose, loops included (an error every frame
+    shares stays hidden). Cameras with too little data in either half are left out.
+    """
+    halves = []
+    for parity in (0, 1):
+        rows = [(np.floor(b.times / SPLIT_BLOCK).astype(np.int64) % 2) == parity for b in blocks]
+        enough = {
+            camera
+            for camera in unknown
+            if sum(
+                int(r.sum()) for b, r in zip(blocks, rows, strict=True)
+                if camera in (b.pair.camera_a, b.pair.camera_b)
+            ) >= params.min_correspondences
+        }  # fmt: skip
+        if not enough:
+            return {}
+        terms = [b.terms(r) for b, r in zip(blocks, rows, strict=True) if r.any()]
+        solved = _robust_solve(poses, sorted(enough), terms, loss=params.loss, scale=scale)
+        halves.append({c: solved[c] for c in enough})
+    return {
+        camera: relative_error(halves[0][camera], halves[1][camera])
+        for camera in halves[0].keys() & halves[1].keys()
+    }
 
 
 def _block(pair: PairPose, params: ExtrinsicsParams) -> _Block:
@@ -937,6 +971,7 @@ def _block(pair: PairPose, params: ExtrinsicsParams) -> _Block:
         joint[keep],
         label,
         np.zeros((n_labels, 3)),
+        c.times[frame[keep]],
     )
 
 

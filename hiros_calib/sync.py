@@ -119,6 +119,12 @@ class SyncParams:
     """Fraction of the sharpest body pairs that choose the consensus lag (Eichler: 10 %)."""
     consensus_tolerance: float = 0.05
     """Body pairs whose peak lies within this (s) of the consensus join it."""
+    loop_overrule_strength: float = 1.5
+    """With three or more cameras, a pair whose lag the other pairs' loop contradicts is
+    left out when its refined correlation's significance (Fisher z times the square root of
+    the overlap, s) is below this and every other pair's is above. Unrelated motion signals,
+    correlated over about half a second, reach about 0.7 on this scale (one standard
+    deviation), so such a lag is noise, not a measurement (see :func:`overrule_weak_pairs`)."""
     window: float = 10.0
     """Window length (s) of the offset-over-time measurements that give the drift."""
     estimate_drift: bool = True
@@ -1087,6 +1093,7 @@ def synchronise(
             pairs.append(pair)
             repins.append(repin)
     pairs = close_loops(pairs, repins, params)
+    pairs = overrule_weak_pairs(pairs, params)
     return solve_clocks(cameras, reference, pairs, clock_epochs(tracks), params), pairs
 
 
@@ -1122,6 +1129,51 @@ def close_loops(
             pairs[k] = decided
             progress = True
     return pairs
+
+
+def overrule_weak_pairs(pairs: list[PairOffset], params: SyncParams) -> list[PairOffset]:
+    """Pairs left out whose chance-level lag the other pairs' loop contradicts.
+
+    With three or more cameras the lags around a loop add up to zero. A pair whose lag is
+    more than ``consensus_tolerance`` from the lag the other pairs imply, and whose refined
+    correlation is no more significant than chance gives (``loop_overrule_strength``) while
+    every other pair's is, measured noise rather than its lag: it is left out, with the
+    reason. Any other conflict is left as it is, for the loop check to flag: re-timing the
+    weaker pair where the others imply would close a loop around two pairs that are both
+    one repetition off, and hide them.
+    """
+    pairs = list(pairs)
+    for k in sorted(
+        (k for k, p in enumerate(pairs) if p.ok), key=lambda k: _pair_strength(pairs[k])
+    ):
+        pair = pairs[k]
+        others = [p for p in pairs if p.ok and p is not pair]
+        implied = _implied_lag(pair.camera_a, pair.camera_b, others)
+        if implied is None or abs(pair.offset - implied) <= params.consensus_tolerance:
+            continue
+        weakest_other = min(_pair_strength(p) for p in others)
+        if not _pair_strength(pair) < params.loop_overrule_strength <= weakest_other:
+            continue
+        pairs[k] = _refused(
+            pair.camera_a,
+            pair.camera_b,
+            f"its lag {pair.offset:+.3f} s rests on a correlation of "
+            f"{pair.quality.get('refined_correlation', 0.0):.2f} over "
+            f"{pair.quality.get('overlap_s', 0.0):.0f} s, no more than chance gives, and the "
+            f"other pairs' loop implies {implied:+.3f} s",
+            loop_implied_lag=round(implied, 4),
+            loop_overruled_lag=round(pair.offset, 4),
+        )
+    return pairs
+
+
+def _pair_strength(pair: PairOffset) -> float:
+    """How much a pair's lag rests on: its refined correlation's significance."""
+    return float(
+        _significance(
+            pair.quality.get("refined_correlation", 0.0), pair.quality.get("overlap_s", 0.0)
+        )
+    )
 
 
 def _implied_lag(camera_a: str, camera_b: str, pairs: list[PairOffset]) -> float | None:

@@ -71,6 +71,23 @@ class BodyTrack:
             self.weights[keep],
         )
 
+    def at(self, times: np.ndarray, max_gap: float) -> tuple[np.ndarray, np.ndarray]:
+        """Positions ``(N, J, 3)`` and weights ``(N, J)`` linearly interpolated at ``times``.
+
+        An instant outside the track, or between frames further apart than ``max_gap`` (s),
+        gets weight 0 (its position is the nearest frames' blend, not to be used).
+        """
+        t = self.times
+        idx = np.clip(np.searchsorted(t, times, side="right") - 1, 0, len(t) - 2)
+        gap = t[idx + 1] - t[idx]
+        frac = (times - t[idx]) / gap
+        inside = (times >= t[0]) & (times <= t[-1]) & (gap <= max_gap)
+        frac = np.clip(frac, 0.0, 1.0)[:, None, None]
+        positions = self.positions[idx] * (1 - frac) + self.positions[idx + 1] * frac
+        weights = np.minimum(self.weights[idx], self.weights[idx + 1])
+        weights = np.where(inside[:, None] & np.isfinite(positions).all(axis=2), weights, 0.0)
+        return positions, weights
+
 
 def joint_weights(
     confidences: np.ndarray, present: np.ndarray, min_confidence: float

@@ -8,7 +8,7 @@ import pytest
 from hiros_calib import Calibrator, CalibratorParams, LiveCalibrator, LiveCalibratorParams
 from hiros_calib.extrinsics import PairPose
 from hiros_calib.quality import arrival_offsets_from_delays, flag_cameras
-from hiros_calib.sync import PairOffset
+from hiros_calib.sync import PairOffset, SyncParams, overrule_weak_pairs
 from hiros_core.calibration import Calibration, CameraCalibration
 from hiros_eval.calibration import compare_calibration
 from hiros_sim import simulate
@@ -51,6 +51,9 @@ def test_per_host_log_times_do_not_hide_a_large_offset(make_scene):
         assert estimate.cameras[name].time_offset == pytest.approx(truth, abs=0.005)
         assert estimate.cameras[name].quality["arrival_times"] == "ignored"
         assert not estimate.cameras[name].flagged
+        # the final pose solved on each half of the recording lands in the same place
+        assert 0.0 < estimate.cameras[name].quality["pose_split_deg"] < 1.0
+        assert 0.0 < estimate.cameras[name].quality["pose_split_cm"] < 5.0
     assert any("own clock" in note for note in calibrator.result.notes)
 
 
@@ -99,6 +102,40 @@ def test_a_clock_loop_that_does_not_close_flags_its_cameras():
     pairs[2] = _pair("k02", "k03", -0.7)
     flag_cameras(closing, pairs, [])
     assert closing.flagged == {}
+
+
+def _timed(a: str, b: str, lag: float, correlation: float, overlap: float) -> PairOffset:
+    pair = _pair(a, b, lag)
+    pair.quality.update(refined_correlation=correlation, overlap_s=overlap)
+    return pair
+
+
+def test_a_chance_level_lag_the_loop_contradicts_is_left_out():
+    strong = [_timed("k01", "k02", 0.5, 0.6, 50.0), _timed("k02", "k03", -0.7, 0.5, 40.0)]
+    # the loop implies -0.2 s for k01-k03; a correlation of 0.25 over 8 s says -0.4 s
+    weak = _timed("k01", "k03", -0.4, 0.25, 8.0)
+    kept = overrule_weak_pairs([*strong, weak], SyncParams())
+    assert kept[:2] == strong
+    assert not kept[2].ok
+    assert "no more than chance gives" in kept[2].reason
+    assert kept[2].quality["loop_implied_lag"] == pytest.approx(-0.2)
+    # a lag as well supported as the others' stays, for the loop check to flag
+    firm = _timed("k01", "k03", -0.4, 0.6, 50.0)
+    assert overrule_weak_pairs([*strong, firm], SyncParams())[2] is firm
+    # and a weak lag the loop agrees with is kept
+    agreeing = _timed("k01", "k03", -0.21, 0.25, 8.0)
+    assert overrule_weak_pairs([*strong, agreeing], SyncParams())[2] is agreeing
+
+
+def test_a_final_pose_that_moves_between_the_halves_flags_its_camera():
+    calibration = Calibration("k01", cameras={"k01": _camera(), "k02": _camera()})
+    calibration.cameras["k02"].quality.update(pose_split_deg=0.4, pose_split_cm=12.0)
+    flag_cameras(calibration, [], [])
+    assert "moves 0.4 deg and 12.0 cm" in calibration.flagged["k02"]
+    steady = Calibration("k01", cameras={"k01": _camera(), "k02": _camera()})
+    steady.cameras["k02"].quality.update(pose_split_deg=0.4, pose_split_cm=3.0)
+    flag_cameras(steady, [], [])
+    assert steady.flagged == {}
 
 
 def test_a_pose_loop_that_does_not_close_flags_its_cameras():
