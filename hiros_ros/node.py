@@ -141,10 +141,12 @@ class HirosNode(Node):
     def create_raw_publisher(self, msg_type: type, topic: str, qos: QoSProfile) -> Any:
         """A publisher whose ``publish`` takes CDR bytes (rclpy publishes them as they are).
 
-        Loads the compiled group encoder now, so that the first message does not wait for it
-        (``codec.warm_up``).
+        For SkeletonGroups, loads the compiled group encoder now, so that the first message
+        does not wait for it (``codec.warm_up``); a node publishing only other messages (the
+        visualizer's MarkerArrays) never loads it.
         """
-        codec_warm_up()
+        if msg_type.__name__ == "SkeletonGroup":
+            codec_warm_up()
         return self.create_publisher(msg_type, topic, qos)
 
     def publish_raw(self, publisher: Any, data: bytes) -> None:
