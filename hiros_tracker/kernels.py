@@ -179,6 +179,7 @@ def canonical_poses(  # noqa: PLR0917
     shoulders: np.ndarray,
     pairs: np.ndarray,
     pair_parts: np.ndarray,
+    sides: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray],
 ) -> tuple[np.ndarray, np.ndarray]:
     """Matched detections in their tracks' labelling, hips/eyes/ears put on the shoulders' side.
 
@@ -188,6 +189,10 @@ def canonical_poses(  # noqa: PLR0917
     (``pairs`` ``(P, 2)``, of parts ``pair_parts`` ``(P,)``) points against the
     ``shoulders`` ``(2,)`` (cos < -0.5) are flipped too; nothing is flagged where a joint is
     missing, or without shoulders (empty).
+
+    With ``align``, the whole body's sides are then held to the track's (``_reversed_sides``):
+    ``sides`` are the tracks' poses ``(T, J, 3)``, the ``(U,)`` track rows of the detections,
+    and the left and right shoulder and hip ``(2,)`` each (empty: not held).
 
     Returns:
         ``(U, J, 3)`` canonical poses and ``(U, K)`` the flips used.
@@ -222,7 +227,45 @@ def canonical_poses(  # noqa: PLR0917
             _order(flips[u], part, mirror, order)
             for j in range(n_joints):
                 canonical[u, j] = positions[rows[u], order[j]]
+    tracks, track_rows, left, right = sides
+    for u in range(n_pairs if align and len(left) else 0):
+        if _reversed_sides(canonical[u], tracks[track_rows[u]], left, right):
+            for k in range(flips.shape[1]):
+                flips[u, k] = not flips[u, k]
+            _order(flips[u], part, mirror, order)
+            for j in range(n_joints):
+                canonical[u, j] = positions[rows[u], order[j]]
     return canonical, flips
+
+
+REVERSED_COS = 0.5
+"""A detection's left-right axis against its track's beyond this (cos < -it) is reversed."""
+
+
+@njit(cache=True, error_model="numpy")
+def _reversed_sides(
+    detection: np.ndarray, track: np.ndarray, left: np.ndarray, right: np.ndarray
+) -> bool:
+    """Whether a detection's left points to its track's right (its sides then all swapped).
+
+    The left-right axis is the left shoulder and hip less the right ones: they lie in the
+    body's frontal plane, so a front/back flip (a reflection through that plane) leaves them
+    where they were and only exchanges their labels, whereas hands, feet and the head swing
+    out of it; relabelling part by part on every joint can then keep a flipped detection's
+    labels and drag its track into the mirrored labelling. Reversed is a cosine under -0.5;
+    nothing is said where a joint is missing.
+    """
+    dx = dy = dz = tx = ty = tz = 0.0
+    for i in range(len(left)):
+        dx += detection[left[i], 0] - detection[right[i], 0]
+        dy += detection[left[i], 1] - detection[right[i], 1]
+        dz += detection[left[i], 2] - detection[right[i], 2]
+        tx += track[left[i], 0] - track[right[i], 0]
+        ty += track[left[i], 1] - track[right[i], 1]
+        tz += track[left[i], 2] - track[right[i], 2]
+    along = dx * tx + dy * ty + dz * tz
+    scale = math.sqrt((dx * dx + dy * dy + dz * dz) * (tx * tx + ty * ty + tz * tz))
+    return along < -REVERSED_COS * scale
 
 
 @njit(cache=True, error_model="numpy")
@@ -412,7 +455,8 @@ def hit_frame(  # noqa: PLR0917 - a compiled kernel takes plain positional value
     smoothing, max_prediction, window_ns, align, orient, weigh, label = settings
     up, camera_position, has_camera, priors = facing_args
     canonical, flips = canonical_poses(detections, dets, flips, part, mirror, align, shoulders,
-                                       side_pairs, side_parts)  # fmt: skip
+                                       side_pairs, side_parts,
+                                       (positions, rows, body[2], body[3]))  # fmt: skip
     full = fold_hits(positions, velocities, velocity, time_ns, last_hit_ns, epoch_ns, hits,
                      n_cameras, body_ids, seen, sums, record_ns, record_camera, record_terms,
                      record_start, record_count, rows, canonical, det_ids[dets], camera,

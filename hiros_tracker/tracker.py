@@ -152,7 +152,7 @@ class TrackerParams:
     track_timeout: float = 2.0
     recent_window: float = 0.2
     max_prediction: float = 0.5
-    position_smoothing: float = 0.6
+    position_smoothing: float = 0.25
     velocity_window: float = 0.25
     body_id_bonus: float = 0.1
     velocity_weight: float = 0.0

@@ -1,0 +1,54 @@
+"""A detection's sides are held to its track's (``kernels.canonical_poses``)."""
+
+import numpy as np
+import pytest
+
+from hiros_core.layouts import AZURE_KINECT
+from hiros_tracker import kernels
+from hiros_tracker.tracker import _body_frame, _mirror_parts, _side_arrays
+
+
+def _standing() -> np.ndarray:
+    """``(J, 3)`` a person facing +x (left = +y), joints placed by name."""
+    pose = np.zeros((AZURE_KINECT.n_joints, 3))
+    for joint, name in enumerate(AZURE_KINECT.joint_names):
+        side = 0.18 if "Left" in name else -0.18 if "Right" in name else 0.0
+        height = 1.4 if any(part in name for part in ("Shoulder", "Clavicle", "Elbow")) else 0.9
+        pose[joint] = (0.05 * (joint % 3), side, height)
+    return pose
+
+
+def _canonical(detection: np.ndarray, track: np.ndarray) -> np.ndarray:
+    """The flips ``canonical_poses`` gives a detection whose parts matched as given."""
+    parts = _mirror_parts(AZURE_KINECT)
+    shoulders, pairs, pair_parts = _side_arrays(AZURE_KINECT, parts)
+    frame = _body_frame(AZURE_KINECT)
+    _, flips = kernels.canonical_poses(
+        detection[None], np.array([0]), np.zeros((1, parts.count), dtype=bool), parts.part,
+        parts.mirror, True, shoulders, pairs, pair_parts,
+        (track[None], np.array([0]), frame.left, frame.right),
+    )  # fmt: skip
+    return flips[0]
+
+
+def _turned(pose: np.ndarray, degrees: float) -> np.ndarray:
+    angle = np.radians(degrees)
+    rotation = np.array(
+        [[np.cos(angle), -np.sin(angle), 0.0], [np.sin(angle), np.cos(angle), 0.0], [0, 0, 1]]
+    )
+    return pose @ rotation.T
+
+
+@pytest.mark.parametrize("degrees", [150.0, 180.0, 210.0])
+def test_a_detection_whose_left_points_to_the_tracks_right_is_relabelled_whole(degrees):
+    # The per-part match kept its labels (a flip's swinging hands and feet can do that):
+    # its left-right axis (shoulders and hips) then says the whole body is mirrored.
+    track = _standing()
+    flips = _canonical(_turned(track, degrees), track)
+    assert flips.all()
+
+
+@pytest.mark.parametrize("degrees", [0.0, 60.0, 100.0])
+def test_a_detection_within_a_turn_of_its_track_keeps_its_labels(degrees):
+    track = _standing()
+    assert not _canonical(_turned(track, degrees), track).any()
