@@ -20,14 +20,14 @@ share); the CDR plans themselves are ``hiros_core.cdr``.
 from hiros_core.codec.group_decode import decode_group
 from hiros_core.codec.group_encode import encode_group, encode_group_into, warm_up
 from hiros_core.codec.group_plans import (
-    _GROUP_HEADER,
-    _GROUP_PLANS,
-    _GROUP_READINGS,
-    _SKELETON_PLANS,
-    _STACK_PLANS,
+    GROUP_HEADER,
+    GROUP_PLANS,
+    GROUP_READINGS,
+    SKELETON_PLANS,
+    STACK_PLANS,
 )
 from hiros_core.codec.marker_array import (
-    _MARKER_PLANS,
+    MARKER_PLANS,
     MarkerArrayData,
     MarkerAttachments,
     MarkerFields,
@@ -55,11 +55,11 @@ __all__ = [
 
 def clear_plan_caches() -> None:
     """Forget every cached plan (they are rebuilt on demand; for tests and memory)."""
-    for cache in (_SKELETON_PLANS, _GROUP_HEADER, _MARKER_PLANS):
+    for cache in (SKELETON_PLANS, GROUP_HEADER, MARKER_PLANS):
         cache.by_key.clear()
-    _GROUP_PLANS.clear()
-    _STACK_PLANS.clear()
-    _GROUP_READINGS.clear()
-    _SKELETON_PLANS.by_phase.clear()
-    _GROUP_HEADER.by_size.clear()
-    _MARKER_PLANS.by_size.clear()
+    GROUP_PLANS.clear()
+    STACK_PLANS.clear()
+    GROUP_READINGS.clear()
+    SKELETON_PLANS.by_phase.clear()
+    GROUP_HEADER.by_size.clear()
+    MARKER_PLANS.by_size.clear()

@@ -13,22 +13,22 @@ import hashlib
 import numpy as np
 
 from hiros_core.cdr import HEADER_SIZE, CdrReader, Plan
-from hiros_core.codec.fields import _NS, _join_ns
+from hiros_core.codec.fields import NS, join_ns
 from hiros_core.codec.group_plans import (
-    _BOX_FLOATS,
-    _CONFIDENCE_STRUCT,
-    _GROUP_PLAN_CAPACITY,
-    _GROUP_READINGS,
-    _HEAD_STRUCT,
-    _LEAD,
-    _MAXES_STRUCT,
-    _SKELETON_PLANS,
-    _STAMP_STRUCT,
-    _build_skeleton_plan,
-    _group_reading,
-    _GroupReading,
-    _skeleton_key,
-    _SkeletonShape,
+    BOX_FLOATS,
+    CONFIDENCE_STRUCT,
+    GROUP_PLAN_CAPACITY,
+    GROUP_READINGS,
+    HEAD_STRUCT,
+    LEAD,
+    MAXES_STRUCT,
+    SKELETON_PLANS,
+    STAMP_STRUCT,
+    GroupReading,
+    SkeletonShape,
+    build_skeleton_plan,
+    group_reading,
+    skeleton_key,
 )
 from hiros_core.errors import LayoutError
 from hiros_core.layouts import AZURE_KINECT, KINECT_V2, Layout
@@ -38,7 +38,7 @@ from hiros_core.model import BOX_WIDTH, STATE_WIDTH, Skeleton, SkeletonGroup, Sk
 _MAX_DENSE_ID = 4096  # dense rows by id: larger ids would allocate absurd arrays
 _HEAD = np.dtype([("id", "<i4"), ("sec", "<i4"), ("nanosec", "<u4")])
 _MAXES = np.dtype([("max_markers", "<u4"), ("max_links", "<u4")])
-_MIN_SKELETON_BYTES = 4 + 8 + 5 + 8 + 8 * _BOX_FLOATS + 8  # id, time, "", maxes, box, 2 counts
+_MIN_SKELETON_BYTES = 4 + 8 + 5 + 8 + 8 * BOX_FLOATS + 8  # id, time, "", maxes, box, 2 counts
 _GROUP_READING_CANDIDATES = 8
 
 
@@ -53,11 +53,11 @@ def decode_group(data: bytes | bytearray | memoryview) -> SkeletonGroup:
     """
     check_skeleton_group(data)  # past hiros_core.limits: refused before anything is made
     size = len(data) if isinstance(data, bytes) else memoryview(data).nbytes
-    readings = _GROUP_READINGS.get(size)
+    readings = GROUP_READINGS.get(size)
     if readings:
         raw = np.frombuffer(data, dtype=np.uint8)
         buffer = np.empty(readings[0].words.size * 8, dtype=np.uint8)
-        buffer[_LEAD : _LEAD + size] = raw
+        buffer[LEAD : LEAD + size] = raw
         words = buffer.view("<u8")
         for reading in readings:
             differ = np.bitwise_xor(words, reading.words)
@@ -65,36 +65,36 @@ def decode_group(data: bytes | bytearray | memoryview) -> SkeletonGroup:
             if not differ.any():
                 return _group_from_reading(reading, buffer)
     group = _decode_group_by_skeleton(data)
-    reading = _group_reading(group, size)
+    reading = group_reading(group, size)
     if reading is not None:
-        found = _GROUP_READINGS.setdefault(size, [])
+        found = GROUP_READINGS.setdefault(size, [])
         found.insert(0, reading)
         del found[_GROUP_READING_CANDIDATES:]
-        if len(_GROUP_READINGS) > _GROUP_PLAN_CAPACITY:
-            _GROUP_READINGS.clear()
+        if len(GROUP_READINGS) > GROUP_PLAN_CAPACITY:
+            GROUP_READINGS.clear()
     return group
 
 
-def _group_from_reading(reading: _GroupReading, buffer: np.ndarray) -> SkeletonGroup:
+def _group_from_reading(reading: GroupReading, buffer: np.ndarray) -> SkeletonGroup:
     plan = reading.plan
-    floats = buffer[_LEAD + HEADER_SIZE :].view("<f8")
+    floats = buffer[LEAD + HEADER_SIZE :].view("<f8")
     floats[reading.scratch : reading.scratch + STATE_WIDTH] = np.nan
     if reading.stack is not None:
         return _stacked_group(reading, buffer, floats)
     values = floats[plan.floats]
-    sec, nanosec = _STAMP_STRUCT.unpack_from(buffer, plan.stamp_at)
+    sec, nanosec = STAMP_STRUCT.unpack_from(buffer, plan.stamp_at)
     skeletons = []
     for (head_at, maxes_at, box_at), (layout, frame, present, link_present, start) in zip(
         plan.fields, reading.skeletons, strict=True
     ):
-        skeleton_id, src_sec, src_nanosec = _HEAD_STRUCT.unpack_from(buffer, head_at)
-        max_markers, max_links = _MAXES_STRUCT.unpack_from(buffer, maxes_at)
-        (confidence,) = _CONFIDENCE_STRUCT.unpack_from(buffer, box_at)
+        skeleton_id, src_sec, src_nanosec = HEAD_STRUCT.unpack_from(buffer, head_at)
+        max_markers, max_links = MAXES_STRUCT.unpack_from(buffer, maxes_at)
+        (confidence,) = CONFIDENCE_STRUCT.unpack_from(buffer, box_at)
         markers_at = start + BOX_WIDTH
         links_at = markers_at + layout.n_joints * STATE_WIDTH
         skeletons.append(
             Skeleton(
-                skeleton_id, src_sec * _NS + src_nanosec, frame, layout,
+                skeleton_id, src_sec * NS + src_nanosec, frame, layout,
                 values[markers_at:links_at].reshape(-1, STATE_WIDTH),
                 values[links_at : links_at + layout.n_links * STATE_WIDTH].reshape(
                     -1, STATE_WIDTH
@@ -103,10 +103,10 @@ def _group_from_reading(reading: _GroupReading, buffer: np.ndarray) -> SkeletonG
                 values[start:markers_at], max_markers, max_links,
             )
         )  # fmt: skip
-    return SkeletonGroup(sec * _NS + nanosec, reading.frame_id, skeletons)
+    return SkeletonGroup(sec * NS + nanosec, reading.frame_id, skeletons)
 
 
-def _stacked_group(reading: _GroupReading, buffer: np.ndarray, floats: np.ndarray) -> SkeletonGroup:
+def _stacked_group(reading: GroupReading, buffer: np.ndarray, floats: np.ndarray) -> SkeletonGroup:
     """A group of one layout, its skeletons the rows of one ``SkeletonRows`` (one gather)."""
     plan, stack = reading.plan, reading.stack
     assert stack is not None
@@ -123,13 +123,13 @@ def _stacked_group(reading: _GroupReading, buffer: np.ndarray, floats: np.ndarra
         rows[:boxes_end].reshape(n_people, BOX_WIDTH),
     ).skeletons(
         values[2::6],
-        [sec * _NS + nanosec for sec, nanosec in zip(values[3::6], values[4::6], strict=True)],
+        [sec * NS + nanosec for sec, nanosec in zip(values[3::6], values[4::6], strict=True)],
         stack.frames,
         stack.layout,
         values[7::6],
         max_sizes=list(zip(values[5::6], values[6::6], strict=True)),
     )
-    return SkeletonGroup(values[0] * _NS + values[1], reading.frame_id, skeletons)
+    return SkeletonGroup(values[0] * NS + values[1], reading.frame_id, skeletons)
 
 
 def _decode_group_by_skeleton(data: bytes | bytearray | memoryview) -> SkeletonGroup:
@@ -143,28 +143,28 @@ def _decode_group_by_skeleton(data: bytes | bytearray | memoryview) -> SkeletonG
     for _ in range(count):
         reader.align(4)
         phase = (reader.pos - HEADER_SIZE) % 8
-        plan = _SKELETON_PLANS.find_at(raw, reader.pos, phase)
+        plan = SKELETON_PLANS.find_at(raw, reader.pos, phase)
         if plan is None:
             skeleton = _parse_skeleton(reader)
-            _SKELETON_PLANS.put(
-                _skeleton_key(skeleton, phase), _build_skeleton_plan(skeleton, phase), phase
+            SKELETON_PLANS.put(
+                skeleton_key(skeleton, phase), build_skeleton_plan(skeleton, phase), phase
             )
         else:
             skeleton = _skeleton_from_block(plan, raw, reader.pos)
             reader.pos += plan.size
         skeletons.append(skeleton)
     reader.done()
-    return SkeletonGroup(stamp_sec * _NS + stamp_nanosec, frame_id, skeletons)
+    return SkeletonGroup(stamp_sec * NS + stamp_nanosec, frame_id, skeletons)
 
 
 def _skeleton_from_block(plan: Plan, raw: np.ndarray, start: int) -> Skeleton:
-    shape: _SkeletonShape = plan.meta  # type: ignore[assignment]
+    shape: SkeletonShape = plan.meta  # type: ignore[assignment]
     values = plan.gather_all(raw, start)
     head = values["head"].view(_HEAD).ravel()
     maxes = values["maxes"].view(_MAXES).ravel()
     box = values["box"].view("<f8").ravel()
     skeleton = Skeleton.empty(shape.layout, skeleton_id=int(head["id"][0]))
-    skeleton.src_time_ns = int(_join_ns(head)[0])
+    skeleton.src_time_ns = int(join_ns(head)[0])
     skeleton.src_frame = shape.src_frame
     skeleton.max_markers = int(maxes["max_markers"][0])
     skeleton.max_links = int(maxes["max_links"][0])
@@ -181,10 +181,10 @@ def _skeleton_from_block(plan: Plan, raw: np.ndarray, start: int) -> Skeleton:
 
 def _parse_skeleton(reader: CdrReader) -> Skeleton:
     skeleton_id = reader.i32()
-    src_time_ns = reader.i32() * _NS + reader.u32()
+    src_time_ns = reader.i32() * NS + reader.u32()
     src_frame = reader.string()
     max_markers, max_links = reader.u32(), reader.u32()
-    box = reader.floats(_BOX_FLOATS)
+    box = reader.floats(BOX_FLOATS)
     markers: dict[int, tuple[str, np.ndarray]] = {}
     for _ in range(reader.count(8 + 8 * STATE_WIDTH)):
         marker_id, name = reader.i32(), reader.string()

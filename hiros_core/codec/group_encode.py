@@ -13,13 +13,13 @@ from collections.abc import Callable
 import numpy as np
 
 from hiros_core.cdr import HEADER_SIZE
-from hiros_core.codec.fields import _NS
+from hiros_core.codec.fields import NS
 from hiros_core.codec.group_plans import (
-    _GROUP_PLAN_CAPACITY,
-    _LEAD,
-    _STACK_PLANS,
-    _GroupPlan,
-    _plan_of,
+    GROUP_PLAN_CAPACITY,
+    LEAD,
+    STACK_PLANS,
+    GroupPlan,
+    plan_of,
 )
 from hiros_core.errors import CodecError
 from hiros_core.model import SkeletonGroup, SkeletonRows, shared_stack, warm_up_group
@@ -71,7 +71,7 @@ def encode_group_into(group: SkeletonGroup, space: Callable[[int], tuple[np.ndar
             out, at = space(plan.size)
             _fill_compiled(out, at, plan, packed, stack)
             return plan.size
-    plan = _plan_of(group)
+    plan = plan_of(group)
     packed = _pack(plan, group)
     values = np.concatenate(
         [a for s in skeletons for a in (s.bounding_box, s.markers, s.links)], axis=None
@@ -84,11 +84,11 @@ def encode_group_into(group: SkeletonGroup, space: Callable[[int], tuple[np.ndar
     return plan.size
 
 
-def _pack(plan: _GroupPlan, group: SkeletonGroup) -> bytes:
+def _pack(plan: GroupPlan, group: SkeletonGroup) -> bytes:
     """The group's integer fields and confidences, packed in the plan's order."""
-    ints: list = [*divmod(group.stamp_ns, _NS)]
+    ints: list = [*divmod(group.stamp_ns, NS)]
     for s in group.skeletons:
-        ints += (s.id, *divmod(s.src_time_ns, _NS), s.max_markers, s.max_links, s.confidence)
+        ints += (s.id, *divmod(s.src_time_ns, NS), s.max_markers, s.max_links, s.confidence)
     try:
         return plan.packer.pack(*ints)
     except struct.error:
@@ -100,7 +100,7 @@ def _pack(plan: _GroupPlan, group: SkeletonGroup) -> bytes:
 
 
 def _fill_compiled(
-    out: np.ndarray, at: int, plan: _GroupPlan, packed: bytes, values: np.ndarray | SkeletonRows
+    out: np.ndarray, at: int, plan: GroupPlan, packed: bytes, values: np.ndarray | SkeletonRows
 ) -> None:
     """``fill.fill_runs`` from concatenated values or from a group's ``SkeletonRows``."""
     from hiros_core.fill import fill_runs
@@ -115,7 +115,7 @@ def _fill_compiled(
                   plan.runs)  # fmt: skip
 
 
-def _stack_plan(group: SkeletonGroup, stack: SkeletonRows) -> _GroupPlan | None:
+def _stack_plan(group: SkeletonGroup, stack: SkeletonRows) -> GroupPlan | None:
     """The plan of a group whose skeletons are ``stack``'s rows, keyed by the stack's masks.
 
     None when the stack's rows are not float64 (the general path converts them).
@@ -128,16 +128,16 @@ def _stack_plan(group: SkeletonGroup, stack: SkeletonRows) -> _GroupPlan | None:
         stack.marker_present.tobytes(),
         stack.link_present.tobytes(),
     )
-    found = _STACK_PLANS.get(key)
+    found = STACK_PLANS.get(key)
     if found is not None and found[0] is layout:
         return found[1]
-    if len(_STACK_PLANS) >= _GROUP_PLAN_CAPACITY:
-        _STACK_PLANS.clear()
+    if len(STACK_PLANS) >= GROUP_PLAN_CAPACITY:
+        STACK_PLANS.clear()
     usable = all(s.layout is layout for s in group.skeletons) and all(
         a.dtype == np.float64 for a in (stack.markers, stack.links, stack.bounding_boxes)
     )
-    plan = _plan_of(group) if usable else None
-    _STACK_PLANS[key] = (layout, plan)
+    plan = plan_of(group) if usable else None
+    STACK_PLANS[key] = (layout, plan)
     return plan
 
 
@@ -145,11 +145,11 @@ _NO_VALUES = np.empty(0)
 
 
 def _fill_numpy(
-    plan: _GroupPlan, packed: bytes, values: np.ndarray, out: np.ndarray, at: int
+    plan: GroupPlan, packed: bytes, values: np.ndarray, out: np.ndarray, at: int
 ) -> None:
     """The numpy form of ``fill.fill_runs`` (the reference it is tested against)."""
     scratch = plan.template.copy()
     scratch[plan.field_index] = np.frombuffer(packed, dtype=np.uint8)
     if values.size:
-        scratch[_LEAD + HEADER_SIZE :].view("<f8")[plan.floats] = values
-    out[at : at + plan.size] = scratch[_LEAD : _LEAD + plan.size]
+        scratch[LEAD + HEADER_SIZE :].view("<f8")[plan.floats] = values
+    out[at : at + plan.size] = scratch[LEAD : LEAD + plan.size]

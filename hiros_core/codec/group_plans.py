@@ -15,21 +15,21 @@ from typing import NamedTuple
 import numpy as np
 
 from hiros_core.cdr import HEADER_SIZE, BlockPlans, Plan, PlanBuilder, PlanCache
-from hiros_core.codec.fields import _c_string
+from hiros_core.codec.fields import c_string
 from hiros_core.layouts import Layout
 from hiros_core.model import BOX_WIDTH, STATE_WIDTH, Skeleton, SkeletonGroup
 
-_HEAD_STRUCT = struct.Struct("<iiI")
-_STAMP_STRUCT = struct.Struct("<iI")
-_MAXES_STRUCT = struct.Struct("<II")
-_CONFIDENCE_STRUCT = struct.Struct("<d")
+HEAD_STRUCT = struct.Struct("<iiI")
+STAMP_STRUCT = struct.Struct("<iI")
+MAXES_STRUCT = struct.Struct("<II")
+CONFIDENCE_STRUCT = struct.Struct("<d")
 _ROW_BYTES = STATE_WIDTH * 8
 _BOX, _MARKERS, _LINKS = 0, 1, 2  # sources of a plan's float runs (``fill.fill_runs``)
-_BOX_FLOATS = 1 + BOX_WIDTH  # skeleton confidence + bounding box
+BOX_FLOATS = 1 + BOX_WIDTH  # skeleton confidence + bounding box
 
 
 @dataclass(frozen=True)
-class _SkeletonShape:
+class SkeletonShape:
     """What a block plan fixes about one skeleton: frame, layout and which ids it carries.
 
     For encoding, where its fields go in the block: byte offsets of the id/stamp and of the
@@ -48,11 +48,12 @@ class _SkeletonShape:
 
 # Each skeleton is its own block (plans reused whatever the other people in the group), so a
 # tracker output mixing cameras and people costs no more plans than the cameras' own frames.
-_SKELETON_PLANS = BlockPlans()
-_GROUP_HEADER = PlanCache(capacity=64)
+SKELETON_PLANS = BlockPlans()
+GROUP_HEADER = PlanCache(capacity=64)
 
 
-def _skeleton_key(skeleton: Skeleton, phase: int) -> tuple:
+def skeleton_key(skeleton: Skeleton, phase: int) -> tuple:
+    """What fixes a skeleton's block plan: frame, layout, present ids, alignment ``phase``."""
     return (
         skeleton.src_frame,
         skeleton.layout,
@@ -62,7 +63,8 @@ def _skeleton_key(skeleton: Skeleton, phase: int) -> tuple:
     )
 
 
-def _build_skeleton_plan(skeleton: Skeleton, payload_offset: int) -> Plan:
+def build_skeleton_plan(skeleton: Skeleton, payload_offset: int) -> Plan:
+    """The block plan of ``skeleton``'s shape, its block at ``payload_offset`` (mod 8)."""
     builder = PlanBuilder(payload_offset)
     layout = skeleton.layout
     marker_ids = np.flatnonzero(skeleton.marker_present)
@@ -70,7 +72,7 @@ def _build_skeleton_plan(skeleton: Skeleton, payload_offset: int) -> Plan:
     builder.slot("head", 12, 4)
     builder.string(skeleton.src_frame)
     builder.slot("maxes", 8, 4)
-    builder.slot("box", _BOX_FLOATS * 8, 8)
+    builder.slot("box", BOX_FLOATS * 8, 8)
     builder.u32(marker_ids.size)
     for marker_id in marker_ids:
         builder.i32(int(marker_id))
@@ -89,15 +91,15 @@ def _build_skeleton_plan(skeleton: Skeleton, payload_offset: int) -> Plan:
         return (offsets[:, None] // 8 + np.arange(width)).ravel()
 
     return builder.build(
-        _SkeletonShape(
-            _c_string(skeleton.src_frame),
+        SkeletonShape(
+            c_string(skeleton.src_frame),
             layout,
             marker_ids,
             link_ids,
             builder.slots["head"][0],
             builder.slots["maxes"][0],
             (
-                floats("box", _BOX_FLOATS),
+                floats("box", BOX_FLOATS),
                 floats("markers", STATE_WIDTH),
                 floats("links", STATE_WIDTH),
             ),
@@ -107,24 +109,24 @@ def _build_skeleton_plan(skeleton: Skeleton, payload_offset: int) -> Plan:
 
 def _group_header(group: SkeletonGroup) -> Plan:
     key = (group.frame_id, len(group.skeletons))
-    plan = _GROUP_HEADER.get(key)
+    plan = GROUP_HEADER.get(key)
     if plan is None:
         builder = PlanBuilder()
         builder.slot("stamp", 8, 4)
         builder.string(group.frame_id)
         builder.u32(len(group.skeletons))
-        plan = _GROUP_HEADER.put(key, builder.build())
+        plan = GROUP_HEADER.put(key, builder.build())
     return plan
 
 
 @dataclass(frozen=True)
-class _GroupPlan:
+class GroupPlan:
     """A whole group's encoding: template, and where each skeleton's values go.
 
     ``floats`` indexes a float64 view of the payload for the concatenation, per skeleton, of
     its bounding box ``(22,)``, all ``J`` marker rows and all ``L`` link rows: rows the
     skeleton does not carry point into a scratch row past the message end, so encoding
-    needs no per-skeleton selection of present rows. The template starts with ``_LEAD``
+    needs no per-skeleton selection of present rows. The template starts with ``LEAD``
     spare bytes so that the payload, and so the float view, is 8-byte aligned in memory
     (numpy scatters into unaligned views several times slower).
     """
@@ -143,12 +145,12 @@ class _GroupPlan:
     message: np.ndarray = field(init=False)  # the template's message bytes (no lead, scratch)
 
     def __post_init__(self) -> None:
-        object.__setattr__(self, "message", self.template[_LEAD : _LEAD + self.size])
+        object.__setattr__(self, "message", self.template[LEAD : LEAD + self.size])
 
 
 @dataclass(frozen=True)
-class _GroupReading:
-    """What decoding needs beyond a ``_GroupPlan``: how to recognise the message and rebuild it.
+class GroupReading:
+    """What decoding needs beyond a ``GroupPlan``: how to recognise the message and rebuild it.
 
     ``words``/``mask``: the template and its constant bytes as 8-byte words (``cdr.Plan``'s
     ``matches_aligned`` idea over the whole group); ``skeletons``: per skeleton its layout,
@@ -156,7 +158,7 @@ class _GroupReading:
     gathered floats.
     """
 
-    plan: _GroupPlan
+    plan: GroupPlan
     frame_id: str
     words: np.ndarray
     mask: np.ndarray
@@ -180,10 +182,10 @@ class _StackReading(NamedTuple):
     frames: list[str]
 
 
-_GROUP_READINGS: dict[int, list[_GroupReading]] = {}  # by message size, most recent first
+GROUP_READINGS: dict[int, list[GroupReading]] = {}  # by message size, most recent first
 
 
-def _group_reading(group: SkeletonGroup, size: int) -> _GroupReading | None:
+def group_reading(group: SkeletonGroup, size: int) -> GroupReading | None:
     """The reading of messages shaped like ``group`` (just decoded from ``size`` bytes)."""
     keys = [
         (s.src_frame, s.layout, s.marker_present.tobytes(), s.link_present.tobytes())
@@ -194,8 +196,8 @@ def _group_reading(group: SkeletonGroup, size: int) -> _GroupReading | None:
     blocks = []
     for skeleton, key in zip(group.skeletons, keys, strict=True):
         phase = offset % 8
-        plan = _SKELETON_PLANS.get((*key, phase)) or _SKELETON_PLANS.put(
-            (*key, phase), _build_skeleton_plan(skeleton, phase), phase
+        plan = SKELETON_PLANS.get((*key, phase)) or SKELETON_PLANS.put(
+            (*key, phase), build_skeleton_plan(skeleton, phase), phase
         )
         blocks.append((offset, plan))
         offset += plan.size
@@ -206,7 +208,7 @@ def _group_reading(group: SkeletonGroup, size: int) -> _GroupReading | None:
     constant = [header.constant]
     constant += [block.constant + start + HEADER_SIZE for start, block in blocks]
     mask = np.zeros(plan.template.size + (-plan.template.size) % 8, dtype=np.uint8)
-    mask[np.concatenate(constant) + _LEAD] = 0xFF
+    mask[np.concatenate(constant) + LEAD] = 0xFF
     words = np.zeros_like(mask)
     words[: plan.template.size] = plan.template
     skeletons, start = [], 0
@@ -222,7 +224,7 @@ def _group_reading(group: SkeletonGroup, size: int) -> _GroupReading | None:
             )
         )
         start += BOX_WIDTH + (n_markers + n_links) * STATE_WIDTH
-    return _GroupReading(
+    return GroupReading(
         plan,
         group.frame_id,
         words.view("<u8"),
@@ -233,7 +235,7 @@ def _group_reading(group: SkeletonGroup, size: int) -> _GroupReading | None:
     )
 
 
-def _stack_reading(group: SkeletonGroup, plan: _GroupPlan) -> _StackReading | None:
+def _stack_reading(group: SkeletonGroup, plan: GroupPlan) -> _StackReading | None:
     """The stack decoding of messages shaped like ``group`` (None: mixed layouts, or none)."""
     skeletons = group.skeletons
     if not skeletons or any(s.layout is not skeletons[0].layout for s in skeletons):
@@ -251,23 +253,23 @@ def _stack_reading(group: SkeletonGroup, plan: _GroupPlan) -> _StackReading | No
     )
 
 
-_GROUP_PLANS: dict[tuple, _GroupPlan] = {}
-_GROUP_PLAN_CAPACITY = 256
-_LEAD = 8 - HEADER_SIZE  # template bytes before the CDR header: aligns the payload
+GROUP_PLANS: dict[tuple, GroupPlan] = {}
+GROUP_PLAN_CAPACITY = 256
+LEAD = 8 - HEADER_SIZE  # template bytes before the CDR header: aligns the payload
 
 
-def _build_group_plan(group: SkeletonGroup, keys: list[tuple]) -> _GroupPlan:
+def _build_group_plan(group: SkeletonGroup, keys: list[tuple]) -> GroupPlan:
     header = _group_header(group)
     offset = header.size - HEADER_SIZE
-    templates = [np.zeros(_LEAD, dtype=np.uint8), header.template]
+    templates = [np.zeros(LEAD, dtype=np.uint8), header.template]
     fields, indices, runs = [], [], []
-    stamp_at = int(header.slots["stamp"][0]) + _LEAD
-    packed = [(stamp_at, _STAMP_STRUCT)]
+    stamp_at = int(header.slots["stamp"][0]) + LEAD
+    packed = [(stamp_at, STAMP_STRUCT)]
     blocks = []
     for skeleton, key in zip(group.skeletons, keys, strict=True):
         phase = offset % 8
-        plan = _SKELETON_PLANS.get(key) or _SKELETON_PLANS.put(
-            key, _build_skeleton_plan(skeleton, phase), phase
+        plan = SKELETON_PLANS.get(key) or SKELETON_PLANS.put(
+            key, build_skeleton_plan(skeleton, phase), phase
         )
         blocks.append((offset, phase, plan, skeleton))
         templates.append(plan.template)
@@ -278,12 +280,12 @@ def _build_group_plan(group: SkeletonGroup, keys: list[tuple]) -> _GroupPlan:
     dump = np.arange(STATE_WIDTH) + scratch // 8
     values_at = 0  # where the skeleton's box, marker and link rows start in the values
     for person, (start, phase, plan, skeleton) in enumerate(blocks):
-        shape: _SkeletonShape = plan.meta  # type: ignore[assignment]
-        at = start + HEADER_SIZE + _LEAD
+        shape: SkeletonShape = plan.meta  # type: ignore[assignment]
+        at = start + HEADER_SIZE + LEAD
         box_at = int(plan.slots["box"][0]) + at
         fields.append((at + shape.head_at, at + shape.maxes_at, box_at))
-        packed += [(at + shape.head_at, _HEAD_STRUCT), (at + shape.maxes_at, _MAXES_STRUCT)]
-        packed.append((box_at, _CONFIDENCE_STRUCT))
+        packed += [(at + shape.head_at, HEAD_STRUCT), (at + shape.maxes_at, MAXES_STRUCT)]
+        packed.append((box_at, CONFIDENCE_STRUCT))
         shift = (start - phase) // 8
         box_index, marker_index, link_index = shape.floats
         markers = np.tile(dump, (skeleton.layout.n_joints, 1))
@@ -298,7 +300,7 @@ def _build_group_plan(group: SkeletonGroup, keys: list[tuple]) -> _GroupPlan:
     floats = np.concatenate(indices) if indices else np.empty(0, dtype=np.intp)
     all_runs = np.array(runs, dtype=np.int64).reshape(-1, 5)
     stackable = len({(s.layout.n_joints, s.layout.n_links) for s in group.skeletons}) <= 1
-    return _GroupPlan(
+    return GroupPlan(
         np.concatenate(templates),
         size,
         stamp_at,
@@ -317,7 +319,7 @@ def _field_runs(packed: list[tuple[int, struct.Struct]]) -> np.ndarray:
     """``(F, 3)`` message offset, packed offset and length of each packed field."""
     runs, at = [], 0
     for template_at, kind in packed:
-        runs.append((template_at - _LEAD, at, kind.size))
+        runs.append((template_at - LEAD, at, kind.size))
         at += kind.size
     return np.array(runs, dtype=np.int64).reshape(-1, 3)
 
@@ -349,10 +351,10 @@ def _value_runs(  # noqa: PLR0917 - one skeleton's positions, all needed
     return runs
 
 
-_STACK_PLANS: dict[tuple, tuple[Layout, _GroupPlan | None]] = {}  # (layout kept alive, plan)
+STACK_PLANS: dict[tuple, tuple[Layout, GroupPlan | None]] = {}  # (layout kept alive, plan)
 
 
-def _plan_of(group: SkeletonGroup) -> _GroupPlan:
+def plan_of(group: SkeletonGroup) -> GroupPlan:
     """The group's cached plan, built on first use (keyed by frames, layouts, presence)."""
     skeletons = group.skeletons
     keys = [
@@ -360,10 +362,10 @@ def _plan_of(group: SkeletonGroup) -> _GroupPlan:
         for s in skeletons
     ]
     group_key = (group.frame_id, *keys)
-    plan = _GROUP_PLANS.get(group_key)
+    plan = GROUP_PLANS.get(group_key)
     if plan is None:
-        if len(_GROUP_PLANS) >= _GROUP_PLAN_CAPACITY:
-            _GROUP_PLANS.clear()
+        if len(GROUP_PLANS) >= GROUP_PLAN_CAPACITY:
+            GROUP_PLANS.clear()
         header = _group_header(group)
         offset = header.size - HEADER_SIZE
         phased = []
@@ -371,14 +373,14 @@ def _plan_of(group: SkeletonGroup) -> _GroupPlan:
             key = (frame, skeleton.layout, markers, links)
             phased.append((*key, offset % 8))
             offset += _skeleton_block_size(skeleton, key, offset % 8)
-        plan = _GROUP_PLANS[group_key] = _build_group_plan(group, phased)
+        plan = GROUP_PLANS[group_key] = _build_group_plan(group, phased)
     return plan
 
 
 def _skeleton_block_size(skeleton: Skeleton, key: tuple, phase: int) -> int:
     """Bytes of one skeleton's block at alignment ``phase`` (its plan, built if new)."""
     key = (*key, phase)
-    plan = _SKELETON_PLANS.get(key) or _SKELETON_PLANS.put(
-        key, _build_skeleton_plan(skeleton, phase), phase
+    plan = SKELETON_PLANS.get(key) or SKELETON_PLANS.put(
+        key, build_skeleton_plan(skeleton, phase), phase
     )
     return plan.size

@@ -14,7 +14,15 @@ from typing import NamedTuple
 import numpy as np
 
 from hiros_core.cdr import CdrReader, Plan, PlanBuilder, PlanCache, aligned_copy
-from hiros_core.codec.fields import _NS, _TIME, _c_string, _checked, _join_ns, _rows, _split_ns
+from hiros_core.codec.fields import (
+    NS,
+    TIME_DTYPE,
+    c_string,
+    checked_ints,
+    join_ns,
+    split_ns,
+    stacked_rows,
+)
 from hiros_core.errors import CodecError
 from hiros_core.limits import check_marker_array
 
@@ -105,7 +113,7 @@ class MarkerArrayData:
         )
 
 
-_MARKER_PLANS = PlanCache()
+MARKER_PLANS = PlanCache()
 
 
 def _text_bytes(texts: list[str]) -> list[bytes]:
@@ -163,7 +171,7 @@ def _build_marker_plan(data: MarkerArrayData, texts: list[bytes]) -> Plan:
             builder.slot("point_colors", 16, 4)
         extra = data.attachments[i]
         builder.string(extra.texture_resource)
-        sec, nanosec = divmod(extra.texture_stamp_ns, _NS)
+        sec, nanosec = divmod(extra.texture_stamp_ns, NS)
         builder.i32(sec)
         builder.u32(nanosec)
         builder.string(extra.texture_frame_id)
@@ -182,8 +190,8 @@ def _build_marker_plan(data: MarkerArrayData, texts: list[bytes]) -> Plan:
         builder.slot("embedded", 1, 1)
     return builder.build(
         _MarkerShape(
-            tuple(map(_c_string, data.frame_ids)),
-            tuple(map(_c_string, data.namespaces)),
+            tuple(map(c_string, data.frame_ids)),
+            tuple(map(c_string, data.namespaces)),
             _text_slots(texts),
             np.array([len(p) for p in data.points], dtype=np.intp),
             np.array([len(c) for c in data.point_colors], dtype=np.intp),
@@ -205,14 +213,14 @@ def marker_array_plan(data: MarkerArrayData) -> Plan:
     """
     texts = _text_bytes(data.texts)
     key = _marker_key(data, texts)
-    return _MARKER_PLANS.get(key) or _MARKER_PLANS.put(key, _build_marker_plan(data, texts))
+    return MARKER_PLANS.get(key) or MARKER_PLANS.put(key, _build_marker_plan(data, texts))
 
 
 def encode_marker_array(data: MarkerArrayData) -> bytes:
     """CDR bytes of ``visualization_msgs/msg/MarkerArray`` for the columns ``data``."""
     texts = _text_bytes(data.texts)
     key = _marker_key(data, texts)
-    plan = _MARKER_PLANS.get(key) or _MARKER_PLANS.put(key, _build_marker_plan(data, texts))
+    plan = MARKER_PLANS.get(key) or MARKER_PLANS.put(key, _build_marker_plan(data, texts))
     shape: _MarkerShape = plan.meta  # type: ignore[assignment]
     text_values = {
         kind: np.frombuffer(b"".join(texts[i] for i in indices), dtype=np.uint8)
@@ -220,21 +228,23 @@ def encode_marker_array(data: MarkerArrayData) -> bytes:
     }
     what = "MarkerArray"
     ita = np.empty(len(data), dtype=_ITA)
-    ita["id"] = _checked(list(map(int, data.ids)), "<i4", f"{what} marker id")
+    ita["id"] = checked_ints(list(map(int, data.ids)), "<i4", f"{what} marker id")
     ita["type"], ita["action"] = data.types, data.actions
     pose_scale = np.concatenate(
         [np.asarray(data.poses, dtype="<f8"), np.asarray(data.scales, dtype="<f8")], axis=1
     )
     return plan.encode(
         {
-            "stamp": _split_ns(data.stamps_ns, what),
+            "stamp": split_ns(data.stamps_ns, what),
             "ita": ita,
             "pose_scale": pose_scale,
             "color": np.asarray(data.colors, dtype="<f4"),
-            "lifetime": _split_ns(data.lifetimes_ns, what),
+            "lifetime": split_ns(data.lifetimes_ns, what),
             "locked": np.asarray(data.frame_locked, dtype=np.uint8),
-            "points": _rows([np.asarray(p, dtype="<f8") for p in data.points], 3),
-            "point_colors": _rows([np.asarray(c, dtype="<f4") for c in data.point_colors], 4),
+            "points": stacked_rows([np.asarray(p, dtype="<f8") for p in data.points], 3),
+            "point_colors": stacked_rows(
+                [np.asarray(c, dtype="<f4") for c in data.point_colors], 4
+            ),
             "embedded": np.asarray(data.mesh_use_embedded_materials, dtype=np.uint8),
             **text_values,
         }
@@ -250,12 +260,12 @@ def _known_shape(data: bytes | bytearray | memoryview) -> tuple[np.ndarray, Plan
     check_marker_array(data)  # past hiros_core.limits: refused before anything is made
     size = len(memoryview(data).cast("B"))
     buffer = aligned_copy(data)
-    plan = _MARKER_PLANS.find_aligned(buffer, size)
+    plan = MARKER_PLANS.find_aligned(buffer, size)
     if plan is not None:
         return buffer, plan
     markers = _walk_marker_array(data)
     texts = _text_bytes(markers.texts)
-    _MARKER_PLANS.put(_marker_key(markers, texts), _build_marker_plan(markers, texts))
+    MARKER_PLANS.put(_marker_key(markers, texts), _build_marker_plan(markers, texts))
     return markers
 
 
@@ -271,7 +281,7 @@ def decode_marker_array(data: bytes | bytearray | memoryview) -> MarkerArrayData
     points = plan.gather_aligned(buffer, "points", "<f8").reshape(-1, 3)
     point_colors = plan.gather_aligned(buffer, "point_colors", "<f4").reshape(-1, 4)
     return MarkerArrayData(
-        stamps_ns=_join_ns(plan.gather_aligned(buffer, "stamp", _TIME).ravel()),
+        stamps_ns=join_ns(plan.gather_aligned(buffer, "stamp", TIME_DTYPE).ravel()),
         frame_ids=list(shape.frame_ids),
         namespaces=list(shape.namespaces),
         ids=ita["id"].copy(),
@@ -280,7 +290,7 @@ def decode_marker_array(data: bytes | bytearray | memoryview) -> MarkerArrayData
         poses=pose_scale[:, :7].copy(),
         scales=pose_scale[:, 7:].copy(),
         colors=plan.gather_aligned(buffer, "color", "<f4").reshape(-1, 4),
-        lifetimes_ns=_join_ns(plan.gather_aligned(buffer, "lifetime", _TIME).ravel()),
+        lifetimes_ns=join_ns(plan.gather_aligned(buffer, "lifetime", TIME_DTYPE).ravel()),
         frame_locked=plan.gather_aligned(buffer, "locked", np.uint8).ravel().astype(bool),
         points=_split_rows(points, shape.point_counts),
         point_colors=_split_rows(point_colors, shape.color_counts),
@@ -323,7 +333,7 @@ def decode_marker_fields(data: bytes | bytearray | memoryview) -> MarkerFields:
     shape: _MarkerShape = plan.meta  # type: ignore[assignment]
     ita = plan.gather_aligned(buffer, "ita", _ITA).ravel()
     return MarkerFields(
-        stamps_ns=_join_ns(plan.gather_aligned(buffer, "stamp", _TIME).ravel()),
+        stamps_ns=join_ns(plan.gather_aligned(buffer, "stamp", TIME_DTYPE).ravel()),
         frame_ids=list(shape.frame_ids),
         namespaces=list(shape.namespaces),
         ids=ita["id"].copy(),
@@ -447,19 +457,19 @@ def _parse_marker_array(data: bytes | bytearray | memoryview) -> MarkerArrayData
     out.attachments = []
     out.points, out.point_colors = [], []
     for i in range(n):
-        out.stamps_ns[i] = reader.i32() * _NS + reader.u32()
+        out.stamps_ns[i] = reader.i32() * NS + reader.u32()
         out.frame_ids[i] = reader.string()
         out.namespaces[i] = reader.string()
         out.ids[i], out.types[i], out.actions[i] = reader.i32(), reader.i32(), reader.i32()
         pose_scale = reader.floats(10)
         out.poses[i], out.scales[i] = pose_scale[:7], pose_scale[7:]
         out.colors[i] = reader.floats(4, "<f4")
-        out.lifetimes_ns[i] = reader.i32() * _NS + reader.u32()
+        out.lifetimes_ns[i] = reader.i32() * NS + reader.u32()
         out.frame_locked[i] = bool(reader.u8())
         out.points.append(reader.floats(3 * reader.count(24)).reshape(-1, 3))
         out.point_colors.append(reader.floats(4 * reader.count(16), "<f4").reshape(-1, 4))
         texture_resource = reader.string()
-        texture_stamp = reader.i32() * _NS + reader.u32()
+        texture_stamp = reader.i32() * NS + reader.u32()
         texture_frame, texture_format = reader.string(), reader.string()
         texture_data = reader.blob()
         uv = reader.floats(2 * reader.count(8), "<f4").reshape(-1, 2)

@@ -162,9 +162,7 @@ def _marker(buf: np.ndarray, start: int, r: int, size: int, row: np.ndarray) -> 
     if r + 105 > size or buf[start + r + 104] > 1:  # pose, scale, colour, lifetime, locked
         return -1
     row[POSE] = start + r
-    row[LIFETIME] = (
-        np.int64(_i32(buf, start + r + 96)) * 1_000_000_000 + _u32(buf, start + r + 100)
-    )
+    row[LIFETIME] = np.int64(_i32(buf, start + r + 96)) * 1_000_000_000 + _u32(buf, start + r + 100)
     row[LOCKED] = buf[start + r + 104]
     row[POINTS], row[POINTS + 1], r = _sequence(buf, start, r + 105, size, 24, 8)
     row[POINT_COLORS], row[POINT_COLORS + 1], r = _sequence(buf, start, r, size, 16, 4)

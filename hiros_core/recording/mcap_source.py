@@ -26,11 +26,11 @@ import numpy as np
 from hiros_core.errors import RecordingError
 from hiros_core.limits import MAX_CHUNK_BYTES, MAX_MESSAGE_BYTES
 from hiros_core.recording.checksum import crc32
-from hiros_core.recording.messages import MessageBatch, RecordedMessage, _Source
+from hiros_core.recording.messages import MessageBatch, RecordedMessage, Source
 from hiros_core.recording.msgdefs import normalize_msgtype
 
 
-class _McapSource(_Source):
+class McapSource(Source):
     """A single MCAP file, read through its index, or straight through when truncated."""
 
     def __init__(self, path: Path, drops: Counter[str], problems: list[str]) -> None:
@@ -227,6 +227,7 @@ class _McapSource(_Source):
         return _readable_prefix(compression, data[name_end + _U64.size :])
 
     def messages(self, topics: set[str] | None) -> Iterator[RecordedMessage]:
+        """The messages of ``topics`` (None: all), in log-time order."""
         if self.summary is None or not self.summary.chunk_indexes:
             yield from self._scan(topics)
             return
@@ -236,6 +237,7 @@ class _McapSource(_Source):
     def batches(
         self, topics: set[str] | None, *, transient: bool = False
     ) -> Iterator[MessageBatch]:
+        """``messages`` a chunk at a time (``transient``: see ``RecordingReader.batches``)."""
         if self.summary is None or not self.summary.chunk_indexes:
             return super().batches(topics)
         return self._chunk_batches(topics, transient=transient)
@@ -429,6 +431,7 @@ class _McapSource(_Source):
         return records
 
     def close(self) -> None:
+        """Close the file."""
         self.stream.close()
 
 

@@ -106,7 +106,7 @@ class MessageBatch:
         )
 
 
-def _batched(messages: Iterable[RecordedMessage]) -> Iterator[MessageBatch]:
+def batched(messages: Iterable[RecordedMessage]) -> Iterator[MessageBatch]:
     """Messages read one at a time, as batches of up to ``_BATCH_SIZE``."""
     batch: list[RecordedMessage] = []
     for message in messages:
@@ -118,19 +118,20 @@ def _batched(messages: Iterable[RecordedMessage]) -> Iterator[MessageBatch]:
         yield MessageBatch.of(batch)
 
 
-class _Source:
+class Source:
     """One readable file or folder: topics up front, then a time-ordered message stream."""
 
     topics: dict[str, str]
 
     def messages(self, topics: set[str] | None) -> Iterator[RecordedMessage]:
+        """The messages of ``topics`` (None: all), in log-time order."""
         raise NotImplementedError
 
     def batches(
         self, topics: set[str] | None, *, transient: bool = False
     ) -> Iterator[MessageBatch]:
         """``messages`` as batches (``transient``: see ``RecordingReader.batches``)."""
-        return _batched(self.messages(topics))
+        return batched(self.messages(topics))
 
     def close(self) -> None:
         """Release open files."""

@@ -30,9 +30,9 @@ from pathlib import Path
 from types import TracebackType
 
 from hiros_core.errors import RecordingError
-from hiros_core.recording.mcap_source import _McapSource
-from hiros_core.recording.messages import MessageBatch, RecordedMessage, _batched, _Source
-from hiros_core.recording.rosbags_source import _REINDEX, _RosbagsSource
+from hiros_core.recording.mcap_source import McapSource
+from hiros_core.recording.messages import MessageBatch, RecordedMessage, Source, batched
+from hiros_core.recording.rosbags_source import REINDEX, RosbagsSource
 from hiros_core.safe_yaml import load_yaml
 
 __all__ = ["UNCOUNTED_DROPS", "MessageBatch", "RecordedMessage", "RecordingReader"]
@@ -46,7 +46,7 @@ _MAX_METADATA_BYTES = 8 << 20
 """Largest rosbag2 ``metadata.yaml`` read (one of a thousand topics and files is ~1 MB)."""
 
 
-def _folder_sources(path: Path, drops: Counter[str], problems: list[str]) -> list[_Source]:
+def _folder_sources(path: Path, drops: Counter[str], problems: list[str]) -> list[Source]:
     """The sources of a rosbag2 folder, with or without its ``metadata.yaml``."""
     metadata = path / "metadata.yaml"
     files: list[Path] = []
@@ -64,9 +64,9 @@ def _folder_sources(path: Path, drops: Counter[str], problems: list[str]) -> lis
             msg = f"cannot read {metadata}: no rosbag2_bagfile_information ({exc!r})"
             raise RecordingError(msg) from exc
         if compressed or storage not in {"mcap", "sqlite3"}:
-            return [_RosbagsSource(path)]
+            return [RosbagsSource(path)]
         if storage == "sqlite3":
-            return [_RosbagsSource(path)]
+            return [RosbagsSource(path)]
         missing = [f.name for f in files if not f.is_file()]
         if missing:
             problems.append(f"{path}: files listed in metadata.yaml are missing: {missing}")
@@ -80,7 +80,7 @@ def _folder_sources(path: Path, drops: Counter[str], problems: list[str]) -> lis
         msg = f"{path} holds no recording (no metadata.yaml, .mcap or .db3 files)"
         raise RecordingError(msg)
     return [
-        _McapSource(f, drops, problems) if f.suffix == ".mcap" else _RosbagsSource(f) for f in files
+        McapSource(f, drops, problems) if f.suffix == ".mcap" else RosbagsSource(f) for f in files
     ]
 
 
@@ -117,11 +117,11 @@ class RecordingReader:
         if self.path.is_dir():
             self._sources = _folder_sources(self.path, self.drops, self.problems)
         elif self.path.suffix == ".mcap":
-            self._sources = [_McapSource(self.path, self.drops, self.problems)]
+            self._sources = [McapSource(self.path, self.drops, self.problems)]
         elif self.path.suffix in {".db3", ".bag"}:
-            self._sources = [_RosbagsSource(self.path)]
+            self._sources = [RosbagsSource(self.path)]
         elif self.path.name.endswith(".bag.active"):
-            msg = f"cannot read {self.path}: {_REINDEX}"
+            msg = f"cannot read {self.path}: {REINDEX}"
             raise RecordingError(msg)
         else:
             msg = (
@@ -156,7 +156,7 @@ class RecordingReader:
         wanted = set(topics) if topics is not None else None
         if len(self._sources) == 1:
             return self._sources[0].batches(wanted, transient=transient)
-        return _batched(self.messages(wanted))
+        return batched(self.messages(wanted))
 
     def __iter__(self) -> Iterator[RecordedMessage]:
         return self.messages()

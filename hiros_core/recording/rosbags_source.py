@@ -14,7 +14,7 @@ from typing import Any
 
 from hiros_core.errors import RecordingError
 from hiros_core.limits import MAX_CHUNK_BYTES
-from hiros_core.recording.messages import RecordedMessage, _Source
+from hiros_core.recording.messages import RecordedMessage, Source
 from hiros_core.recording.msgdefs import normalize_msgtype
 
 
@@ -50,7 +50,7 @@ def _bound_ros1_chunks() -> None:
     )
 
 
-class _RosbagsSource(_Source):
+class RosbagsSource(Source):
     """A ``.db3`` file, a sqlite3 rosbag2 folder, or a ROS 1 bag, through ``AnyReader``."""
 
     def __init__(self, path: Path) -> None:
@@ -79,6 +79,7 @@ class _RosbagsSource(_Source):
         return found
 
     def messages(self, topics: set[str] | None) -> Iterator[RecordedMessage]:
+        """The messages of ``topics`` (None: all), in log-time order, as ROS 2 CDR."""
         connections = [c for c in self.reader.connections if topics is None or c.topic in topics]
         if not connections:
             return
@@ -92,11 +93,12 @@ class _RosbagsSource(_Source):
             raise RecordingError(msg) from exc
 
     def close(self) -> None:
+        """Close the bag."""
         with contextlib.suppress(Exception):
             self.reader.close()
 
 
-_REINDEX = (
+REINDEX = (
     "a ROS 1 recorder stopped without closing the bag (a .bag.active file) leaves no index; "
     "ROS 1's `rosbag reindex` writes it, then the bag can be read"
 )
@@ -106,7 +108,7 @@ def _bag_advice(path: Path, error: Exception) -> str:
     """What to do about a ROS 1 bag whose index cannot be read (else nothing)."""
     if path.suffix != ".bag" or "index" not in str(error).lower():
         return ""
-    return f". {_REINDEX[0].upper()}{_REINDEX[1:]}"
+    return f". {REINDEX[0].upper()}{REINDEX[1:]}"
 
 
 def _ros1_converter(bag_store: Any, msgtype: str) -> Callable[[bytes], bytes]:

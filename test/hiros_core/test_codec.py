@@ -157,7 +157,7 @@ def _numpy_encoding(group: SkeletonGroup) -> bytes:
     """The group's bytes by the numpy form of the filler."""
     from hiros_core.codec import group_encode, group_plans
 
-    plan = group_plans._plan_of(group)
+    plan = group_plans.plan_of(group)
     skeletons = group.skeletons
     values = np.concatenate(
         [a for s in skeletons for a in (s.bounding_box, s.markers, s.links)], axis=None
