@@ -32,7 +32,7 @@ import functools
 import itertools
 import math
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from functools import cached_property
 from typing import Any
 
@@ -1090,7 +1090,7 @@ def synchronise(
             repin = functools.partial(_repin, tracks[a], tracks[b], pair, work)
             if settle is not None:
                 pair = settle(pair, repin)
-            pairs.append(pair)
+            pairs.append(_unless_uncorrelated(pair, params))
             repins.append(repin)
     pairs = close_loops(pairs, repins, params)
     pairs = overrule_weak_pairs(pairs, params)
@@ -1105,12 +1105,14 @@ def close_loops(
     With three or more cameras, a pair whose motion repeats may still be timed through the
     others: the lags of a-c and c-b add up to the lag of a-b. A refused pair that listed
     candidate lags takes the one within ``consensus_tolerance`` of that sum (re-estimated
-    there by ``repins[k]``), until no more can be decided.
+    there by ``repins[k]``), until no more can be decided. Two such pairs of a camera
+    triangle whose third pair is timed are decided together when exactly one combination of
+    their candidates closes the triangle (:func:`_decide_two_by_triangle`).
     """
     pairs = list(pairs)
     progress = True
     while progress:
-        progress = False
+        progress = _decide_two_by_triangle(pairs, repins, params)
         for k, pair in enumerate(pairs):
             if pair.ok or len(pair.candidates) == 0:
                 continue
@@ -1129,6 +1131,73 @@ def close_loops(
             pairs[k] = decided
             progress = True
     return pairs
+
+
+def _unless_uncorrelated(pair: PairOffset, params: SyncParams) -> PairOffset:
+    """The pair, or its refusal when the motion hardly correlates at the lag it ended on.
+
+    A lag kept for the arrival times, or chosen by the poses, may sit where the refined
+    correlation is no more significant than ``min_prior_significance``: nothing in the
+    motion supports it then. The refusal keeps the candidates, so a loop may still decide.
+    """
+    if not pair.ok or _pair_strength(pair) >= params.min_prior_significance:
+        return pair
+    refused = _refused(
+        pair.camera_a,
+        pair.camera_b,
+        f"the motion hardly correlates at its lag {pair.offset:+.3f} s (correlation "
+        f"{pair.quality.get('refined_correlation', 0.0):.2f} over "
+        f"{pair.quality.get('overlap_s', 0.0):.0f} s)",
+    )
+    refused.candidates = pair.candidates
+    return refused
+
+
+def _decide_two_by_triangle(
+    pairs: list[PairOffset], repins: list[Callable[[float], PairOffset]], params: SyncParams
+) -> bool:
+    """Two ambiguous pairs decided by the timed third side of their triangle (in place).
+
+    Each lists candidate lags; a combination closes the triangle when its lags add up to the
+    third pair's within ``consensus_tolerance``. Only a single closing combination decides:
+    motion repeated with one period in both pairs closes it as well one repetition up in
+    one and down in the other, and then nothing is decided. True when a pair was decided.
+    """
+    ambiguous = [k for k, p in enumerate(pairs) if not p.ok and len(p.candidates)]
+    timed = [p for p in pairs if p.ok]
+    for k, m in itertools.combinations(ambiguous, 2):
+        first, second = pairs[k], pairs[m]
+        cameras = {first.camera_a, first.camera_b, second.camera_a, second.camera_b}
+        third = next((r for r in timed if {r.camera_a, r.camera_b} <= cameras), None)
+        if len(cameras) != 3 or third is None:
+            continue
+        closing = [
+            (lag_1, lag_2)
+            for lag_1 in first.candidates[:, 0]
+            for lag_2 in second.candidates[:, 0]
+            if abs(
+                _implied_lag(
+                    third.camera_a,
+                    third.camera_b,
+                    [replace(first, offset=lag_1), replace(second, offset=lag_2)],
+                )
+                - third.offset
+            )
+            <= params.consensus_tolerance
+        ]
+        if len(closing) != 1:
+            continue
+        decided = [repins[k](float(closing[0][0])), repins[m](float(closing[0][1]))]
+        if not all(d.ok for d in decided):
+            continue
+        for index, old, new in ((k, first, decided[0]), (m, second, decided[1])):
+            new.candidates = old.candidates
+            new.quality.update(
+                lag_decided_by="loop", loop_closed_by=f"{third.camera_a}-{third.camera_b}"
+            )
+            pairs[index] = new
+        return True
+    return False
 
 
 def overrule_weak_pairs(pairs: list[PairOffset], params: SyncParams) -> list[PairOffset]:
