@@ -8,7 +8,7 @@ import pytest
 from hiros_calib import Calibrator, CalibratorParams, LiveCalibrator, LiveCalibratorParams
 from hiros_calib.extrinsics import PairPose
 from hiros_calib.quality import arrival_offsets_from_delays, flag_cameras
-from hiros_calib.sync import PairOffset, SyncParams, overrule_weak_pairs
+from hiros_calib.sync import PairOffset, SyncParams, close_loops, overrule_weak_pairs
 from hiros_core.calibration import Calibration, CameraCalibration
 from hiros_eval.calibration import compare_calibration
 from hiros_sim import simulate
@@ -125,6 +125,27 @@ def test_a_chance_level_lag_the_loop_contradicts_is_left_out():
     # and a weak lag the loop agrees with is kept
     agreeing = _timed("k01", "k03", -0.21, 0.25, 8.0)
     assert overrule_weak_pairs([*strong, agreeing], SyncParams())[2] is agreeing
+
+
+def test_two_ambiguous_pairs_decided_by_the_third_side_of_their_triangle():
+    timed = _timed("k01", "k03", 0.85, 0.65, 78.0)
+    first = PairOffset("k01", "k02", candidates=np.array([[1.14, 0.27], [0.67, 0.16]]))
+    second = PairOffset("k02", "k03", candidates=np.array([[-0.30, 0.25], [-0.77, 0.15]]))
+    repins = [
+        lambda lag, a=a, b=b: _timed(a, b, lag, 0.5, 30.0)
+        for a, b in (("k01", "k02"), ("k01", "k03"), ("k02", "k03"))
+    ]
+    # only 1.14 - 0.30 adds up to k01-k03's 0.85
+    decided = close_loops([first, timed, second], repins, SyncParams())
+    assert decided[0].offset == pytest.approx(1.14)
+    assert decided[2].offset == pytest.approx(-0.30)
+    assert decided[0].quality["lag_decided_by"] == "loop"
+    # one period (0.5 s) in both: up in one and down in the other closes it too
+    first.candidates = np.array([[1.14, 0.27], [1.64, 0.2]])
+    second.candidates = np.array([[-0.30, 0.25], [-0.80, 0.2]])
+    undecided = close_loops([first, timed, second], repins, SyncParams())
+    assert not undecided[0].ok
+    assert not undecided[2].ok
 
 
 def test_a_final_pose_that_moves_between_the_halves_flags_its_camera():
