@@ -50,6 +50,9 @@ MATRIX_ROWS = (
 )
 """The simulator presets of the matrix, in order (``hiros_sim.presets``)."""
 
+UNDECIDABLE = "the lag is ambiguous"
+"""How a refusal begins when neither the motion nor the skeletons single out one lag."""
+
 WRONG = (50.0, 2.0, 10.0)
 """A camera off by more than this time (ms), rotation (deg) or translation (cm) is wrong."""
 
@@ -70,6 +73,7 @@ class _Row:
     calibrated: int = 0
     flagged: int = 0
     refused: int = 0
+    undecidable: int = 0
     silently_wrong: int = 0
     wrong_flagged: int = 0
     time_ms: list[float] = field(default_factory=list)
@@ -107,6 +111,7 @@ def one_run(preset: str, seed: int, duration: float, row: _Row) -> None:
         estimate = calibrator.calibrate(result.camera_groups, arrival_ns=result.receive_ns)
     except CalibrationError as exc:
         row.refused += 1
+        row.undecidable += UNDECIDABLE in str(exc)
         row.reasons[f"refused: {_short(str(exc))}"] += 1
         return
     finally:
@@ -142,8 +147,11 @@ def _stats(values: list[float]) -> str:
 
 def _row_line(name: str, row: _Row) -> str:
     share = 100.0 * row.success / max(row.runs, 1)
+    decidable = row.runs - row.undecidable
+    decided = f"{100.0 * row.success / decidable:5.0f}%" if decidable else "    -"
     return (
-        f"{name:<16s} {row.runs:5d} {share:5.0f}% {row.refused:4d} {row.flagged:4d} "
+        f"{name:<16s} {row.runs:5d} {share:5.0f}% {row.undecidable:6d} {decided} "
+        f"{row.refused:4d} {row.flagged:4d} "
         f"{row.silently_wrong:6d} {_stats(row.time_ms):>12s} {_stats(row.rotation_deg):>11s} "
         f"{_stats(row.translation_cm):>11s} {np.median(row.seconds):6.1f}"
     )
@@ -197,7 +205,8 @@ def run(
         f"calibration robustness matrix: default settings, {duration:.0f} s, seeds "
         f"{seeds[0]}-{seeds[-1]}; wrong = off by > {WRONG[0]:.0f} ms, {WRONG[1]:.0f} deg or "
         f"{WRONG[2]:.0f} cm; errors of successful runs, median/p95",
-        f"{'condition':<16s} {'runs':>5s} {'succ.':>6s} {'ref.':>4s} {'flag':>4s} "
+        f"{'condition':<16s} {'runs':>5s} {'succ.':>6s} {'undec.':>6s} {'of dec.':>6s} "
+        f"{'ref.':>4s} {'flag':>4s} "
         f"{'silent':>6s} {'time ms':>12s} {'rot deg':>11s} {'transl cm':>11s} {'s/run':>6s}",
     ]
     notes = []
@@ -214,6 +223,11 @@ def run(
         notes.extend(
             f"  {name}: {count}x {reason}" for reason, count in row.reasons.most_common(3)
         )
+    lines.append(
+        "undec. = refused because neither the motion nor the skeletons single out one lag "
+        "(motion repeated over the whole recording, no usable log times): the data cannot "
+        "decide; of dec. = success among the other runs"
+    )
     lines.append("refusals and flags (most common per row):")
     lines.extend(notes or ["  none"])
     lines.append(f"conditions: {', '.join(f'{r} = {PRESETS[r].description}' for r in rows)}")

@@ -20,8 +20,10 @@ def test_matrix_rows_report_outcomes_and_nothing_silently_wrong() -> None:
     }
     assert set(table) == set(rows)
     for name, cells in table.items():
-        runs, refused, flagged, silent = int(cells[1]), int(cells[3]), int(cells[4]), int(cells[5])
+        runs, undecidable = int(cells[1]), int(cells[3])
+        refused, flagged, silent = int(cells[5]), int(cells[6]), int(cells[7])
         assert runs == 1, name
         assert silent == 0, name
+        assert undecidable <= refused
         assert refused + flagged <= runs
     assert any(line.startswith("KinectMultiTrack") or "KinectMultiTrack" in line for line in lines)
