@@ -1134,20 +1134,21 @@ def close_loops(
 
 
 def _unless_uncorrelated(pair: PairOffset, params: SyncParams) -> PairOffset:
-    """The pair, or its refusal when the motion hardly correlates at the lag it ended on.
+    """The pair, or its refusal when the motion does not correlate at the lag it ended on.
 
     A lag kept for the arrival times, or chosen by the poses, may sit where the refined
-    correlation is no more significant than ``min_prior_significance``: nothing in the
-    motion supports it then. The refusal keeps the candidates, so a loop may still decide.
+    correlation is below ``min_peak``, the least a usable body pair's peak needs: nothing in
+    the motion supports it then. The refusal keeps the candidates, so a loop may decide.
     """
-    if not pair.ok or _pair_strength(pair) >= params.min_prior_significance:
+    correlation = pair.quality.get("refined_correlation", 0.0)
+    if not pair.ok or correlation >= params.min_peak:
         return pair
     refused = _refused(
         pair.camera_a,
         pair.camera_b,
-        f"the motion hardly correlates at its lag {pair.offset:+.3f} s (correlation "
-        f"{pair.quality.get('refined_correlation', 0.0):.2f} over "
-        f"{pair.quality.get('overlap_s', 0.0):.0f} s)",
+        f"the motion does not correlate at its lag {pair.offset:+.3f} s (correlation "
+        f"{correlation:.2f} over {pair.quality.get('overlap_s', 0.0):.0f} s; a usable lag "
+        f"needs {params.min_peak})",
     )
     refused.candidates = pair.candidates
     return refused
