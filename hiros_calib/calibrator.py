@@ -125,6 +125,8 @@ class Calibrator:
         camera_groups: Mapping[str, Sequence[SkeletonGroup]] | None = None,
         progress: Progress | None = None,
         arrival_ns: Mapping[str, Sequence[int]] | None = None,
+        *,
+        one_receiver: bool = False,
     ) -> Calibration:
         """The calibration of every camera; also kept with all details in ``self.result``.
 
@@ -136,6 +138,9 @@ class Calibrator:
                 They narrow each clock search to the lag they suggest; without them every
                 lag is searched, and a pair whose people repeat one motion (another lag
                 correlating nearly as well) is refused as ambiguous rather than guessed.
+            one_receiver: the arrival times are the caller's own receiving clock (a live
+                node), never each camera's host clock, so they are used even when they look
+                alike on every camera (cameras whose clocks already agree).
 
         Raises:
             CalibrationError: fewer than two cameras, or (with ``require_all``) a camera
@@ -151,7 +156,9 @@ class Calibrator:
                 for c in groups
                 if arrival_ns and c in arrival_ns
             }
-        arrival_offsets, arrival_notes = arrival_offsets_from_delays(delays)
+        arrival_offsets, arrival_notes = arrival_offsets_from_delays(
+            delays, one_receiver=one_receiver
+        )
         notes = list(arrival_notes)
         report = progress or (lambda _stage, _done: None)
         params = self.params

@@ -334,7 +334,8 @@ class LiveCalibrator(Accounted):
         )
         calibrator = Calibrator(params)
         try:
-            estimate = calibrator.calibrate(groups, arrival_ns=arrivals)
+            # the arrival times are this node's own receiving clock
+            estimate = calibrator.calibrate(groups, arrival_ns=arrivals, one_receiver=True)
         except CalibrationError as exc:
             self.drops["estimate_failed"] += 1
             self._event(now_ns, f"estimate failed: {exc}")

@@ -55,17 +55,19 @@ class LoopTolerances:
 
 
 def arrival_offsets_from_delays(
-    delays: Mapping[str, Sequence[int]],
+    delays: Mapping[str, Sequence[int]], *, one_receiver: bool = False
 ) -> tuple[dict[str, float], list[str]]:
     """Per camera the typical ``log - stamp`` (s), or none with the reason why.
 
     ``delays`` holds per camera each frame's ``log time - stamp`` (ns). Log times that look
     like each camera's own clock (``log - stamp`` a latency on every camera: between 0 and
     :data:`OWN_CLOCK_LATENCY`, and alike within :data:`OWN_CLOCK_SPREAD`) are no information
-    about the lag: an empty mapping and a note are returned.
+    about the lag: an empty mapping and a note are returned. Cameras whose clocks already
+    agree look the same through one receiver, so a caller that received the frames itself
+    (the live calibrator: ``one_receiver``) keeps them.
     """
     typical = {c: float(np.median(d)) * 1e-9 for c, d in delays.items() if len(d)}
-    if len(typical) < 2:
+    if len(typical) < 2 or one_receiver:
         return typical, []
     values = list(typical.values())
     latencies = all(-0.005 <= v < OWN_CLOCK_LATENCY for v in values)

@@ -31,6 +31,10 @@ def test_log_times_on_each_cameras_own_clock_are_no_information():
     offsets, notes = arrival_offsets_from_delays(own)
     assert offsets == {}
     assert "each camera's own clock" in notes[0]
+    # received by the caller itself (the live node): cameras whose clocks agree, kept
+    offsets, notes = arrival_offsets_from_delays(own, one_receiver=True)
+    assert offsets == pytest.approx({"k01": 0.030, "k02": 0.031, "k03": 0.055})
+    assert notes == []
     # one receiver's clock: log - stamp differs by the cameras' offsets (seed 0 of simulate)
     receiver = {"k01": [60 * MS] * 50, "k02": [418 * MS] * 50, "k03": [-331 * MS] * 50}
     offsets, notes = arrival_offsets_from_delays(receiver)
