@@ -397,6 +397,7 @@ def _summary(samples: list[Sample], latencies: list[float], period: float) -> in
 
 def run(console, quick: bool = False, minutes: float | None = None) -> list[str]:  # noqa: ANN001 - rich Console
     """Run the soak in a loopback-only child and print its lines as they come."""
+    from hiros_bench import SuiteFailedError
     from hiros_core.isolation import isolated, isolated_env
 
     minutes = minutes or (3.0 if quick else 30.0)
@@ -410,6 +411,9 @@ def run(console, quick: bool = False, minutes: float | None = None) -> list[str]
         for line in child.stdout:
             lines.append(line.rstrip())
             console.print(line.rstrip(), highlight=False)
+    if child.returncode != 0:
+        msg = f"the soak failed (exit status {child.returncode})"
+        raise SuiteFailedError(msg)
     return lines
 
 

@@ -34,6 +34,8 @@ import inspect
 
 from rich.console import Console
 
+from hiros_bench import SuiteFailedError
+
 HELP = "speed and accuracy benchmarks, each beside a baseline run alongside"
 SUITES = ("codec", "io", "calib", "tracking", "body", "pipeline", "robust", "soak")
 DEFAULT_SUITES = SUITES[:-1]
@@ -124,5 +126,9 @@ def run(args: argparse.Namespace) -> int:
         elif suite == "soak":
             options.update(minutes=args.minutes)
         accepted = inspect.signature(module.run).parameters
-        module.run(console, **{k: v for k, v in options.items() if k in accepted})
+        try:
+            module.run(console, **{k: v for k, v in options.items() if k in accepted})
+        except SuiteFailedError as exc:
+            console.print(f"[red]bench {suite}: {exc}[/]")
+            failed.append(suite)
     return 1 if failed else 0

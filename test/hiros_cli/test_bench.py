@@ -19,3 +19,18 @@ def test_settings_take_their_fields_types() -> None:
 def test_bad_settings_are_refused_with_the_reason(pair: str) -> None:
     with pytest.raises(ConfigError, match="--sim"):
         _sim_overrides([pair])
+
+
+def test_a_suite_that_fails_its_own_verdict_makes_bench_exit_1(monkeypatch, capsys) -> None:
+    import argparse
+
+    from hiros_bench import SuiteFailedError, soak
+    from hiros_cli.commands import bench
+
+    def failing(console, quick: bool = False, minutes: float | None = None) -> list[str]:
+        raise SuiteFailedError("the soak failed (exit status 1)")
+
+    monkeypatch.setattr(soak, "run", failing)
+    args = argparse.Namespace(suites=["soak"], sim=[], quick=True, minutes=0.1, matrix=False)
+    assert bench.run(args) == 1
+    assert "the soak failed" in capsys.readouterr().out
