@@ -54,6 +54,23 @@ from hiros_core.limits import MAX_POSITION_M
 from hiros_core.model import Skeleton, SkeletonGroup
 from hiros_tracker import kernels
 from hiros_tracker.correction import CameraCorrection, MovedFrame
+from hiros_tracker.kernel_args import (
+    FacingBody,
+    FacingPriors,
+    FacingView,
+    FrameRows,
+    GateFrame,
+    GateSettings,
+    GateTracks,
+    HitLayout,
+    HitSettings,
+    MatchSettings,
+    MirrorLayout,
+    SideLayout,
+    StackedRows,
+    TrackPoses,
+    UpdateSettings,
+)
 from hiros_tracker.tracks import TrackTable
 
 __all__ = ["Tracker", "TrackerParams"]
@@ -198,6 +215,11 @@ class _MirrorParts:
         return self.onehot.shape[1]
 
     @cached_property
+    def arrays(self) -> MirrorLayout:
+        """The parts as the kernels take them."""
+        return MirrorLayout(self.part, self.mirror, self.count)
+
+    @cached_property
     def _table(self) -> np.ndarray:
         """``(2**K, J)`` the joint order of every combination of flipped parts."""
         combos = (np.arange(2**self.count)[:, None] >> np.arange(self.count)) & 1
@@ -333,16 +355,13 @@ class _LayoutInfo:
         return bool(self.frame.usable)
 
     @cached_property
-    def hit_layout(self) -> tuple:
-        """What ``kernels.hit_frame`` needs of the layout (see there)."""
-        parts = self.parts
-        return (parts.part, parts.mirror, self.weights, *self.sides, self.facing_body)
-
-    @cached_property
-    def facing_body(self) -> tuple[int, int, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """What ``kernels.turn_facing`` needs of the layout: body frame joints and mirror."""
+    def hit_layout(self) -> HitLayout:
+        """What ``kernels.hit_frame`` needs of the layout: mirror parts, side pairs, body frame."""
         frame = self.frame
-        return frame.root, frame.neck, frame.left, frame.right, frame.pointers, self.parts.mirror
+        body = FacingBody(
+            frame.root, frame.neck, frame.left, frame.right, frame.pointers, self.parts.mirror
+        )
+        return HitLayout(self.parts.arrays, SideLayout(*self.sides), body)
 
 
 class _Detections(NamedTuple):
@@ -358,7 +377,7 @@ class _Detections(NamedTuple):
     positions: np.ndarray
     kept: np.ndarray
     index: np.ndarray
-    rows: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]
+    rows: StackedRows
     stacked: bool
 
 
@@ -414,7 +433,7 @@ class Tracker(Accounted):
         self._released_ns: int | None = None
         self._suspect: tuple[int, str, MovedFrame] | None = None  # a frame far ahead, on hold
         self._recent: dict[str, deque[int]] = {}  # each camera's last stamps
-        self._up = np.zeros(4)  # the world's up (x, y, z, known): see kernels._update_up
+        self._up = np.zeros(4)  # the world's up (x, y, z, known): see facing._update_up
         self._info: _LayoutInfo | None = None
         self._camera_positions: dict[str, tuple[CameraCalibration, np.ndarray]] = {}
         self.restarts = 0  # times a source's stamps went back past the tracks' timeout
@@ -618,14 +637,14 @@ class Tracker(Accounted):
         stack = frame.stack
         if stack is not None:
             markers, present = stack.markers, stack.marker_present
-            rows = (markers, present, stack.links, stack.link_present)
+            rows = StackedRows(markers, present, stack.links, stack.link_present)
         else:
             skeletons = self._one_layout(skeletons)
             if not skeletons:
                 return None
             markers = np.array([s.markers for s in skeletons])
             present = np.array([s.marker_present for s in skeletons])
-            rows = (markers, present, markers, present)  # the links are never labelled here
+            rows = StackedRows(markers, present, markers, present)  # links never labelled here
         positions, usable, kept, unusable = kernels.masked_positions(
             markers, present, self.params.min_confidence
         )
@@ -748,23 +767,22 @@ class Tracker(Accounted):
         per frame and each cascade level takes its rows.
         """
         params = self.params
-        parts = info.parts
+        parts = info.parts.arrays
         n = table.n
-        match_args = (
-            table.positions[:n], table.velocity[:n], table.time_ns[:n], stamp,
-            params.max_prediction, positions, info.weights, parts.part, parts.mirror, parts.count,
-            params.mirror_check, params.min_joints, params.mirror_margin,
-        )  # fmt: skip
-        gate_args = (
-            table.last_hit_ns, table.confirmed, table.body_ids, table.seen, det_ids, camera, stamp,
-            stamp - round(params.recent_window * 1e9), params.body_id_bonus,
-            params.gate_distance, params.gate_growth,
-        )  # fmt: skip
+        tracks = TrackPoses(table.positions[:n], table.velocity[:n], table.time_ns[:n])
+        match = MatchSettings(
+            params.max_prediction, params.mirror_check, params.min_joints, params.mirror_margin
+        )
+        gate_tracks = GateTracks(table.last_hit_ns, table.confirmed, table.body_ids, table.seen)
+        frame = GateFrame(det_ids, camera, stamp, stamp - round(params.recent_window * 1e9))
+        gate = GateSettings(params.body_id_bonus, params.gate_distance, params.gate_growth)
         if params.velocity_weight <= 0 and params.orientation_weight <= 0:
-            return kernels.frame_costs(*match_args, *gate_args)
-        cost, flips = kernels.match_costs(*match_args)
-        cost = cost + self._motion_costs(table, detections, parts, flips)
-        feasible, levels = kernels.gate_costs(cost, *gate_args)
+            return kernels.frame_costs(
+                tracks, positions, info.weights, parts, match, gate_tracks, frame, gate
+            )
+        cost, flips = kernels.match_costs(tracks, positions, stamp, info.weights, parts, match)
+        cost = cost + self._motion_costs(table, detections, info.parts, flips)
+        feasible, levels = kernels.gate_costs(cost, gate_tracks, frame, gate)
         return cost, flips, feasible, levels
 
     def _motion_costs(
@@ -853,15 +871,29 @@ class Tracker(Accounted):
         rows = pairs[0]
         facing = params.mirror_check and params.facing_check and info.usable
         voting = params.mirror_check and params.mirror_vote and not facing
-        settings = (
-            float(params.position_smoothing), float(params.max_prediction),
-            round(params.velocity_window * 1e9), params.mirror_check and params.facing_check,
-            params.orientation_weight > 0, facing, found.stacked and not voting,
-        )  # fmt: skip
+        update = UpdateSettings(
+            float(params.position_smoothing),
+            float(params.max_prediction),
+            round(params.velocity_window * 1e9),
+            info.weights,
+        )
+        settings = HitSettings(
+            update,
+            align=params.mirror_check and params.facing_check,
+            orient=params.orientation_weight > 0,
+            weigh=facing,
+            label=found.stacked and not voting,
+            priors=self._priors,
+        )
+        frame = FrameRows(found.positions, det_ids, found.index, found.rows)
         flips, full, turned, n_turned, track_ids, labelled = kernels.hit_frame(
-            table.hit_fields(), (found.positions, det_ids, found.index, *found.rows), pairs,
-            info.hit_layout, camera, time_ns, settings, self._facing_args(camera_position),
-        )  # fmt: skip
+            table.hit_fields(),
+            frame,
+            pairs,
+            self._view(camera, time_ns, camera_position),
+            info.hit_layout,
+            settings,
+        )
         if full:
             table.grow_records()
         table.learn_limbs(rows, found.positions[pairs[1]], info.parents)
@@ -878,17 +910,25 @@ class Tracker(Accounted):
                 flips[u] ^= self._vote(table, row, info.parts, camera, time_ns, flips[u].copy())
         return flips, track_ids, False
 
-    def _facing_args(self, camera_position: np.ndarray | None) -> tuple:
-        """What ``kernels.turn_facing`` needs beyond the tracks: up, camera, priors."""
+    def _view(self, camera: int, time_ns: int, camera_position: np.ndarray | None) -> FacingView:
+        """Where ``kernels.turn_facing`` judges a frame's facing from: up, camera, stamp."""
+        position = _NO_CAMERA if camera_position is None else camera_position
+        return FacingView(self._up, position, camera_position is not None, camera, time_ns)
+
+    @property
+    def _priors(self) -> FacingPriors:
+        """The facing check's settings, as ``kernels.turn_facing`` takes them."""
         params = self.params
-        return (
-            self._up,
-            _NO_CAMERA if camera_position is None else camera_position,
-            camera_position is not None,
-            (params.flip_prior, params.flip_prior_back, params.walking_speed,
-             params.walking_evidence, params.facing_memory, params.facing_threshold,
-             params.flip_episode, params.flip_misread),
-        )  # fmt: skip
+        return FacingPriors(
+            params.flip_prior,
+            params.flip_prior_back,
+            params.walking_speed,
+            params.walking_evidence,
+            params.facing_memory,
+            params.facing_threshold,
+            params.flip_episode,
+            params.flip_misread,
+        )
 
     @staticmethod
     def _turned(table: TrackTable, rows: np.ndarray) -> None:
@@ -964,11 +1004,11 @@ class Tracker(Accounted):
     ) -> np.ndarray:
         """``(len(rows),)`` cost distance (m) of track ``row`` to tracks ``rows`` predicted."""
         params = self.params
+        tracks = TrackPoses(table.positions[rows], table.velocity[rows], table.time_ns[rows])
+        plain = MatchSettings(params.max_prediction, False, params.min_joints, 0.0)
         distance, _ = kernels.match_costs(
-            table.positions[rows], table.velocity[rows], table.time_ns[rows], time_ns,
-            params.max_prediction, table.positions[row][None], info.weights, info.parts.part,
-            info.parts.mirror, info.parts.count, False, params.min_joints, 0.0,
-        )  # fmt: skip
+            tracks, table.positions[row][None], time_ns, info.weights, info.parts.arrays, plain
+        )
         return distance[:, 0]
 
     @staticmethod
@@ -1036,9 +1076,13 @@ class Tracker(Accounted):
         if table is None or not table.n:
             return
         count, keep = kernels.live_tracks(
-            table.last_hit_ns, table.confirmed, table.n, now_ns,
-            params.track_timeout, params.tentative_timeout,
-        )  # fmt: skip
+            table.last_hit_ns,
+            table.confirmed,
+            table.n,
+            now_ns,
+            params.track_timeout,
+            params.tentative_timeout,
+        )
         if count < table.n:
             if params.reid_timeout > 0:
                 gone = np.flatnonzero(~keep & table.confirmed[: table.n]).tolist()
@@ -1076,17 +1120,30 @@ class Tracker(Accounted):
                 detection.id = track_id
             return detections
         if found.stacked:
-            kernels.label_frame(*found.rows, found.index[dets], flips, parts.part, parts.mirror,
-                                table.velocities, rows, table.confirmed)  # fmt: skip
+            kernels.label_frame(
+                found.rows,
+                found.index[dets],
+                flips,
+                parts.arrays,
+                table.velocities,
+                rows,
+                table.confirmed,
+            )
         output = []
         confirmed = table.confirmed[rows].tolist()
         for u, (detection, row) in enumerate(zip(detections, rows.tolist(), strict=True)):
             if not confirmed[u]:
                 continue
             if not found.stacked:
-                kernels.label_rows(detection.markers, detection.marker_present, detection.links,
-                                   detection.link_present, flips[u], parts.part, parts.mirror,
-                                   table.velocities[row])  # fmt: skip
+                kernels.label_rows(
+                    detection.markers,
+                    detection.marker_present,
+                    detection.links,
+                    detection.link_present,
+                    flips[u],
+                    parts.arrays,
+                    table.velocities[row],
+                )
             detection.id = int(track_ids[u])
             output.append(detection)
         return output

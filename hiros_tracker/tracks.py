@@ -23,7 +23,7 @@ Per track (``J`` joints, ``C`` cameras, ``R`` record slots):
   ``epoch_ns``, ``facing`` (log-odds that its sides are right) and ``facing_ns``;
 - per camera, whether its SDK is in a front/back flip episode for the track: ``flip_state``
   ``(C, 2)`` P(flipped) if the track's sides are right / reversed, at ``flip_ns`` ``(C,)``,
-  ``flip_known`` ``(C,)`` once the camera has seen the track (``kernels._episode_evidence``);
+  ``flip_known`` ``(C,)`` once the camera has seen the track (``facing._episode_evidence``);
 - ``limbs`` ``(J,)``: the mean length of the link ending at each joint over the track's
   detections (0 before a detection shows it), ``limb_count`` ``(J,)`` how many it averages,
   capped at ``LIMB_MEMORY`` (a running mean that still follows a slow change): the body's
@@ -36,6 +36,7 @@ from __future__ import annotations
 import numpy as np
 
 from hiros_tracker import kernels
+from hiros_tracker.kernel_args import TrackFields
 
 __all__ = ["TrackTable"]
 
@@ -64,6 +65,7 @@ class TrackTable:
     def __init__(self, n_joints: int, n_cameras: int = 1, capacity: int = 8) -> None:
         self.n = 0
         self.n_joints = n_joints
+        self._fields: TrackFields | None = None
         self.votes: list[dict[int, tuple[int, np.ndarray]]] = []
         self.mirrored: list[set[int]] = []
         joints, cameras, records = n_joints, max(n_cameras, 1), _RECORDS
@@ -78,7 +80,7 @@ class TrackTable:
         for name in _ROW_FIELDS:
             dtype = float if name in _FLOAT_FIELDS or name == "record_terms" else np.int64
             dtype = bool if name in _BOOL_FIELDS else dtype
-            setattr(self, name, np.zeros((capacity, *shapes.get(name, ())), dtype=dtype))
+            self._set(name, np.zeros((capacity, *shapes.get(name, ())), dtype=dtype))
 
     positions: np.ndarray
     orientations: np.ndarray
@@ -159,19 +161,26 @@ class TrackTable:
         for name in ("record_ns", "record_camera", "record_terms"):
             field = getattr(self, name)
             index = order.reshape(order.shape + (1,) * (field.ndim - 2))
-            setattr(self, name, np.take_along_axis(field, index, 1))
+            self._set(name, np.take_along_axis(field, index, 1))
             self._widen(name, 1, 2 * slots)
         self.record_start[:] = 0
 
-    def hit_fields(self) -> tuple[np.ndarray, ...]:
-        """The fields ``kernels.hit_frame`` reads and changes, in its order."""
-        return (
-            self.positions, self.orientations, self.velocities, self.velocity, self.time_ns,
-            self.last_hit_ns, self.epoch_ns, self.hits, self.n_cameras, self.body_ids,
-            self.seen, self.sums, self.record_ns, self.record_camera, self.record_terms,
-            self.record_start, self.record_count, self.facing, self.facing_ns,
-            self.flip_state, self.flip_ns, self.flip_known, self.confirmed, self.ids,
-        )  # fmt: skip
+    def hit_fields(self) -> TrackFields:
+        """The fields the frame kernels read and change in place (``kernels.hit_frame``).
+
+        Kept until a field is replaced by a larger array (``_set``), so that a frame does not
+        gather 24 fields anew.
+        """
+        if self._fields is None:
+            self._fields = TrackFields(
+                **{name: getattr(self, name) for name in TrackFields._fields}
+            )
+        return self._fields
+
+    def _set(self, name: str, field: np.ndarray) -> None:
+        """Replace field ``name`` by a new array (the kernels' bundle is made anew)."""
+        setattr(self, name, field)
+        self._fields = None
 
     def learn_limbs(self, rows: np.ndarray, positions: np.ndarray, parents: np.ndarray) -> None:
         """Fold detections' link lengths into their tracks' running means.
@@ -197,10 +206,7 @@ class TrackTable:
 
     def relabel(self, row: int, permutation: np.ndarray) -> None:
         """Reorder a track's joints (swap the sides of some parts); votes are the caller's."""
-        kernels.relabel(
-            row, permutation, self.positions, self.orientations, self.velocities, self.sums,
-            self.record_terms, self.record_start, self.record_count,
-        )  # fmt: skip
+        kernels.relabel(self.hit_fields(), row, permutation)
 
     def _grow_rows(self) -> None:
         for name in _ROW_FIELDS:
@@ -213,4 +219,4 @@ class TrackTable:
         shape[axis] = size
         grown = np.zeros(shape, dtype=field.dtype)
         grown[tuple(slice(0, n) for n in field.shape)] = field
-        setattr(self, name, grown)
+        self._set(name, grown)

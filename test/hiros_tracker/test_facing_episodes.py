@@ -1,4 +1,4 @@
-"""The facing check's flip-episode filter (``kernels._episode_evidence``)."""
+"""The facing check's flip-episode filter (``facing._episode_evidence``)."""
 
 from __future__ import annotations
 
@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from hiros_tracker.kernels import _episode_evidence, _independent_evidence
+from hiros_tracker.facing import _episode_evidence, _independent_evidence
 
 FRONT, BACK = 0.1, 0.7  # flip priors of a front and a back view
 

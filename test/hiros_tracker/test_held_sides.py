@@ -5,6 +5,7 @@ import pytest
 
 from hiros_core.layouts import AZURE_KINECT
 from hiros_tracker import kernels
+from hiros_tracker.kernel_args import HeldSides, SideLayout
 from hiros_tracker.tracker import _body_frame, _mirror_parts, _side_arrays
 
 
@@ -23,11 +24,17 @@ def _canonical(detection: np.ndarray, track: np.ndarray) -> np.ndarray:
     parts = _mirror_parts(AZURE_KINECT)
     shoulders, pairs, pair_parts = _side_arrays(AZURE_KINECT, parts)
     frame = _body_frame(AZURE_KINECT)
+    no_flips = np.zeros((1, parts.count), dtype=bool)
+    held = HeldSides(track[None], np.array([0]), frame.left, frame.right)
     _, flips = kernels.canonical_poses(
-        detection[None], np.array([0]), np.zeros((1, parts.count), dtype=bool), parts.part,
-        parts.mirror, True, shoulders, pairs, pair_parts,
-        (track[None], np.array([0]), frame.left, frame.right),
-    )  # fmt: skip
+        detection[None],
+        np.array([0]),
+        no_flips,
+        parts.arrays,
+        True,
+        SideLayout(shoulders, pairs, pair_parts),
+        held,
+    )
     return flips[0]
 
 

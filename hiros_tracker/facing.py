@@ -1,0 +1,295 @@
+"""Facing evidence: whether each track's sides are right, weighed detection by detection.
+
+An SDK sometimes reports a body front/back flipped (its left labelled right). Each detection
+of a track gives log-odds that the track's sides are right (``_facing_evidence``): the front
+its sides say against the way its feet and nose point, each hypothesis weighted by the flip
+prior of the view its camera would have, SDK flips followed as episodes
+(``_episode_evidence``) and walking forward as extra evidence. The log-odds fade over the
+facing memory; a track whose log-odds fall below minus the threshold is relabelled.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+from hiros_tracker.kernel_args import FacingBody, FacingPriors, FacingView, TrackFields
+from hiros_tracker.labels import relabel
+
+__all__ = [
+    "turn_facing",
+]
+
+
+@njit(cache=True, error_model="numpy")
+def _unit3(x: float, y: float, z: float) -> tuple[float, float, float]:
+    """A vector scaled to unit length; zero or NaN gives NaN."""
+    norm = math.sqrt(x * x + y * y + z * z)
+    if norm == 0.0:
+        return np.nan, np.nan, np.nan
+    return x / norm, y / norm, z / norm
+
+
+@njit(cache=True, error_model="numpy")
+def _flat3(  # noqa: PLR0917 - two vectors as scalars (no arrays in the inner loop)
+    x: float, y: float, z: float, ux: float, uy: float, uz: float
+) -> tuple[float, float, float]:
+    """A vector with its component along the unit ``u`` removed."""
+    along = x * ux + y * uy + z * uz
+    return x - along * ux, y - along * uy, z - along * uz
+
+
+@njit(cache=True, error_model="numpy")
+def _trunk_mean(
+    positions: np.ndarray, rows: np.ndarray, root: int, neck: int
+) -> tuple[np.ndarray, int]:
+    """``(3,)`` mean unit root -> neck over tracks ``rows`` where it is finite, and how many."""
+    mean = np.zeros(3)
+    count = 0
+    for r in rows:
+        x, y, z = _unit3(
+            positions[r, neck, 0] - positions[r, root, 0],
+            positions[r, neck, 1] - positions[r, root, 1],
+            positions[r, neck, 2] - positions[r, root, 2],
+        )
+        if math.isfinite(x) and math.isfinite(y) and math.isfinite(z):
+            mean[0] += x
+            mean[1] += y
+            mean[2] += z
+            count += 1
+    if count:
+        mean /= count
+    return mean, count
+
+
+@njit(cache=True, error_model="numpy")
+def _facing_evidence(  # noqa: PLR0915, PLR0917 - one loop over the frame's pairs
+    tracks: TrackFields,
+    rows: np.ndarray,
+    canonical: np.ndarray,
+    up: np.ndarray,
+    view: FacingView,
+    body: FacingBody,
+    priors: FacingPriors,
+) -> np.ndarray:
+    """``(U,)`` log-odds each detection gives that its track faces the way its sides say.
+
+    Tracks ``rows`` ``(U,)`` were hit by ``canonical`` ``(U, J, 3)``; ``up`` ``(3,)`` is the
+    world's up (NaN: unknown, no evidence). With ``flat(v) = v - (v·up) up``:
+
+    - the track's front ``f = unit(L × up)``, ``L`` the sum of its left shoulder and hip less
+      the right ones (of the track's pose);
+    - the detection's forward ``a = unit(sum_i unit(flat(p_b - p_a)))`` over the forward
+      ``pointers`` ``(a, b)`` (a pair with a missing joint adds nothing); it looks flipped
+      when ``a·f < 0``;
+    - with the camera's position known, ``cos = f·unit(flat(camera - root))``: the track seen
+      from the back (cos < -0.5) takes ``flip_prior_back``, else ``flip_prior``, under each
+      hypothesis (reversed: front ``-f``); the evidence is ``_episode_evidence`` (when
+      ``flip_episode > 0``; it updates ``flip_state``, ``flip_ns`` and ``flip_known`` of this
+      camera) or ``_independent_evidence``; without it ``±log((1 - p) / p)``, ``p`` the flip
+      prior, negative when flipped;
+    - a track moving faster than ``walking_speed`` (its ``flat`` body velocity) adds
+      ``walking_evidence`` when it moves along ``f``, subtracts it when against.
+
+    Evidence that is not finite counts 0.
+    """
+    positions, velocity = tracks.positions, tracks.velocity
+    flip_state, flip_ns, flip_known = tracks.flip_state, tracks.flip_ns, tracks.flip_known
+    camera, has_camera = view.camera_position, view.has_camera
+    cam, stamp_ns = view.camera, view.stamp_ns
+    root, left, right, pointers = body.root, body.left, body.right, body.pointers
+    flip_prior, flip_prior_back = priors.flip_prior, priors.flip_prior_back
+    walking_speed, walking_evidence = priors.walking_speed, priors.walking_evidence
+    episode, noise = priors.flip_episode, priors.flip_misread
+    n_pairs = len(rows)
+    evidence = np.zeros(n_pairs)
+    ux, uy, uz = up[0], up[1], up[2]
+    for u in range(n_pairs):
+        r = rows[u]
+        lx = ly = lz = 0.0
+        for i in range(len(left)):
+            lx += positions[r, left[i], 0]
+            ly += positions[r, left[i], 1]
+            lz += positions[r, left[i], 2]
+        rx = ry = rz = 0.0
+        for i in range(len(right)):
+            rx += positions[r, right[i], 0]
+            ry += positions[r, right[i], 1]
+            rz += positions[r, right[i], 2]
+        lx, ly, lz = lx - rx, ly - ry, lz - rz
+        fx, fy, fz = _unit3(ly * uz - lz * uy, lz * ux - lx * uz, lx * uy - ly * ux)
+        ax = ay = az = 0.0
+        for i in range(len(pointers)):
+            a, b = pointers[i, 0], pointers[i, 1]
+            sx, sy, sz = _flat3(
+                canonical[u, b, 0] - canonical[u, a, 0],
+                canonical[u, b, 1] - canonical[u, a, 1],
+                canonical[u, b, 2] - canonical[u, a, 2],
+                ux,
+                uy,
+                uz,
+            )
+            sx, sy, sz = _unit3(sx, sy, sz)
+            ax += sx if math.isfinite(sx) else 0.0
+            ay += sy if math.isfinite(sy) else 0.0
+            az += sz if math.isfinite(sz) else 0.0
+        ax, ay, az = _unit3(ax, ay, az)
+        flipped = ax * fx + ay * fy + az * fz < 0
+        if has_camera:
+            cx, cy, cz = _flat3(
+                camera[0] - positions[r, root, 0],
+                camera[1] - positions[r, root, 1],
+                camera[2] - positions[r, root, 2],
+                ux,
+                uy,
+                uz,
+            )
+            cx, cy, cz = _unit3(cx, cy, cz)
+            cosine = fx * cx + fy * cy + fz * cz
+            prior_right = flip_prior_back if cosine < -0.5 else flip_prior
+            prior_wrong = flip_prior_back if -cosine < -0.5 else flip_prior
+            if episode > 0.0 and math.isfinite(cosine):
+                elapsed = (stamp_ns - flip_ns[r, cam]) * 1e-9 if flip_known[r, cam] else -1.0
+                value = _episode_evidence(
+                    flip_state[r, cam], flipped, prior_right, prior_wrong, episode, noise, elapsed
+                )
+                flip_ns[r, cam], flip_known[r, cam] = stamp_ns, True
+            else:
+                value = _independent_evidence(flipped, prior_right, prior_wrong)
+        else:  # no camera pose: a flipped-looking detection is simply evidence against
+            value = (-1.0 if flipped else 1.0) * math.log((1.0 - flip_prior) / flip_prior)
+        wx, wy, wz = _flat3(velocity[r, 0], velocity[r, 1], velocity[r, 2], ux, uy, uz)
+        speed = math.sqrt(wx * wx + wy * wy + wz * wz)
+        along = (wx * fx + wy * fy + wz * fz) / max(speed, 1e-9)
+        if speed > walking_speed:
+            if along > 0:
+                value += walking_evidence
+            elif along < 0:
+                value -= walking_evidence
+            elif math.isnan(along):
+                value = np.nan
+        evidence[u] = value if math.isfinite(value) else 0.0
+    return evidence
+
+
+@njit(cache=True, error_model="numpy")
+def _independent_evidence(flipped: bool, prior_right: float, prior_wrong: float) -> float:
+    """Log-odds of one detection taken on its own (each hypothesis' view prior)."""
+    likely_right = prior_right if flipped else 1.0 - prior_right
+    likely_wrong = 1.0 - prior_wrong if flipped else prior_wrong
+    return math.log(likely_right / likely_wrong)
+
+
+@njit(cache=True, error_model="numpy")
+def _episode_evidence(  # noqa: PLR0917
+    state: np.ndarray,
+    flipped: bool,
+    prior_right: float,
+    prior_wrong: float,
+    episode: float,
+    noise: float,
+    elapsed: float,
+) -> float:
+    """Log-odds one detection adds for its track's facing, knowing SDK flips last seconds.
+
+    An SDK flips a body front/back for seconds at a time, so one camera's consecutive flipped
+    detections are one event, not independent votes. For each hypothesis (the track's sides
+    right, or reversed) a two-state filter follows whether this camera's SDK is in a flip
+    episode: episodes last ``episode`` s on average and cover the share of time the view's
+    flip prior says; an observation is misread with probability ``noise``. The detection adds
+    the log ratio of the two hypotheses' predictive likelihoods; a run of flipped detections
+    then costs about one flip prior, plus little per frame, instead of a prior per frame.
+
+    ``state`` ``(2,)``: P(SDK flipped) under "right" and "reversed", updated in place;
+    ``elapsed`` s since this camera's previous detection of the track (< 0: the first).
+    """
+    priors = (prior_right, prior_wrong)
+    likely = np.empty(2)
+    for h in range(2):
+        if elapsed < 0.0:
+            before = priors[h]
+        else:  # relax towards the view's prior: leave rate 1/episode, share = prior
+            keep = math.exp(-elapsed / (episode * (1.0 - priors[h])))
+            before = state[h] * keep + priors[h] * (1.0 - keep)
+        # under "right" a flipped observation means the SDK flipped; under "reversed", not
+        sdk_flip_seen = flipped if h == 0 else not flipped
+        if sdk_flip_seen:
+            with_flip, without_flip = before * (1.0 - noise), (1.0 - before) * noise
+        else:
+            with_flip, without_flip = before * noise, (1.0 - before) * (1.0 - noise)
+        likely[h] = with_flip + without_flip
+        state[h] = with_flip / likely[h]
+    return math.log(likely[0] / likely[1])
+
+
+@njit(cache=True, error_model="numpy")
+def turn_facing(  # noqa: PLR0917 - the tracks, the frame's pairs, the view, body and priors
+    tracks: TrackFields,
+    rows: np.ndarray,
+    canonical: np.ndarray,
+    view: FacingView,
+    body: FacingBody,
+    priors: FacingPriors,
+) -> np.ndarray:
+    """Weigh one frame's evidence on each hit track's facing; relabel tracks found reversed.
+
+    For a detection (in its track's labelling) with anatomical forward ``a`` and a track
+    front ``f``: if the track is right, the detection is flipped iff ``a·f < 0``; if the
+    track is mirrored, the opposite, and its front is ``-f``. Each hypothesis' likelihood
+    uses the flip prior for the view the camera would have (back: cos(f, to camera) < -0.5);
+    walking forward adds evidence (``_facing_evidence``).
+
+    Track ``r = rows[u]`` (hit by ``canonical[u]``) keeps log-odds ``facing[r]`` that its
+    sides are right, set at ``facing_ns[r]``: ``facing[r] = facing[r] * exp(-dt /
+    facing_memory) + evidence[u]`` (``dt`` s since then, at least 0). Below
+    ``-facing_threshold`` the track is relabelled with ``body.mirror`` (all parts,
+    ``relabel``), its log-odds negated and its flip states' hypotheses exchanged. ``tracks``
+    changes in place, and ``view.up`` too (``_update_up``, before the evidence).
+
+    Returns:
+        ``(U,)`` which tracks were relabelled.
+
+    """
+    facing, facing_ns, flip_state = tracks.facing, tracks.facing_ns, tracks.flip_state
+    memory, threshold = priors.facing_memory, priors.facing_threshold
+    stamp_ns = view.stamp_ns
+    world_up = _update_up(view.up, tracks.positions, rows, body.root, body.neck)
+    evidence = _facing_evidence(tracks, rows, canonical, world_up, view, body, priors)
+    turned = np.zeros(len(rows), dtype=np.bool_)
+    for u in range(len(rows)):
+        r = rows[u]
+        fade = math.exp(-max(stamp_ns - facing_ns[r], 0) * 1e-9 / memory)
+        facing[r] = facing[r] * fade + evidence[u]
+        facing_ns[r] = stamp_ns
+        if facing[r] < -threshold:
+            relabel(tracks, r, body.mirror)
+            facing[r] = -facing[r]
+            for c in range(flip_state.shape[1]):  # the hypotheses trade places
+                flip_state[r, c, 0], flip_state[r, c, 1] = flip_state[r, c, 1], flip_state[r, c, 0]
+            turned[u] = True
+    return turned
+
+
+@njit(cache=True, error_model="numpy")
+def _update_up(
+    up: np.ndarray, positions: np.ndarray, rows: np.ndarray, root: int, neck: int
+) -> np.ndarray:
+    """``(3,)`` the world's up: a running mean of the hit tracks' trunks (root -> neck).
+
+    ``up`` ``(4,)`` is the state: x, y, z and whether it is known (0 before the first trunk;
+    NaN is returned then). The world frame may be a camera's (y down) or z-up; people stand
+    most of the time, and one bending person must not tilt the front the facing compares with.
+    """
+    mean, count = _trunk_mean(positions, rows, root, neck)
+    if count:
+        for a in range(3):
+            up[a] = mean[a] if up[3] == 0.0 else up[a] + 0.01 * (mean[a] - up[a])
+        norm = math.sqrt(up[0] * up[0] + up[1] * up[1] + up[2] * up[2])
+        for a in range(3):
+            up[a] = up[a] / norm
+        up[3] = 1.0
+    if up[3] == 0.0:
+        return np.full(3, np.nan)
+    return up[:3].copy()

@@ -1,0 +1,255 @@
+"""Relabelling: detections put in their tracks' labelling, tracks and outputs relabelled.
+
+A detection's mirror parts may be swapped against its track's (left taken for right):
+``canonical_poses`` reorders its joints into the track's labelling, holding hips, eyes and
+ears to the shoulders' side and the body's sides to the track's; ``relabel`` reorders a
+track's own per-joint state when the facing check finds the track reversed; ``label_rows``
+relabels an output detection and fills its velocities.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+from hiros_tracker.kernel_args import HeldSides, MirrorLayout, SideLayout, StackedRows, TrackFields
+
+__all__ = [
+    "REVERSED_COS",
+    "canonical_poses",
+    "label_frame",
+    "label_rows",
+    "relabel",
+]
+
+
+@njit(cache=True, error_model="numpy")
+def _order(flips: np.ndarray, part: np.ndarray, mirror: np.ndarray, out: np.ndarray) -> None:
+    """Joint order relabelling the parts flagged in ``flips`` ``(K,)``, written to ``out``."""
+    for j in range(len(part)):
+        out[j] = mirror[j] if part[j] >= 0 and flips[part[j]] else j
+
+
+@njit(cache=True, error_model="numpy")
+def canonical_poses(  # noqa: PLR0917 - one frame's pairs, the layout and the tracks
+    positions: np.ndarray,
+    rows: np.ndarray,
+    flips: np.ndarray,
+    layout: MirrorLayout,
+    align: bool,
+    sides: SideLayout,
+    held: HeldSides,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Matched detections in their tracks' labelling, hips/eyes/ears put on the shoulders' side.
+
+    ``positions`` ``(D, J, 3)`` are the frame's detections, ``rows`` ``(U,)`` those matched
+    and ``flips`` ``(U, K)`` the parts to relabel in each (``layout`` as in ``match_costs``;
+    the input is not changed): joint ``j`` of pose ``u`` is ``positions[rows[u], o_j]`` with
+    ``o_j = mirror[j]`` where ``part[j]`` is flipped, else ``j``.
+
+    With ``align``, each left/right pair ``(a, b)`` of ``sides.pairs`` (of part
+    ``pair_parts``) pointing against the shoulders ``s = p[left shoulder] - p[right]``,
+    ``(p_a - p_b)·s < -0.5 |p_a - p_b| |s|``, flips its part (once, on the pose relabelled so
+    far; nothing is flagged where a joint is missing, or without shoulders). Then the whole
+    body's sides are held to the track's (``_reversed_sides`` against ``held.tracks[
+    held.track_rows[u]]``; ``held.left`` empty: not held): a reversed pose flips every part.
+
+    Returns:
+        ``(U, J, 3)`` canonical poses and ``(U, K)`` the flips used.
+
+    """
+    part, mirror = layout.part, layout.mirror
+    shoulders, pairs, pair_parts = sides.shoulders, sides.pairs, sides.pair_parts
+    n_pairs, n_joints = len(rows), positions.shape[1]
+    flips = flips.copy()
+    canonical = np.empty((n_pairs, n_joints, 3))
+    order = np.empty(n_joints, dtype=np.int64)
+    for u in range(n_pairs):
+        _order(flips[u], part, mirror, order)
+        for j in range(n_joints):
+            canonical[u, j] = positions[rows[u], order[j]]
+        if not align or len(shoulders) < 2 or len(pairs) == 0:
+            continue
+        sx = canonical[u, shoulders[0], 0] - canonical[u, shoulders[1], 0]
+        sy = canonical[u, shoulders[0], 1] - canonical[u, shoulders[1], 1]
+        sz = canonical[u, shoulders[0], 2] - canonical[u, shoulders[1], 2]
+        shoulder_sq = sx * sx + sy * sy + sz * sz
+        changed = False
+        for p in range(len(pairs)):
+            a, b = pairs[p, 0], pairs[p, 1]
+            vx = canonical[u, a, 0] - canonical[u, b, 0]
+            vy = canonical[u, a, 1] - canonical[u, b, 1]
+            vz = canonical[u, a, 2] - canonical[u, b, 2]
+            along = vx * sx + vy * sy + vz * sz
+            scale = math.sqrt((vx * vx + vy * vy + vz * vz) * shoulder_sq)
+            if along < -0.5 * scale:  # clearly reversed only: eyes must not toggle on noise
+                flips[u, pair_parts[p]] = not flips[u, pair_parts[p]]
+                changed = True
+        if changed:
+            _order(flips[u], part, mirror, order)
+            for j in range(n_joints):
+                canonical[u, j] = positions[rows[u], order[j]]
+    tracks, track_rows, left, right = held.tracks, held.track_rows, held.left, held.right
+    for u in range(n_pairs if align and len(left) else 0):
+        if _reversed_sides(canonical[u], tracks[track_rows[u]], left, right):
+            for k in range(flips.shape[1]):
+                flips[u, k] = not flips[u, k]
+            _order(flips[u], part, mirror, order)
+            for j in range(n_joints):
+                canonical[u, j] = positions[rows[u], order[j]]
+    return canonical, flips
+
+
+REVERSED_COS = 0.5
+"""A detection's left-right axis against its track's beyond this (cos < -it) is reversed."""
+
+
+@njit(cache=True, error_model="numpy")
+def _reversed_sides(
+    detection: np.ndarray, track: np.ndarray, left: np.ndarray, right: np.ndarray
+) -> bool:
+    """Whether a detection's left points to its track's right (its sides then all swapped).
+
+    The left-right axis is the left shoulder and hip less the right ones: they lie in the
+    body's frontal plane, so a front/back flip (a reflection through that plane) leaves them
+    where they were and only exchanges their labels, whereas hands, feet and the head swing
+    out of it; relabelling part by part on every joint can then keep a flipped detection's
+    labels and drag its track into the mirrored labelling. Reversed is a cosine under -0.5;
+    nothing is said where a joint is missing.
+    """
+    dx = dy = dz = tx = ty = tz = 0.0
+    for i in range(len(left)):
+        dx += detection[left[i], 0] - detection[right[i], 0]
+        dy += detection[left[i], 1] - detection[right[i], 1]
+        dz += detection[left[i], 2] - detection[right[i], 2]
+        tx += track[left[i], 0] - track[right[i], 0]
+        ty += track[left[i], 1] - track[right[i], 1]
+        tz += track[left[i], 2] - track[right[i], 2]
+    along = dx * tx + dy * ty + dz * tz
+    scale = math.sqrt((dx * dx + dy * dy + dz * dz) * (tx * tx + ty * ty + tz * tz))
+    return along < -REVERSED_COS * scale
+
+
+@njit(cache=True, error_model="numpy")
+def _take_orientations(  # noqa: PLR0917
+    orientations: np.ndarray,
+    rows: np.ndarray,
+    markers: np.ndarray,
+    dets: np.ndarray,
+    flips: np.ndarray,
+    layout: MirrorLayout,
+) -> None:
+    """Track ``rows[u]`` takes the orientations of the detection in row ``dets[u]``.
+
+    Relabelled by ``flips[u]``, when it has any (``markers`` ``(D, J, 20)``, orientation in
+    columns 4:8): the orientation cost compares a detection with its track's last ones.
+    """
+    part, mirror = layout.part, layout.mirror
+    order = np.empty(len(part), dtype=np.int64)
+    for u in range(len(rows)):
+        d = dets[u]
+        known = False
+        for j in range(len(part)):
+            for a in range(4):
+                known |= math.isfinite(markers[d, j, 4 + a])
+        if known:
+            _order(flips[u], part, mirror, order)
+            for j in range(len(part)):
+                for a in range(4):
+                    orientations[rows[u], j, a] = markers[d, order[j], 4 + a]
+
+
+@njit(cache=True, error_model="numpy")
+def relabel(tracks: TrackFields, r: int, permutation: np.ndarray) -> None:
+    """Reorder track ``r``'s joints (swap the sides of some parts) in every per-joint field.
+
+    ``permutation`` ``(J,)``: joint ``j`` takes what joint ``permutation[j]`` held, in the
+    pose, orientations, joint velocities, running sums and the window's records.
+    """
+    positions, orientations, velocities = tracks.positions, tracks.orientations, tracks.velocities
+    sums, record_terms = tracks.sums, tracks.record_terms
+    record_start, record_count = tracks.record_start, tracks.record_count
+    positions[r] = positions[r][permutation]
+    orientations[r] = orientations[r][permutation]
+    velocities[r] = velocities[r][permutation]
+    for c in range(sums.shape[1]):
+        sums[r, c] = sums[r, c][permutation]
+    slots = record_terms.shape[1]
+    for i in range(record_count[r]):
+        slot = (record_start[r] + i) % slots
+        record_terms[r, slot] = record_terms[r, slot][permutation]
+
+
+@njit(cache=True, error_model="numpy")
+def label_frame(  # noqa: PLR0917 - the frame's rows, its pairs and their tracks
+    stacked: StackedRows,
+    index: np.ndarray,
+    flips: np.ndarray,
+    layout: MirrorLayout,
+    velocities: np.ndarray,
+    rows: np.ndarray,
+    confirmed: np.ndarray,
+) -> None:
+    """``label_rows`` on a stacked frame: each pair ``u`` whose track ``rows[u]`` is confirmed.
+
+    ``stacked``'s markers ``(N, J, 20)``, presence ``(N, J)`` and the links alike are the
+    frame's detections; pair ``u`` is stacked row
+    ``index[u]`` with flips ``flips[u]`` and its track's ``velocities[rows[u]]`` (``(T, J,
+    3)``, ``confirmed`` ``(T,)``: the track table's).
+    """
+    markers, present = stacked.markers, stacked.present
+    links, link_present = stacked.links, stacked.link_present
+    for u in range(len(rows)):
+        if confirmed[rows[u]]:
+            d = index[u]
+            label_rows(
+                markers[d],
+                present[d],
+                links[d],
+                link_present[d],
+                flips[u],
+                layout,
+                velocities[rows[u]],
+            )
+
+
+@njit(cache=True, error_model="numpy")
+def label_rows(  # noqa: PLR0917 - one detection's four row arrays, its flips and its track
+    markers: np.ndarray,
+    present: np.ndarray,
+    links: np.ndarray,
+    link_present: np.ndarray,
+    flips: np.ndarray,
+    layout: MirrorLayout,
+    track_velocities: np.ndarray,
+) -> None:
+    """One output detection, in place: parts in ``flips`` relabelled, velocities filled.
+
+    Link ids are child joint ids, so links take the joints' order. A present joint without a
+    finite velocity takes its track's.
+    """
+    part, mirror = layout.part, layout.mirror
+    n_joints = len(part)
+    if flips.any():
+        order = np.empty(n_joints, dtype=np.int64)
+        _order(flips, part, mirror, order)
+        moved_markers = markers[order].copy()
+        moved_present = present[order].copy()
+        moved_links = links[order].copy()
+        moved_link_present = link_present[order].copy()
+        markers[:] = moved_markers
+        present[:] = moved_present
+        links[:] = moved_links
+        link_present[:] = moved_link_present
+    for j in range(n_joints):
+        known = (
+            math.isfinite(markers[j, 8])
+            and math.isfinite(markers[j, 9])
+            and math.isfinite(markers[j, 10])
+        )
+        if present[j] and not known:
+            markers[j, 8] = track_velocities[j, 0]
+            markers[j, 9] = track_velocities[j, 1]
+            markers[j, 10] = track_velocities[j, 2]
