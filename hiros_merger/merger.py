@@ -23,6 +23,7 @@ weight each camera by confidence, distance and view; the product form is ours)::
         × occlusion                       another person's torso on the camera's ray
         × agreement(c)                    1 / (1 + (e_c / agreement_scale)²), e_c the camera's
                                           recent mean distance to the fused skeletons
+                                          (1 when agreement_scale is 0)
         × staleness                       1 / (1 + (Δt / staleness_scale)²)
 
 then the robust mean multiplies by a Cauchy weight ``1 / (1 + (r / outlier_scale)²)`` of each
@@ -90,7 +91,10 @@ class MergerParams:
         occlusion_radius: metres; a joint whose camera ray passes this close to another
             person's torso, in front of the joint, is occluded (0 turns the check off).
         occlusion_weight: weight factor of an occluded joint.
-        agreement_scale: metres; scale of the camera agreement weight.
+        agreement_scale: metres; scale of the camera agreement weight; 0 turns it off. The
+            weight feeds back on itself: a camera's distance to a fusion its own weight shapes
+            is smallest for the camera already weighed most, so one camera can come to
+            outweigh others as good as it (docs/stages-robustness.md weighs both).
         agreement_smoothing: weight (0..1] of each new residual in a camera's running agreement.
         staleness_scale: seconds; scale of the weight of older detections.
         outlier_scale: metres; Cauchy scale of the robust mean.
@@ -521,7 +525,8 @@ class Merger(Accounted):
 
         ``totals`` and ``counts`` per camera index: the sum (in track order) and number of
         its detections' mean distances. A camera without a name (no frame id) has none. Its
-        weight in the next fusions is ``1 / (1 + (agreement / agreement_scale)²)``.
+        weight in the next fusions is ``1 / (1 + (agreement / agreement_scale)²)`` (1 with
+        ``agreement_scale`` 0).
         """
         alpha = self.params.agreement_smoothing
         scale = self.params.agreement_scale
@@ -534,7 +539,7 @@ class Merger(Accounted):
             previous = self.agreement.get(name)
             error = value if previous is None else previous + alpha * (value - previous)
             self.agreement[name] = error
-            self._camera_factors[index] = 1.0 / (1.0 + (error / scale) ** 2)
+            self._camera_factors[index] = 1.0 / (1.0 + (error / scale) ** 2) if scale > 0 else 1.0
 
 
 _WARM = False

@@ -220,6 +220,32 @@ def test_a_camera_that_disagrees_loses_its_agreement():
     assert merger.agreement["k02"] > 2 * max(merger.agreement["k01"], merger.agreement["k03"])
 
 
+def test_agreement_scale_0_keeps_the_weight_of_the_camera_the_fusion_follows():
+    """With the agreement weight on, the camera weighed most agrees best with the fusion it
+    shapes and gains still more weight; ``agreement_scale`` 0 records the agreement but keeps
+    the weights as confidence, depth and view give them."""
+    pose = _person()
+    offsets = {"k01": [0.0, 0.1, 0.0], "k02": [0.0, -0.1, 0.0], "k03": [0.0, 0.0, 0.0]}
+
+    def fused_over(params: MergerParams) -> tuple[Merger, list[np.ndarray]]:
+        merger, out = Merger(params), []
+        for k in range(60):
+            t = T0 + k * 33_000_000
+            views = [
+                _detection(pose + o, name, t_ns=t, confidence=0.9 if name == "k01" else 0.6)
+                for name, o in offsets.items()
+            ]
+            out.append(merger.update(_group(views, t)).skeletons[0].positions)
+        return merger, out
+
+    merger, steady = fused_over(MergerParams(agreement_scale=0.0))
+    np.testing.assert_allclose(steady[-1], steady[0], atol=1e-12)
+    assert steady[0][0, 1] > pose[0, 1] + 0.01  # k01, the most confident, counts most
+    assert set(merger.agreement) == set(offsets)
+    _, fed_back = fused_over(MergerParams(agreement_scale=0.1))
+    assert fed_back[-1][0, 1] - pose[0, 1] > 1.5 * (steady[0][0, 1] - pose[0, 1])
+
+
 def test_bad_input_is_dropped_with_a_reason():
     merger = Merger()
     nobody = _detection(_person(), "k01", track=-1)
