@@ -91,10 +91,11 @@ class MergerParams:
         occlusion_radius: metres; a joint whose camera ray passes this close to another
             person's torso, in front of the joint, is occluded (0 turns the check off).
         occlusion_weight: weight factor of an occluded joint.
-        agreement_scale: metres; scale of the camera agreement weight; 0 turns it off. The
-            weight feeds back on itself: a camera's distance to a fusion its own weight shapes
-            is smallest for the camera already weighed most, so one camera can come to
-            outweigh others as good as it (docs/stages-robustness.md weighs both).
+        agreement_scale: metres; scale of the camera agreement weight; 0 (the default) turns
+            it off. The weight feeds back on itself: a camera's distance to a fusion its own
+            weight shapes is smallest for the camera already weighed most, so one camera comes
+            to outweigh others as good as it, and the fused person follows that camera's
+            mistakes (docs/stages-robustness.md weighs both).
         agreement_smoothing: weight (0..1] of each new residual in a camera's running agreement.
         staleness_scale: seconds; scale of the weight of older detections.
         outlier_scale: metres; Cauchy scale of the robust mean.
@@ -138,7 +139,7 @@ class MergerParams:
     flipped_weight: float = 0.1
     occlusion_radius: float = 0.2
     occlusion_weight: float = 0.5
-    agreement_scale: float = 0.1
+    agreement_scale: float = 0.0
     agreement_smoothing: float = 0.02
     staleness_scale: float = 0.05
     outlier_scale: float = 0.4

@@ -211,7 +211,7 @@ def test_each_input_gives_one_output_and_stale_tracks_leave():
 def test_a_camera_that_disagrees_loses_its_agreement():
     rng = np.random.default_rng(5)
     pose = _person()
-    merger = Merger()
+    merger = Merger(MergerParams(agreement_scale=0.1))  # the weight is off by default
     for k in range(30):
         t = T0 + k * 33_000_000
         views = [pose + rng.normal(0.0, 0.01, pose.shape) for _ in range(3)]
