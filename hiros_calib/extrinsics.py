@@ -24,45 +24,10 @@ All cameras are then refined jointly (:func:`solve_poses`): every pair's corresp
 one least-squares problem over all camera poses (reference fixed), so loops close.
 Poses are camera -> world with ``p_world = R p_camera + t`` (DESIGN.md).
 
-What limits the accuracy is the data, not a bias of these steps: a body-tracking SDK's joint
-errors are mostly one shift of the whole body per frame, correlated over about 0.2 s, plus
-fixed per-person joint offsets (hiros_sim.noise models both after a real Azure Kinect take).
-On the simulator this pipeline reaches about 0.35 deg and 2.1 cm (median) for a minute of one
-to three people, and the same fits given the true left/right labels and exact timing did no
-better. Without
-the fixed offsets the rotation error stays the same (0.35 deg) and only the translation
-improves (1.5 cm): a body's mean offset in the camera frame cannot be told from the camera's
-position. Without offsets and SDK mistakes it is 0.30 deg, and there a free whole-body shift
-per frame (rotation from the bodies' shapes only) reaches 0.26 deg; with either the offsets
-or the mistakes, shapes mislead and such shifts, or generalised least squares with the shift
-variance estimated from the residuals, do worse than ignoring them. Offsets that turn with
-the limb's direction (what a body model posed on biased evidence does), view-dependent
-weights, leaving out hidden joints, torso-only fits and using every frame do not help either.
-
-Most of what remains does not average out with time: three minutes instead of one give 0.30
-deg and 1.65 cm (``hiros bench calib --duration 180``; 0.34 deg and 1.9 cm while the frames
-kept were capped at 1000 whatever the length). It comes from the SDK's larger error on
-bodies seen from the side (``--sim oblique_gain=0``: 0.23 deg, 1.6 cm; 0.17 deg and 1.5 cm over
-three minutes). Part of it is a bias: a body model posed on noisier evidence sits, on average,
-drawn in towards its root (head and neck some 5 cm low, hands high, seen from the side; half
-that from the front), so each camera's skeletons are biased by how it sees the person. Most of
-it is the larger noise itself: with the other SDK errors off, side views cost 0.18 -> 0.34 deg,
-and still 0.18 -> 0.28 deg when the simulator poses no body model on the evidence (unbiased).
-Per-frame body scale, offsets per side seen (front, left, back, right) in the body's frame,
-leaving out the most drawn-in joints (spine, clavicles, face, hands), weighting frames by how
-alike the two cameras see the body, and a per-frame shrink along the kinematic chains did not
-reduce it (0.36-0.51 deg); fewer joints cost more than the bias they remove.
-
-Where the rotation comes from (30 seeds, each camera with the reference): the bodies' shapes
-alone (every frame's shift left free) give 1.4 deg, their positions alone (frame centroids)
-0.47 deg, both 0.41 deg for the pair alone and 0.37 deg after the joint solve. On clean data the
-shapes alone give 0.10 deg, but each SDK imperfection of the simulator costs them 0.15-1 deg
-(mistakes most, then the fixed offsets), so a partly free shift gains nothing at default
-realism, even with the offsets solved jointly and joints screened by their shape residual. The
-translation given the true rotation is 1.4-1.7 cm (``hiros bench calib`` prints it): the
-cameras' skeletons disagree that much on where each person is. Also tried without gain:
-adding b's skeletons flipped back front to back to the per-frame choice, and frame weights
-smoothed over a second.
+What limits the accuracy is the data, not a bias of these steps: the SDKs' joint errors
+(mostly one shift of the whole body per frame, and fixed per-person joint offsets) and their
+larger error on bodies seen from the side. The experiments behind that, and what was tried
+without gain, are in ``docs/pose-accuracy.md``.
 """
 
 from __future__ import annotations
