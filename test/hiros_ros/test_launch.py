@@ -165,7 +165,7 @@ def test_the_planned_commands_start_nodes_with_the_launch_s_values(ros_processes
     ], got.stderr  # fmt: skip
     calib = hiros(env, "param", "get", "/lab/calib", "camera_names")
     assert calib.stdout.strip() == "camera_names: [left, right]", calib.stderr
-    topics = hiros(env, "topic", "list").stdout
+    topics = hiros(env, "topic", "list", "--wait", "10").stdout  # a loaded machine discovers slowly
     for topic in ("/lab/left/skeletons", "/lab/right/skeletons", "/lab/hiros/tracker"):
         assert topic in topics, topics
     output = ros_processes.stop()

@@ -73,7 +73,8 @@ def test_describe_set_refuse_get_and_the_topic_tools(ros_processes) -> None:
         "input_topic: /hiros/optimizer",
         "filter: kalman",
     ]
-    listed = hiros(env, "topic", "list")
+    # a new process discovers the graph afresh: give a loaded machine time (2 s by default)
+    listed = hiros(env, "topic", "list", "--wait", "10")
     assert "/diagnostics [diagnostic_msgs/msg/DiagnosticArray]" in listed.stdout
     echoed = hiros(env, "topic", "echo", "/diagnostics", "-n", "1")
     assert "name: /filter" in echoed.stdout, echoed.stderr
