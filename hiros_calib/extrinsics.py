@@ -59,7 +59,14 @@ __all__ = [
 ]
 
 SPLIT_BLOCK = 2.0
-"""Length (s) of the alternating spans of time that make the two halves of a pose's check."""
+"""Length (s) of the alternating spans of time that make the two halves of a pose's check
+(and the two folds of a lag's cross-validated fit, :mod:`~hiros_calib.lags`): longer than
+the SDKs' error correlation, so one half's frames are not near copies of the other's."""
+
+
+def second_half(times: np.ndarray) -> np.ndarray:
+    """Which of two halves each instant (s) falls in: alternating ``SPLIT_BLOCK`` spans."""
+    return (np.floor(times / SPLIT_BLOCK).astype(np.int64) % 2).astype(bool)
 
 
 @dataclass
@@ -900,7 +907,7 @@ def _split_half_spreads(
     """
     halves = []
     for parity in (0, 1):
-        rows = [(np.floor(b.times / SPLIT_BLOCK).astype(np.int64) % 2) == parity for b in blocks]
+        rows = [second_half(b.times) == parity for b in blocks]
         enough = {
             camera
             for camera in unknown

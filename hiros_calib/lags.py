@@ -40,16 +40,13 @@ from hiros_calib.extrinsics import (
     estimate_pair_pose,
     pair_correspondences,
     relative_error,
+    second_half,
 )
 from hiros_calib.sync import CameraClock, PairOffset
 from hiros_calib.tracks import BodyTrack
 from hiros_core.geometry import RigidTransform
 
 __all__ = ["LagFit", "compare_fits", "fit_at_lag", "settle_lag", "split_half_spread"]
-
-HOLD_OUT_BLOCK = 2.0
-"""Seconds per block of the lag fit's cross-validation (longer than the SDKs' error
-correlation, so held-out frames are not near copies of fitted ones)."""
 
 
 @dataclass
@@ -101,7 +98,7 @@ def fit_at_lag(
     # two-fold cross-validation over alternating blocks of time: each frame's residual comes
     # from a transform fitted without it, so a lag with little common data cannot win by a
     # transform that fits its few frames too closely
-    fold = (np.floor(joined.times / HOLD_OUT_BLOCK).astype(np.int64) % 2).astype(bool)
+    fold = second_half(joined.times)
     if fold.all() or not fold.any():
         return fit
     residual = np.full(joined.n_frames, np.nan)
@@ -133,7 +130,7 @@ def split_half_spread(
     """
     if correspondences is None or correspondences.n_frames < 2:
         return None
-    fold = (np.floor(correspondences.times / HOLD_OUT_BLOCK).astype(np.int64) % 2).astype(bool)
+    fold = second_half(correspondences.times)
     poses = []
     for half in (fold, ~fold):
         if not half.any():
