@@ -49,7 +49,13 @@ def canonical_poses(  # noqa: PLR0917 - one frame's pairs, the layout and the tr
     the input is not changed): joint ``j`` of pose ``u`` is ``positions[rows[u], o_j]`` with
     ``o_j = mirror[j]`` where ``part[j]`` is flipped, else ``j``.
 
-    With ``align``, each left/right pair ``(a, b)`` of ``sides.pairs`` (of part
+    With ``align``, the shoulders' part first follows the detection's torso as its camera
+    labelled it: with ``c`` the cosine of its left-right axis (``_sides_cosine``, left
+    shoulder and hip less the right ones) with its track's (``held``), the part is flipped
+    when ``c < -0.5`` and not when ``c > 0.5``, whatever the part's mean joint distance said:
+    a flipped detection's shoulders and hips only trade labels, while its noisy or swinging
+    hands can make the arms' labels look right. Then each left/right pair ``(a, b)`` of
+    ``sides.pairs`` (of part
     ``pair_parts``) pointing against the shoulders ``s = p[left shoulder] - p[right]``,
     ``(p_a - p_b)·s < -0.5 |p_a - p_b| |s|``, flips its part (once, on the pose relabelled so
     far; nothing is flagged where a joint is missing, or without shoulders). Then the whole
@@ -66,7 +72,13 @@ def canonical_poses(  # noqa: PLR0917 - one frame's pairs, the layout and the tr
     flips = flips.copy()
     canonical = np.empty((n_pairs, n_joints, 3))
     order = np.empty(n_joints, dtype=np.int64)
+    tracks, track_rows, left, right = held.tracks, held.track_rows, held.left, held.right
+    torso = align and len(left) > 0 and len(shoulders) == 2
     for u in range(n_pairs):
+        if torso:
+            _follow_torso(
+                flips[u], part[shoulders[0]], positions[rows[u]], tracks[track_rows[u]], held
+            )
         _order(flips[u], part, mirror, order)
         for j in range(n_joints):
             canonical[u, j] = positions[rows[u], order[j]]
@@ -91,7 +103,6 @@ def canonical_poses(  # noqa: PLR0917 - one frame's pairs, the layout and the tr
             _order(flips[u], part, mirror, order)
             for j in range(n_joints):
                 canonical[u, j] = positions[rows[u], order[j]]
-    tracks, track_rows, left, right = held.tracks, held.track_rows, held.left, held.right
     for u in range(n_pairs if align and len(left) else 0):
         if _reversed_sides(canonical[u], tracks[track_rows[u]], left, right):
             for k in range(flips.shape[1]):
@@ -119,6 +130,31 @@ def _reversed_sides(
     labels and drag its track into the mirrored labelling. Reversed is a cosine under -0.5;
     nothing is said where a joint is missing.
     """
+    return _sides_cosine(detection, track, left, right) < -REVERSED_COS
+
+
+@njit(cache=True, error_model="numpy")
+def _follow_torso(
+    flips: np.ndarray, arms: int, detection: np.ndarray, track: np.ndarray, held: HeldSides
+) -> None:
+    """Flip part ``arms`` of ``flips`` ``(K,)`` to what the detection's torso says, if clear.
+
+    Flipped when the detection's left-right axis points against its track's (cosine under
+    ``-REVERSED_COS``), not flipped when along it (over ``REVERSED_COS``), else unchanged.
+    """
+    along = _sides_cosine(detection, track, held.left, held.right)
+    if abs(along) > REVERSED_COS:
+        flips[arms] = along < 0.0
+
+
+@njit(cache=True, error_model="numpy")
+def _sides_cosine(
+    detection: np.ndarray, track: np.ndarray, left: np.ndarray, right: np.ndarray
+) -> float:
+    """Cosine of a detection's left-right axis with its track's (``left`` less ``right``).
+
+    NaN where a joint is missing.
+    """
     dx = dy = dz = tx = ty = tz = 0.0
     for i in range(len(left)):
         dx += detection[left[i], 0] - detection[right[i], 0]
@@ -129,7 +165,7 @@ def _reversed_sides(
         tz += track[left[i], 2] - track[right[i], 2]
     along = dx * tx + dy * ty + dz * tz
     scale = math.sqrt((dx * dx + dy * dy + dz * dz) * (tx * tx + ty * ty + tz * tz))
-    return along < -REVERSED_COS * scale
+    return along / scale if scale > 0.0 else np.nan
 
 
 @njit(cache=True, error_model="numpy")

@@ -19,17 +19,23 @@ def _standing() -> np.ndarray:
     return pose
 
 
-def _canonical(detection: np.ndarray, track: np.ndarray) -> np.ndarray:
-    """The flips ``canonical_poses`` gives a detection whose parts matched as given."""
+def _canonical(
+    detection: np.ndarray, track: np.ndarray, matched: np.ndarray | None = None
+) -> np.ndarray:
+    """The flips ``canonical_poses`` gives a detection whose parts matched ``matched``.
+
+    ``matched`` ``(K,)``: the parts the association took mirrored (default: none).
+    """
     parts = _mirror_parts(AZURE_KINECT)
     shoulders, pairs, pair_parts = _side_arrays(AZURE_KINECT, parts)
     frame = _body_frame(AZURE_KINECT)
-    no_flips = np.zeros((1, parts.count), dtype=bool)
+    if matched is None:
+        matched = np.zeros(parts.count, dtype=bool)
     held = HeldSides(track[None], np.array([0]), frame.left, frame.right)
     _, flips = kernels.canonical_poses(
         detection[None],
         np.array([0]),
-        no_flips,
+        matched[None],
         parts.arrays,
         True,
         SideLayout(shoulders, pairs, pair_parts),
@@ -59,3 +65,24 @@ def test_a_detection_whose_left_points_to_the_tracks_right_is_relabelled_whole(d
 def test_a_detection_within_a_turn_of_its_track_keeps_its_labels(degrees):
     track = _standing()
     assert not _canonical(_turned(track, degrees), track).any()
+
+
+def test_the_arms_follow_a_clearly_reversed_torso_whatever_the_part_match() -> None:
+    # A noisy flipped detection: its shoulders and hips together point to the track's right
+    # (cos -0.99), but the association took its legs mirrored and its arms as given, and
+    # neither the hips against the shoulders (cos -0.2) nor the relabelled torso (cos -0.4)
+    # is clearly reversed: the arms kept the camera's mirrored labels and pulled the track
+    # (noisy-sdk, 18.75 s). The arms' labels now follow the raw torso's.
+    names = {name: j for j, name in enumerate(AZURE_KINECT.joint_names)}
+    track = _standing()
+    detection = track.copy()
+    for joint, half in (("Shoulder", [0.1, -0.15, 0.0]), ("Hip", [-0.125, -0.05, 0.0])):
+        left, right = names[f"{joint}Left"], names[f"{joint}Right"]
+        middle = (track[left] + track[right]) / 2
+        detection[left], detection[right] = middle + half, middle - np.array(half)
+    parts = _mirror_parts(AZURE_KINECT)
+    arms, legs = parts.part[names["ShoulderLeft"]], parts.part[names["HipLeft"]]
+    matched = np.zeros(parts.count, dtype=bool)
+    matched[legs] = True
+    flips = _canonical(detection, track, matched)
+    assert flips[arms]
