@@ -4,11 +4,15 @@ The calibration solves every camera's pose relative to the reference camera, who
 frame has y down and z forward and is tilted as the camera happens to be. People stand on the
 floor, so they tell where it is:
 
-- **Up.** Where people walk around, the places their feet rest (a foot joint that hardly
-  moves) lie on a plane parallel to the floor: its normal is up. Where the feet stay in one
-  small area (gestures on the spot), that plane is not pinned down and the body's mean
-  vertical (pelvis to neck, averaged over the frames) is used instead, kept perpendicular to
-  the direction the resting feet do spread along.
+- **Up.** Things that stay at one height as people walk lie on planes parallel to the
+  floor: the places their feet rest (a foot joint that hardly moves), all on the floor itself,
+  and each person's torso (the mean of the spine joints), at that person's own height. Up is
+  the tilt that levels them all at once (a Cauchy-reweighted least-squares fit of the two tilt
+  angles, each torso with its own height). A group tells the tilt only along the directions
+  it spreads over: one person walking to and fro on one line says nothing about the tilt
+  across it. Where the groups together do not spread in two directions (gestures on the
+  spot), the body's mean vertical (pelvis to neck, averaged over the frames) is used instead,
+  kept perpendicular to the direction the resting feet do spread along.
 - **The floor.** The resting feet's median height along up, less the height of the foot
   joint above the floor when the foot rests (:data:`FOOT_JOINT_HEIGHT`).
 - **The axes.** x along the reference camera's view projected on the floor, y to its left,
@@ -16,7 +20,8 @@ floor, so they tell where it is:
 
 Every camera's pose then becomes ``world <- reference <- camera``. The fit's figures (how far
 the resting feet lie from the plane, the tilt it corrected, what up came from) go into the
-reference camera's quality.
+reference camera's quality, with why the floor may be doubtful (:meth:`FloorFit.doubts`).
+How well this does on the simulator, and what was tried: docs/world-frame.md.
 """
 
 from __future__ import annotations
@@ -46,8 +51,26 @@ SPEED_BASELINE = 0.4
 """Seconds over which a foot's speed is measured."""
 
 MIN_SPREAD = 0.25
-"""Resting feet must spread this far (m, standard deviation) in two directions for their plane
-to give up; otherwise the body's vertical does."""
+"""A group of points (the resting feet, one person's torso) tells the tilt only along the
+directions it spreads over this far (m, standard deviation)."""
+
+MIN_COVERAGE = 0.1
+"""The groups together must tell the tilt over this spread (m, standard deviation over all
+samples) in every direction; otherwise up is the body's vertical. Two groups each spread along
+nearly the same line would pin the tilt across it only by the small angle between them."""
+
+DOUBT_POINTS = 200
+"""Fewer resting-foot samples than this make the floor doubtful."""
+
+DOUBT_RESIDUAL = 0.08
+"""Resting feet scattering more than this (m, RMS) about their plane make the floor doubtful."""
+
+DOUBT_SPREAD = 1.0
+"""Up moving more than this (deg) when one camera is left out makes it doubtful."""
+
+TORSO_JOINTS = (("Pelvis", "SpineNaval", "SpineChest", "Neck"), ("SpineBase", "SpineMid",
+                "SpineShoulder", "Neck"))  # fmt: skip
+"""The torso joints whose mean keeps one height as a person walks (Azure Kinect, Kinect v2)."""
 
 
 @dataclass
@@ -63,7 +86,10 @@ class FloorFit:
     points: int
     """Resting-foot samples used."""
     source: str
-    """``"feet"`` (their plane) or ``"body"`` (the mean pelvis-to-neck direction)."""
+    """``"feet and torsos"`` (their planes) or ``"body"`` (the mean pelvis-to-neck direction)."""
+    up_spread_deg: float = math.nan
+    """How far up moves (deg) when any one camera is left out; NaN with one camera or when up
+    is the body's."""
 
     def quality(self) -> dict[str, Any]:
         """The figures for the calibration file."""
@@ -73,7 +99,33 @@ class FloorFit:
             "floor_tilt_deg": round(tilt, 2),
             "floor_points": self.points,
             "floor_up_from": self.source,
+            "floor_up_spread_deg": (
+                round(self.up_spread_deg, 2) if math.isfinite(self.up_spread_deg) else None
+            ),
+            "floor_doubtful": "; ".join(self.doubts()),
         }
+
+    def doubts(self) -> list[str]:
+        """Why this floor may be off by more than 2 cm or up by more than 1 deg (empty: none seen).
+
+        The limits are where the simulator's scenes went wrong; see docs/world-frame.md.
+        """
+        doubts = []
+        if self.points < DOUBT_POINTS:
+            doubts.append(f"only {self.points} resting-foot samples (< {DOUBT_POINTS})")
+        if self.residual_m > DOUBT_RESIDUAL:
+            doubts.append(
+                f"the resting feet scatter {100 * self.residual_m:.1f} cm about their plane "
+                f"(> {100 * DOUBT_RESIDUAL:.0f} cm)"
+            )
+        if self.source != "feet and torsos":
+            doubts.append("up is the bodies' mean vertical: people lean")
+        elif self.up_spread_deg > DOUBT_SPREAD:
+            doubts.append(
+                f"up moves {self.up_spread_deg:.1f} deg when one camera is left out "
+                f"(> {DOUBT_SPREAD:g})"
+            )
+        return doubts
 
 
 def _joint(track: BodyTrack, names: tuple[str, ...]) -> list[int]:
@@ -121,6 +173,80 @@ def _body_vertical(track: BodyTrack) -> np.ndarray | None:
     return spine[ok] / norm[ok]
 
 
+def _torso_centres(track: BodyTrack) -> np.ndarray | None:
+    """``(N, 3)`` the mean of the torso joints (camera frame) where all are seen, or None."""
+    for names in TORSO_JOINTS:
+        joints = _joint(track, names)
+        if len(joints) == len(names):
+            seen = (track.weights[:, joints] > 0).all(axis=1)
+            centres = track.positions[seen][:, joints].mean(axis=1)
+            return centres[np.isfinite(centres).all(axis=1)]
+    return None
+
+
+@dataclass
+class _Seen:
+    """What one camera saw that lies on planes parallel to the floor (reference frame)."""
+
+    camera: str
+    feet: np.ndarray
+    """``(N, 3)`` resting feet: all on the floor."""
+    torsos: list[np.ndarray]
+    """Per track, ``(M, 3)`` torso centres: each person at their own height."""
+
+
+@dataclass
+class _Source:
+    """Points of one kind, each group on its own level plane, with one noise scale."""
+
+    points: np.ndarray  # (N, 3) reference frame
+    groups: np.ndarray  # (N,) group index 0..G-1
+    weights: np.ndarray  # (N,) robust weights, updated by the fit
+
+    @classmethod
+    def of(cls, groups: list[np.ndarray]) -> _Source | None:
+        """The groups' points, or None without any."""
+        groups = [g for g in groups if len(g)]
+        if not groups:
+            return None
+        points = np.concatenate(groups)
+        index = np.concatenate([np.full(len(g), k) for k, g in enumerate(groups)])
+        return cls(points, index, np.ones(len(points)))
+
+
+def _sources(seen: list[_Seen]) -> list[_Source]:
+    """The cameras' resting feet (one group: one floor) and torso centres (a group a track)."""
+    feet = _Source.of([np.concatenate([s.feet for s in seen])])
+    torsos = _Source.of([t for s in seen for t in s.torsos])
+    return [source for source in (feet, torsos) if source is not None]
+
+
+def _gather(
+    tracks: dict[str, list[BodyTrack]], poses: dict[str, RigidTransform]
+) -> tuple[list[_Seen], np.ndarray, list[np.ndarray]]:
+    """Per camera its resting feet and torso centres; the feet's joint heights; body verticals.
+
+    Everything in the reference frame.
+    """
+    seen, heights, verticals = [], [], []
+    for camera, pose in poses.items():
+        feet, torsos = [], []
+        for track in tracks.get(camera, []):
+            rest = _resting_feet(track)
+            if rest is not None and len(rest[0]):
+                points = pose.apply(rest[0])
+                feet.append(points[np.isfinite(points).all(axis=1)])
+                heights.append(np.full(len(feet[-1]), rest[1]))
+            centres = _torso_centres(track)
+            if centres is not None and len(centres) >= 10:
+                torsos.append(pose.apply(centres))
+            vertical = _body_vertical(track)
+            if vertical is not None and len(vertical):
+                verticals.append(pose.rotate(vertical))
+        seen.append(_Seen(camera, np.concatenate(feet) if feet else np.zeros((0, 3)), torsos))
+    return seen, np.concatenate(heights) if heights else np.zeros(0), verticals
+
+
 def fit_floor(
     tracks: dict[str, list[BodyTrack]], poses: dict[str, RigidTransform]
 ) -> FloorFit | None:
@@ -129,41 +255,44 @@ def fit_floor(
     ``poses`` maps each camera to its ``reference <- camera`` transform. None when no
     camera saw a body with both a vertical and resting feet.
     """
-    feet, heights, verticals = [], [], []
-    for camera, pose in poses.items():
-        for track in tracks.get(camera, []):
-            rest = _resting_feet(track)
-            if rest is not None and len(rest[0]):
-                points = pose.apply(rest[0])
-                feet.append(points[np.isfinite(points).all(axis=1)])
-                heights.append(np.full(len(feet[-1]), rest[1]))
-            vertical = _body_vertical(track)
-            if vertical is not None and len(vertical):
-                verticals.append(pose.rotate(vertical))
-    if not feet or not verticals:
+    seen, joint_height, verticals = _gather(tracks, poses)
+    points = np.concatenate([s.feet for s in seen]) if seen else np.zeros((0, 3))
+    if len(points) < 10 or not verticals:
         return None
-    points, joint_height = np.concatenate(feet), np.concatenate(heights)
     body_up = np.concatenate(verticals).mean(axis=0)
     body_up /= np.linalg.norm(body_up)
-    if len(points) < 10:
-        return None
-    up, source = _up(points, body_up)
+    up = _tilt_fit(_sources(seen), body_up)
+    if up is None:
+        up, source, spread = *_body_up(points, body_up), math.nan
+    else:
+        up, source = (up if up @ body_up > 0 else -up), "feet and torsos"
+        spread = _leave_one_out_spread(seen, up)
     along = points @ up - joint_height
     floor = float(np.median(along))
-    spread = along - floor
-    inliers = np.abs(spread) < 3 * max(1.4826 * float(np.median(np.abs(spread))), 0.005)
-    residual = float(np.sqrt(np.mean(spread[inliers] ** 2)))
-    return FloorFit(up, floor, residual, int(inliers.sum()), source)
+    scatter = along - floor
+    inliers = np.abs(scatter) < 3 * max(1.4826 * float(np.median(np.abs(scatter))), 0.005)
+    residual = float(np.sqrt(np.mean(scatter[inliers] ** 2)))
+    return FloorFit(up, floor, residual, int(inliers.sum()), source, spread)
 
 
-def _up(points: np.ndarray, body_up: np.ndarray) -> tuple[np.ndarray, str]:
-    """Up from the resting feet's plane where they spread widely, else the body's vertical."""
+def _leave_one_out_spread(seen: list[_Seen], up: np.ndarray) -> float:
+    """The largest angle (deg) by which up moves when one camera's samples are left out.
+
+    What the scatter of the samples alone cannot show: a camera whose pose is off tilts
+    everything it saw. NaN with a single camera.
+    """
+    angles = []
+    for left_out in range(len(seen) if len(seen) > 1 else 0):
+        others = _tilt_fit(_sources(seen[:left_out] + seen[left_out + 1 :]), up)
+        if others is not None:
+            angles.append(math.degrees(math.acos(min(1.0, abs(float(others @ up))))))
+    return max(angles) if angles else math.nan
+
+
+def _body_up(points: np.ndarray, body_up: np.ndarray) -> tuple[np.ndarray, str]:
+    """Up where no plane is pinned down: the body's vertical, across the feet's line if any."""
     values, vectors = np.linalg.eigh(np.cov((points - np.median(points, axis=0)).T))
-    spreads = np.sqrt(np.maximum(values, 0.0))  # ascending
-    if spreads[1] >= MIN_SPREAD:
-        normal = _robust_plane_normal(points, vectors[:, 0])
-        return (normal if normal @ body_up > 0 else -normal), "feet"
-    if spreads[2] >= MIN_SPREAD:
+    if np.sqrt(max(values[2], 0.0)) >= MIN_SPREAD:
         # feet along one line (walking to and fro): up is perpendicular to it
         line = vectors[:, 2]
         up = body_up - (body_up @ line) * line
@@ -171,21 +300,86 @@ def _up(points: np.ndarray, body_up: np.ndarray) -> tuple[np.ndarray, str]:
     return body_up, "body"
 
 
-def _robust_plane_normal(points: np.ndarray, normal: np.ndarray, rounds: int = 8) -> np.ndarray:
-    """The normal of the plane best fitting ``points``, Cauchy-reweighted from ``normal``.
+def _basis(up: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Two unit vectors perpendicular to ``up`` and to each other."""
+    helper = np.array([1.0, 0.0, 0.0]) if abs(up[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
+    first = np.cross(up, helper)
+    first /= np.linalg.norm(first)
+    return first, np.cross(up, first)
 
-    A foot joint the SDK misplaces by decimetres would tilt a least-squares plane.
+
+def _tilt_fit(sources: list[_Source], up: np.ndarray, rounds: int = 10) -> np.ndarray | None:
+    """Up that makes every group of every source level.
+
+    Gauss-Newton on the two tilt angles about ``up``: each group keeps its own height (a
+    person's torso) and a source its own Cauchy-reweighted scale; a group adds what it knows
+    only along the directions it spreads over by at least :data:`MIN_SPREAD` (a person walking
+    to and fro on one line says nothing about the tilt across it, where gait sway would bias
+    it). None when the groups together do not spread in two directions.
     """
-    weights = np.ones(len(points))
     for _ in range(rounds):
-        centre = np.average(points, axis=0, weights=weights)
-        centred = points - centre
-        distance = centred @ normal
-        scale = max(1.4826 * float(np.median(np.abs(distance - np.median(distance)))), 0.005)
-        weights = 1.0 / (1.0 + (distance / (2.0 * scale)) ** 2)
-        covariance = (centred * weights[:, None]).T @ centred
-        normal = np.linalg.eigh(covariance)[1][:, 0]
-    return normal
+        first, second = _basis(up)
+        information, gradient, coverage = np.zeros((2, 2)), np.zeros(2), np.zeros((2, 2))
+        total = 0.0
+        for source in sources:
+            step = _normal_equations(source, up, np.stack([first, second], axis=1))
+            information += step[0]
+            gradient += step[1]
+            coverage += step[2]
+            total += float(source.weights.sum())
+        if np.sqrt(max(np.linalg.eigvalsh(coverage / total)[0], 0.0)) < MIN_COVERAGE:
+            return None
+        tilt = np.linalg.solve(information, gradient)
+        up = up + tilt[0] * first + tilt[1] * second
+        up /= np.linalg.norm(up)
+    return up
+
+
+def _normal_equations(
+    source: _Source, up: np.ndarray, across: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """One source's information ``(2, 2)``, gradient ``(2,)`` and coverage ``(2, 2)``.
+
+    The information and gradient are for the tilt about ``up``; the coverage is the weighted
+    sum of the groups' spreads along their wide directions. ``across`` holds the two tilt
+    directions as columns. The source's robust weights are updated from the heights' spread
+    about their groups' means.
+    """
+    count = int(source.groups.max()) + 1
+
+    def centred(values: np.ndarray) -> np.ndarray:
+        total = np.bincount(source.groups, source.weights, count)
+        means = np.bincount(source.groups, source.weights * values, count) / np.maximum(
+            total, 1e-12
+        )
+        return values - means[source.groups]
+
+    height = centred(source.points @ up)
+    scale = max(1.4826 * float(np.median(np.abs(height))), 0.005)
+    source.weights = 1.0 / (1.0 + (height / (2.0 * scale)) ** 2)
+    height = centred(source.points @ up)
+    plane = np.stack([centred(source.points @ axis) for axis in across.T], axis=1)
+    information, gradient, coverage = np.zeros((2, 2)), np.zeros(2), np.zeros((2, 2))
+    for group in range(count):
+        member = source.groups == group
+        wide = _wide_directions(plane[member], source.weights[member])
+        if wide.shape[1] == 0:
+            continue
+        along = plane[member] @ wide
+        weighted = along * source.weights[member][:, None]
+        coverage += wide @ (weighted.T @ along) @ wide.T
+        information += wide @ (weighted.T @ along) @ wide.T / scale**2
+        gradient -= wide @ (weighted.T @ height[member]) / scale**2
+    return information, gradient, coverage
+
+
+def _wide_directions(plane: np.ndarray, weights: np.ndarray) -> np.ndarray:
+    """``(2, K)`` the directions in which ``plane`` points spread at least MIN_SPREAD."""
+    if len(plane) < 10 or weights.sum() <= 0:
+        return np.zeros((2, 0))
+    covariance = (plane * weights[:, None]).T @ plane / weights.sum()
+    values, vectors = np.linalg.eigh(covariance)
+    return vectors[:, np.sqrt(np.maximum(values, 0.0)) >= MIN_SPREAD]
 
 
 def align_to_floor(calibration: Calibration, floor: FloorFit) -> None:

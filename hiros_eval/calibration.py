@@ -25,7 +25,7 @@ from hiros_core.calibration import Calibration, CameraCalibration
 from hiros_core.errors import CalibrationError
 from hiros_core.geometry import RigidTransform
 
-__all__ = ["CameraAccuracy", "compare_calibration"]
+__all__ = ["CameraAccuracy", "WorldAccuracy", "compare_calibration", "compare_world"]
 
 
 @dataclass(frozen=True)
@@ -109,3 +109,34 @@ def compare_calibration(
             100.0 * distance,
         )
     return out
+
+
+@dataclass(frozen=True)
+class WorldAccuracy:
+    """How far an estimated world's up and floor are from a z-up truth with the floor at z = 0."""
+
+    up_error_deg: float
+    """Angle between the estimate's z axis and the truth's."""
+    floor_error_cm: float
+    """Height of the true floor in the estimated world at the chosen place (0: exact;
+    negative: the estimated floor is above the true one)."""
+
+
+def compare_world(estimated: Calibration, truth: Calibration, at: np.ndarray) -> WorldAccuracy:
+    """The estimate's world against a z-up, floor-at-zero truth, through the reference camera.
+
+    Args:
+        estimated: a calibration in a gravity-aligned world (``world`` = floor).
+        truth: the true calibration, its world z up with the floor at z = 0.
+        at: ``(2,)`` the place on the true floor (truth x, y) where the floor is compared,
+            e.g. where the people walked: a tilted estimate is off by more further away.
+
+    """
+    reference = estimated.reference
+    truth_from_estimate = (
+        truth.camera(reference).extrinsics @ estimated.camera(reference).extrinsics.inverse()
+    )
+    up = truth_from_estimate.rotate(np.array([0.0, 0.0, 1.0]))
+    angle = math.degrees(math.acos(float(np.clip(up[2], -1.0, 1.0))))
+    floor = truth_from_estimate.inverse().apply(np.array([at[0], at[1], 0.0]))
+    return WorldAccuracy(angle, 100.0 * float(floor[2]))

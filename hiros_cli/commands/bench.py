@@ -7,6 +7,9 @@ Suites:
              Eichler et al.'s RANSAC + Kabsch alone, on the same recordings; with --matrix
              the robustness matrix: one row per simulator condition (host clocks, repeated
              motion, one person, two cameras, noisy SDK, 15 Hz, drops, all), default settings
+  world      the gravity-aligned world against the simulator's truth: up (deg) and floor
+             (cm) per condition (default, one person, 15 Hz, repeated motion, noisy SDK,
+             two cameras), default settings, and whether a miss was called doubtful
   tracking   tracker and merger time per frame for 1-4 people vs Hi-ROS's published figures,
              and a norfair tracker on the same detections
   body       optimizer and filter time per frame vs Hi-ROS, filter lag/jitter vs One-Euro
@@ -37,7 +40,7 @@ from rich.console import Console
 from hiros_bench import SuiteFailedError
 
 HELP = "speed and accuracy benchmarks, each beside a baseline run alongside"
-SUITES = ("codec", "io", "calib", "tracking", "body", "pipeline", "robust", "soak")
+SUITES = ("codec", "io", "calib", "world", "tracking", "body", "pipeline", "robust", "soak")
 DEFAULT_SUITES = SUITES[:-1]
 """Run when no suite is named: all but the half-hour soak."""
 
@@ -121,7 +124,7 @@ def run(args: argparse.Namespace) -> int:
         if suite == "calib" and args.matrix:
             module = importlib.import_module("hiros_bench.calib_matrix")
             options.update(duration=args.duration)
-        elif suite == "calib":
+        elif suite in ("calib", "world"):
             options.update(sim=sim, duration=args.duration)
         elif suite == "soak":
             options.update(minutes=args.minutes)

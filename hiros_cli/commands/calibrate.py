@@ -277,6 +277,8 @@ def print_summary(console: Console, result: CalibrationResult) -> None:
             f"camera tilted {floor['floor_tilt_deg']:.1f} deg from level",
             highlight=False,
         )
+        if floor.get("floor_doubtful"):
+            console.print(f"[yellow]floor doubtful: {floor['floor_doubtful']}[/]", highlight=False)
 
 
 def _fit(residual: float | str | None) -> str:

@@ -11,7 +11,9 @@ calibration error counts.
 Given a calibration file (`hiros calibrate`'s .yaml, or one the `calib` node saved) instead
 of a run's output, only the calibration is judged: per camera the time error (ms, mean and
 largest over the recording's frames), the rotation error (°) and the translation error (cm),
-relative to the file's reference camera.
+relative to the file's reference camera. A file in a gravity-aligned world (``hiros
+calibrate``'s default) also gets its world judged: the angle between its z axis and the
+truth's, and the height of the true floor in its world below where the people walked.
 """
 
 from __future__ import annotations
@@ -102,6 +104,28 @@ def evaluate_calibration_file(path: Path, truth_dir: Path) -> list[list[str]]:
     ]
 
 
+def world_line(path: Path, truth_dir: Path) -> str | None:
+    """The file's world against the truth's (z up, floor at 0), or None in a camera frame."""
+    import numpy as np
+
+    from hiros_core.calibration import load_calibration
+    from hiros_eval.calibration import compare_world
+    from hiros_sim import load_truth
+
+    estimate, true = load_calibration(path), load_calibration(truth_dir / "calibration.yaml")
+    quality = estimate.camera(estimate.reference).quality
+    if "floor_up_from" not in quality:
+        return None
+    people = np.nanmean(load_truth(truth_dir).positions[:, :, 0, :2], axis=(0, 1))
+    accuracy = compare_world(estimate, true, people)
+    doubt = quality.get("floor_doubtful")
+    return (
+        f"world: z {accuracy.up_error_deg:.2f} deg from the truth's up, the true floor at "
+        f"{accuracy.floor_error_cm:+.1f} cm below the people (targets 1 deg, 2 cm); the file "
+        + (f"calls its floor doubtful: {doubt}" if doubt else "does not call its floor doubtful")
+    )
+
+
 def print_evaluation(console: Console, evaluation) -> None:  # noqa: ANN001 - RunEvaluation
     """The evaluation's tables, then the merged-vs-best-camera ratio."""
     for title, (headers, rows) in evaluation.tables().items():
@@ -148,6 +172,9 @@ def run(args: argparse.Namespace) -> int:
         rows = evaluate_calibration_file(args.output, args.truth)
         title = f"{args.output.name} against the truth (relative to its reference camera)"
         console.print(_table(title, headers, rows, console.width))
+        world = world_line(args.output, args.truth)
+        if world:
+            console.print(world, highlight=False)
         return 0
     problems: list[str] = []
     evaluation = evaluate_output(args.output, args.truth, problems)
