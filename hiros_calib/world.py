@@ -59,6 +59,10 @@ MIN_COVERAGE = 0.1
 samples) in every direction; otherwise up is the body's vertical. Two groups each spread along
 nearly the same line would pin the tilt across it only by the small angle between them."""
 
+SEEN_WEIGHT = 0.99
+"""A torso joint counts where its weight is the best the camera reports (seen, not predicted;
+files without confidences have weight 1 everywhere)."""
+
 DOUBT_POINTS = 200
 """Fewer resting-foot samples than this make the floor doubtful."""
 
@@ -93,7 +97,8 @@ class FloorFit:
 
     def quality(self) -> dict[str, Any]:
         """The figures for the calibration file."""
-        tilt = math.degrees(math.acos(float(np.clip(-self.up[1], -1.0, 1.0))))
+        # from the camera's vertical axis: y down (Azure Kinect) or y up (Kinect v2)
+        tilt = math.degrees(math.acos(float(np.clip(abs(self.up[1]), 0.0, 1.0))))
         return {
             "floor_residual_cm": round(100 * self.residual_m, 2),
             "floor_tilt_deg": round(tilt, 2),
@@ -164,8 +169,9 @@ def _speed(positions: np.ndarray, times: np.ndarray) -> np.ndarray:
 
 def _body_vertical(track: BodyTrack) -> np.ndarray | None:
     """``(T, 3)`` pelvis-to-neck unit vectors (camera frame), or None without those joints."""
-    joints = _joint(track, ("Pelvis", "Neck")) or _joint(track, ("SpineBase", "SpineShoulder"))
-    if len(joints) != 2:
+    pairs = (_joint(track, names) for names in (("Pelvis", "Neck"), ("SpineBase", "SpineShoulder")))
+    joints = next((pair for pair in pairs if len(pair) == 2), None)
+    if joints is None:  # (Kinect v2 has a Neck but no Pelvis: both joints must be found)
         return None
     spine = track.positions[:, joints[1]] - track.positions[:, joints[0]]
     norm = np.linalg.norm(spine, axis=1, keepdims=True)
@@ -174,11 +180,15 @@ def _body_vertical(track: BodyTrack) -> np.ndarray | None:
 
 
 def _torso_centres(track: BodyTrack) -> np.ndarray | None:
-    """``(N, 3)`` the mean of the torso joints (camera frame) where all are seen, or None."""
+    """``(N, 3)`` the mean of the torso joints (camera frame) where all are seen, or None.
+
+    Joints the SDK only predicts (hidden behind the body or another person) are left out:
+    they are several times noisier.
+    """
     for names in TORSO_JOINTS:
         joints = _joint(track, names)
         if len(joints) == len(names):
-            seen = (track.weights[:, joints] > 0).all(axis=1)
+            seen = (track.weights[:, joints] >= SEEN_WEIGHT).all(axis=1)
             centres = track.positions[seen][:, joints].mean(axis=1)
             return centres[np.isfinite(centres).all(axis=1)]
     return None

@@ -13,7 +13,7 @@ from hiros_calib.tracks import BodyTrack
 from hiros_calib.world import FOOT_JOINT_HEIGHT, FloorFit, align_to_floor, fit_floor
 from hiros_core.calibration import Calibration, CameraCalibration
 from hiros_core.geometry import RigidTransform
-from hiros_core.layouts import AZURE_KINECT
+from hiros_core.layouts import AZURE_KINECT, KINECT_V2, Layout
 from hiros_eval.calibration import compare_world
 from hiros_sim import SimParams, simulate
 
@@ -46,27 +46,31 @@ def _walker(
     pelvis_height: float,
     noise: float,
     frames: int = 600,
+    layout: Layout = AZURE_KINECT,
 ) -> BodyTrack:
     """A person walking from ``start`` to ``end`` (z-up world, floor z = 0), feet resting in
     turn; Azure joints, world frame; gaussian joint noise."""
-    positions = np.full((frames, AZURE_KINECT.n_joints, 3), np.nan)
+    positions = np.full((frames, layout.n_joints, 3), np.nan)
     times = np.arange(frames) / 30.0
     path = start + np.linspace(0.0, 1.0, frames)[:, None] * (end - start)
     direction = (end - start) / np.linalg.norm(end - start)
     side = np.array([-direction[1], direction[0], 0.0])
     # each foot rests for 30 frames, then steps for 30 (the other rests meanwhile)
     step = (np.arange(frames) // 30) * 30
-    for name, z in (("Pelvis", 0.0), ("SpineNaval", 0.2), ("SpineChest", 0.35), ("Neck", 0.55)):
-        positions[:, AZURE_KINECT.index(name)] = path + np.array([0.0, 0.0, pelvis_height + z])
+    spine = ("Pelvis", "SpineNaval", "SpineChest", "Neck")
+    if layout is KINECT_V2:
+        spine = ("SpineBase", "SpineMid", "SpineShoulder", "Neck")
+    for name, z in zip(spine, (0.0, 0.2, 0.35, 0.55), strict=True):
+        positions[:, layout.index(name)] = path + np.array([0.0, 0.0, pelvis_height + z])
     for sign, kind in ((1.0, "Left"), (-1.0, "Right")):
         rest = path[np.clip(step + (15 if sign > 0 else 0), 0, frames - 1)]
         for joint, height in (("Foot", FOOT_JOINT_HEIGHT["Foot"]), ("Ankle", 0.09)):
-            positions[:, AZURE_KINECT.index(f"{joint}{kind}")] = (
+            positions[:, layout.index(f"{joint}{kind}")] = (
                 rest + 0.1 * sign * side + [0.0, 0.0, height]
             )
     positions += rng.normal(0.0, noise, positions.shape)
     weights = np.where(np.isfinite(positions[..., 0]), 1.0, 0.0)
-    return BodyTrack("k01", 0, AZURE_KINECT, times, positions, weights)
+    return BodyTrack("k01", 0, layout, times, positions, weights)
 
 
 def _tilted(tracks: list[BodyTrack], camera_from_world: RigidTransform) -> list[BodyTrack]:
@@ -101,6 +105,28 @@ def test_up_and_floor_of_people_walking_before_a_tilted_camera(people: int) -> N
     # one person on one straight line pins no plane: the body's vertical, called doubtful
     assert floor.source == ("body" if people == 1 else "feet and torsos")
     assert (floor.doubts() == []) == (people > 1)
+
+
+def test_kinect_v2_skeletons_find_the_floor_too() -> None:
+    # Kinect v2 has SpineBase ... SpineShoulder and a Neck but no Pelvis, and its camera frame
+    # has y up: its tilt is measured from +y as the Azure Kinect's is from -y
+    rng = np.random.default_rng(5)
+    ends = (([-2.0, 0.0, 0.0], [2.0, 0.5, 0.0]), ([0.0, -2.0, 0.0], [0.5, 2.0, 0.0]))
+    tracks = [
+        _walker(rng, np.array(a), np.array(b), pelvis_height=0.9, noise=0.01, layout=KINECT_V2)
+        for a, b in ends
+    ]
+    # the camera 4 m away looks 10 deg down at the people: y up, z forward
+    world_from_camera = RigidTransform(
+        Rotation.from_euler("x", 100.0, degrees=True), np.array([0.0, 4.0, 1.2])
+    )
+    floor = fit_floor(
+        {"k01": _tilted(tracks, world_from_camera.inverse())}, {"k01": RigidTransform.identity()}
+    )
+    assert floor is not None
+    assert floor.source == "feet and torsos"
+    assert math.degrees(math.acos(world_from_camera.rotate(floor.up)[2])) < 0.5
+    assert floor.quality()["floor_tilt_deg"] == pytest.approx(10.0, abs=0.5)
 
 
 def test_one_person_on_one_line_does_not_tilt_up_across_it() -> None:
