@@ -41,6 +41,7 @@ Shapes: ``M`` tracks, ``C`` detections per track (padded), ``J`` joints; metres,
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TypeVar, get_type_hints
 
 import numpy as np
 
@@ -57,9 +58,20 @@ from hiros_core.model import (
     stack_rows,
 )
 from hiros_merger import kernels
+from hiros_merger.kernel_args import (
+    BodyLayout,
+    CameraTable,
+    DirectionSettings,
+    FuseSettings,
+    RobustSettings,
+    StoredDetections,
+    WeightSettings,
+)
 from hiros_merger.latest import LatestDetections
 
 __all__ = ["OTHER_FRAME", "Merger", "MergerParams"]
+
+T = TypeVar("T")
 
 OTHER_FRAME = "not in the world frame"
 """Drop reason of the detections of an input group in another frame than the world's."""
@@ -157,21 +169,16 @@ class MergerParams:
 
 @dataclass(frozen=True)
 class _BodyAxes:
-    """Joints that give a body's facing direction and torso, or -1 where a layout lacks them."""
+    """A layout's joints for the fusion (``body``), and its two trees of links to rebuild."""
 
-    root: int
-    neck: int
-    left: np.ndarray  # (2,) hip and shoulder on the left
-    right: np.ndarray  # (2,)
-    torso: np.ndarray  # joints standing for the torso in occlusion tests
-    pointers: np.ndarray  # (k, 2) joint pairs pointing forward: ankle -> foot, head -> nose
-    has_front: bool  # whether the layout names what the facing direction needs
-    groups: np.ndarray  # (J,) limb of each joint: 0 torso, then one per subtree off the torso
+    body: BodyLayout  # what the weights and the limbs need
     parents: np.ndarray  # (J,) the layout's parents (-1 at the root)
-    order: np.ndarray  # (J,) joints with every parent before its children
     limb_parents: np.ndarray  # (J,) parents, -1 for the torso's joints
-    link_parents: np.ndarray  # the layout's links' parent joints
-    link_children: np.ndarray  # and child joints (= link ids)
+
+    @property
+    def groups(self) -> np.ndarray:
+        """``(J,)`` limb of each joint (``_limbs``)."""
+        return self.body.groups
 
     @classmethod
     def of(cls, layout: Layout) -> _BodyAxes:
@@ -195,22 +202,21 @@ class _BodyAxes:
             while parents[k] >= 0:
                 k = parents[k]
                 depth[j] += 1
-        order = np.argsort(depth, kind="stable").astype(np.int64)
-        return cls(
-            root,
-            neck,
-            left,
-            right,
-            torso,
-            pointers,
-            has_front,
-            _limbs(layout, torso),
-            parents,
-            order,
-            np.where(np.isin(np.arange(layout.n_joints), torso), -1, parents),
-            np.asarray(layout.link_parents, dtype=np.intp),
-            np.asarray(layout.link_children, dtype=np.intp),
+        body = BodyLayout(
+            root=root,
+            neck=neck,
+            left=left,
+            right=right,
+            torso=torso,
+            pointers=pointers,
+            has_front=has_front,
+            groups=_limbs(layout, torso),
+            order=np.argsort(depth, kind="stable").astype(np.int64),
+            link_parents=np.asarray(layout.link_parents, dtype=np.intp),
+            link_children=np.asarray(layout.link_children, dtype=np.intp),
         )
+        limb_parents = np.where(np.isin(np.arange(layout.n_joints), torso), -1, parents)
+        return cls(body, parents, limb_parents)
 
 
 def _limbs(layout: Layout, torso: np.ndarray) -> np.ndarray:
@@ -243,6 +249,32 @@ def _axes(layout: Layout) -> _BodyAxes:
     if axes is None:
         axes = _AXES[layout.name] = _BodyAxes.of(layout)
     return axes
+
+
+def _read(bundle: type[T], params: MergerParams, **given: object) -> T:
+    """``bundle``'s fields from ``params``' of the same names, as the declared types.
+
+    The compiled kernels are built for those types: an ``int`` where a float is declared (a
+    YAML ``1``, say) would compile them again for it. Fields in ``given`` are taken as given.
+    """
+    declared = {name: kind for name, kind in get_type_hints(bundle).items() if name not in given}
+    return bundle(**{name: kind(getattr(params, name)) for name, kind in declared.items()}, **given)
+
+
+def _fuse_settings(params: MergerParams, axes: _BodyAxes) -> FuseSettings:
+    """The fusion's parameters as the kernels read them."""
+    cutoff = params.limb_cutoff if params.limb_residuals else params.outlier_cutoff
+    directions = DirectionSettings(
+        enabled=bool(params.fuse_directions),
+        iterations=int(params.direction_iterations),
+        eps=float(params.direction_eps),
+        parents=axes.parents if params.direction_torso else axes.limb_parents,
+    )
+    return FuseSettings(
+        _read(WeightSettings, params),
+        _read(RobustSettings, params, own_cutoff=float(cutoff)),
+        directions,
+    )
 
 
 def _quaternion_mean(quaternions: np.ndarray, weights: np.ndarray) -> np.ndarray:
@@ -293,14 +325,14 @@ class Merger(Accounted):
         self._newest_in_ns: int | None = None
         self._world_frame = "world"
         self._world_frame_set = False  # by the calibration, or else the first framed input
-        self._constants: dict[str, tuple] = {}  # layout name -> ``_kernel_constants``
+        self._constants: dict[str, tuple] = {}  # layout name -> ``_fusion_constants``
         if calibration is not None:
             self.set_calibration(calibration)
 
     def set_params(self, params: MergerParams) -> None:
         """Fuse with ``params`` from the next update on (tracks and agreements are kept)."""
         self.params = params
-        self._constants.clear()  # they pack the parameters (``_kernel_constants``)
+        self._constants.clear()  # they hold the parameters (``_fusion_constants``)
 
     # ----------------------------------------------------------------------------- calibration
     def set_calibration(self, calibration: Calibration) -> None:
@@ -459,60 +491,42 @@ class Merger(Accounted):
         """Fuse the detections of each track: robust weighted mean of positions, SO(3) mean.
 
         The positions, weights, means and output rows are one compiled kernel
-        (``kernels.merge``, the numpy form of each step is in the module docstring's
-        formulas) reading the ``selected`` slots of the stored detections; the orientations'
-        eigen-decomposition stays with numpy.
+        (``kernels.merge``, the module docstring's formulas) reading the ``selected`` slots
+        of the stored detections; the orientations' eigen-decomposition stays with numpy.
         """
         latest = self._latest
-        (
-            track_ids, table, final, rows, present, links, link_present, confidences, totals,
-            counts, oriented,
-        ) = kernels.merge(
-            latest.rows, latest.present, latest.stamps, latest.tracks, latest.cameras,
-            np.array(selected, dtype=np.int64), out_ns, self._camera_positions,
-            self._camera_factors, *self._kernel_constants(layout),
-        )  # fmt: skip
-        self._update_agreement(totals, counts)
-        if oriented:
-            quaternions = self._stored_orientations(table, layout.n_joints)
+        stored = StoredDetections(
+            latest.rows, latest.present, latest.stamps, latest.tracks, latest.cameras
+        )
+        cameras = CameraTable(self._camera_positions, self._camera_factors)
+        settings, body = self._fusion_constants(layout)
+        selection = np.array(selected, dtype=np.int64)
+        frame = kernels.merge(stored, selection, out_ns, cameras, settings, body)
+        rows, present = frame.rows, frame.present
+        links, link_present = frame.links, frame.link_present
+        self._update_agreement(frame.camera_totals, frame.camera_counts)
+        if frame.oriented:
+            quaternions = self._stored_orientations(frame.table, layout.n_joints)
             rows[..., 4:8] = np.where(
-                present[..., None], _quaternion_mean(quaternions, final), np.nan
+                present[..., None], _quaternion_mean(quaternions, frame.final), np.nan
             )
             links, link_present = link_rows(rows, present, layout)
         boxes = np.full((len(rows), BOX_WIDTH), np.nan)
         return SkeletonRows(rows, present, links, link_present, boxes).skeletons(
-            track_ids.tolist(), out_ns, self._world_frame, layout, confidences.tolist()
+            frame.track_ids.tolist(), out_ns, self._world_frame, layout, frame.confidences.tolist()
         )
 
-    def _kernel_constants(self, layout: Layout) -> tuple:
-        """The trailing arguments of ``kernels.merge`` for ``layout``, built once per layout.
+    def _fusion_constants(self, layout: Layout) -> tuple[FuseSettings, BodyLayout]:
+        """``kernels.merge``'s settings and body bundles for ``layout``, built once per layout.
 
         The parameters are read on a layout's first fusion (as the optimizer and the filter
-        read theirs once): packing these 19 values cost more than a third of the kernel call.
+        read theirs once), and converted to the types the compiled kernel was built for.
         """
         constants = self._constants.get(layout.name)
         if constants is None:
             params = self.params
             axes = _axes(layout)
-            # The float parameters in the order ``kernels.fuse`` unpacks them.
-            floats = np.array(
-                [
-                    params.max_extrapolation, params.confidence_floor, params.confidence_power,
-                    params.staleness_scale, params.depth_gain, params.flipped_weight,
-                    params.view_weight_min, params.view_power, params.occlusion_radius,
-                    params.occlusion_weight, params.outlier_scale, params.outlier_cutoff,
-                    params.limb_cutoff, params.oblique_gain,
-                ],
-                dtype=float,
-            )  # fmt: skip
-            constants = self._constants[layout.name] = (
-                floats, params.iterations, params.extrapolate, axes.root, axes.neck, axes.left,
-                axes.right, axes.torso, axes.pointers, axes.has_front, axes.groups,
-                params.limb_residuals,
-                axes.parents if params.direction_torso else axes.limb_parents,
-                axes.order, params.fuse_directions, params.direction_iterations,
-                params.direction_eps, axes.link_parents, axes.link_children,
-            )  # fmt: skip
+            constants = self._constants[layout.name] = (_fuse_settings(params, axes), axes.body)
         return constants
 
     def _stored_orientations(self, table: np.ndarray, n_joints: int) -> np.ndarray:

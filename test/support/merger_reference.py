@@ -1,0 +1,296 @@
+"""The merger's fusion stated in numpy: the readable specification of ``hiros_merger.kernels.fuse``.
+
+Whole-array formulas written from the maths in ``hiros_merger/merger.py``'s docstring and the
+kernels' docstrings (``weights.py``, ``robust.py``, ``directions.py``), not from the kernels'
+loops; ``test/hiros_merger/test_kernel_reference.py`` holds the kernel equal to it on random
+frames. Shapes: ``M`` tracks, ``C`` detections per track (padded), ``J`` joints.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from hiros_merger.kernel_args import (
+    BodyLayout,
+    DirectionSettings,
+    FuseSettings,
+    Fusion,
+    RobustSettings,
+    TrackDetections,
+    WeightSettings,
+)
+
+__all__ = ["occluded", "reference_fuse"]
+
+
+def _unit(vectors: np.ndarray) -> np.ndarray:
+    """``vectors / |vectors|`` along the last axis (NaN for zero vectors)."""
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return vectors / np.linalg.norm(vectors, axis=-1, keepdims=True)
+
+
+def _mean_or_nan(total: np.ndarray, norm: np.ndarray) -> np.ndarray:
+    """``total / norm`` where ``norm`` is not 0, NaN there."""
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return np.where(norm != 0, total / norm, np.nan)
+
+
+def detections_at(
+    detections: TrackDetections, settings: WeightSettings, n_joints: int
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """``(M, C, J, 3)`` positions at the output time and velocities, confidences, weights.
+
+    ``p + v · clip(age, ±max_extrapolation)`` (non-finite ``v`` as 0); the weight is
+    ``max(conf, floor)^power / (1 + (age / staleness_scale)²) × agreement
+    × (1 + depth_gain · depth)^-2`` (the last where the camera is known; 0 where the
+    position is not finite).
+    """
+    table = detections.table
+    valid = (table >= 0)[..., None] & detections.present[np.maximum(table, 0), :n_joints]
+    rows = detections.rows[np.maximum(table, 0), :n_joints]
+    positions = np.where(valid[..., None], rows[..., 1:4], np.nan)
+    velocities = np.where(valid[..., None], rows[..., 8:11], np.nan)
+    ages = detections.ages
+    if settings.extrapolate:
+        dt = np.clip(ages, -settings.max_extrapolation, settings.max_extrapolation)
+        positions = (
+            positions + np.where(np.isfinite(velocities), velocities, 0.0) * dt[..., None, None]
+        )
+    confidences = np.where(valid, rows[..., 0], np.nan)
+    confidences = np.where(np.isfinite(confidences), confidences, 1.0)
+    weight = np.maximum(confidences, settings.confidence_floor) ** settings.confidence_power
+    weight = np.where(np.isfinite(positions).all(axis=-1), weight, 0.0)
+    weight = weight / (1.0 + (ages / settings.staleness_scale) ** 2)[..., None]
+    weight = weight * detections.agreement[..., None]
+    known = np.isfinite(detections.cameras).all(axis=-1)
+    depth = np.linalg.norm(positions - detections.cameras[:, :, None], axis=-1)
+    with np.errstate(invalid="ignore"):
+        weight = np.where(
+            known[..., None], weight * (1.0 + settings.depth_gain * depth) ** -2.0, weight
+        )
+    return positions, velocities, confidences, weight
+
+
+def weighted_median(positions: np.ndarray, weight: np.ndarray) -> np.ndarray:
+    """``(M, J, 3)`` per coordinate the smallest value whose cumulative weight reaches half.
+
+    Of the finite values of positive weight (NaN where there are none).
+    """
+    weights = np.where(np.isfinite(positions), weight[..., None], 0.0)
+    weights = np.where(weights > 0, weights, 0.0)
+    keys = np.where(weights > 0, positions, np.inf)
+    order = np.argsort(keys, axis=1, kind="stable")
+    keys = np.take_along_axis(keys, order, axis=1)
+    cumulative = np.cumsum(np.take_along_axis(weights, order, axis=1), axis=1)
+    total = cumulative[:, -1:]
+    first = np.argmax(cumulative >= 0.5 * total, axis=1)
+    median = np.take_along_axis(keys, first[:, None], axis=1)[:, 0]
+    return np.where(total[:, 0] > 0, median, np.nan)
+
+
+def facing_factors(
+    fused: np.ndarray,
+    positions: np.ndarray,
+    cameras: np.ndarray,
+    body: BodyLayout,
+    settings: WeightSettings,
+) -> np.ndarray:
+    """``(M, C)`` each detection's flipped factor times its camera's view factor.
+
+    Up: root -> neck; front: ``side × up`` with ``side`` from the mean right to the mean left
+    hip and shoulder. A detection whose forward pointers, taken across up and summed as unit
+    vectors, point against the front is flipped. The view factor is
+    ``max(view_weight_min, ((1 + cos θ) / 2)^view_power) / (1 + oblique_gain · |sin θ|)²``, θ
+    between the front and the direction from the root to the camera (1 where unknown).
+    """
+    up = _unit(fused[:, body.neck] - fused[:, body.root])  # (M, 3)
+    side = fused[:, body.left].mean(axis=1) - fused[:, body.right].mean(axis=1)
+    front = _unit(np.cross(side, up))
+    factor = np.ones(positions.shape[:2])
+    if len(body.pointers):
+        pointing = positions[:, :, body.pointers[:, 1]] - positions[:, :, body.pointers[:, 0]]
+        along = np.einsum("mcpa,ma->mcp", pointing, up)
+        across = _unit(pointing - along[..., None] * up[:, None, None])
+        summed = _unit(np.where(np.isfinite(across), across, 0.0).sum(axis=2))
+        with np.errstate(invalid="ignore"):
+            backwards = np.einsum("mca,ma->mc", summed, front) < 0
+        factor = np.where(backwards, settings.flipped_weight, factor)
+    towards = _unit(cameras - fused[:, None, body.root])  # (M, C, 3)
+    cosine = np.einsum("mca,ma->mc", towards, front)
+    with np.errstate(invalid="ignore"):
+        view = np.maximum(((1.0 + cosine) / 2.0) ** settings.view_power, settings.view_weight_min)
+        if settings.oblique_gain > 0:
+            sine = np.sqrt(np.maximum(1.0 - cosine**2, 0.0))
+            view = view / (1.0 + settings.oblique_gain * sine) ** 2
+    known = np.isfinite(cameras).all(axis=-1)
+    return factor * np.where(known & np.isfinite(view), view, 1.0)
+
+
+def occluded(  # noqa: PLR0917 - the kernel's arguments
+    fused: np.ndarray,
+    positions: np.ndarray,
+    cameras: np.ndarray,
+    torso: np.ndarray,
+    weight: np.ndarray,
+    radius: float,
+    factor: float,
+) -> np.ndarray:
+    """``weight`` times ``factor`` where another track's torso point blocks the camera's ray.
+
+    A point ``q`` blocks the ray from camera ``o`` to joint ``p`` when it lies within
+    ``radius`` of the ray and between ``o`` and ``radius`` short of ``p``.
+    """
+    n_tracks = len(fused)
+    rel = positions - cameras[:, :, None]  # (M, C, J, 3) joint - camera
+    length = np.linalg.norm(rel, axis=-1)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        unit = rel / length[..., None]
+        q = fused[None, None, :, torso] - cameras[:, :, None, None]  # (M, C, M', T, 3)
+        along = np.einsum("mcja,mcota->mcjot", unit, q)
+        across_sq = (q * q).sum(-1)[:, :, None] - along**2
+        blocked = (across_sq < radius**2) & (along > 0) & (along < length[..., None, None] - radius)
+    blocked[np.arange(n_tracks), :, :, np.arange(n_tracks)] = False  # not by its own torso
+    return np.where(blocked.any(axis=(-2, -1)), weight * factor, weight)
+
+
+def judged_residuals(
+    positions: np.ndarray, fused: np.ndarray, groups: np.ndarray, limb_residuals: bool
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``(M, C, J)`` distances to ``fused``, and their limb mean and limb maximum.
+
+    Over the joints of the limb whose positions and distances are finite; a joint that is
+    not finite (or all of them, without ``limb_residuals``) keeps its own distance.
+    """
+    residual = np.linalg.norm(positions - fused[:, None], axis=-1)
+    if not limb_residuals:
+        return residual, residual, residual
+    finite = np.isfinite(positions).all(axis=-1)
+    used = finite & np.isfinite(residual)
+    in_limb = groups[:, None] == np.arange(groups.max() + 1)  # (J, G)
+    masked = np.where(used, residual, 0.0)
+    counts = np.einsum("mcj,jg->mcg", used.astype(float), in_limb.astype(float))
+    with np.errstate(invalid="ignore", divide="ignore"):
+        means = np.einsum("mcj,jg->mcg", masked, in_limb.astype(float)) / counts
+    peaks = np.where(in_limb, masked[..., None], 0.0).max(axis=2)
+    keep = finite & (counts[..., groups] > 0)
+    return (
+        residual,
+        np.where(keep, means[..., groups], residual),
+        np.where(keep, peaks[..., groups], residual),
+    )
+
+
+def cauchy_weights(
+    weight: np.ndarray, residual: np.ndarray, own: np.ndarray, settings: RobustSettings
+) -> np.ndarray:
+    """``weight / (1 + (r / outlier_scale)²)``, 0 beyond the cutoffs where some camera is within."""
+    with np.errstate(invalid="ignore"):
+        robust = np.where(
+            np.isfinite(residual), weight / (1.0 + (residual / settings.outlier_scale) ** 2), 0.0
+        )
+        inside = (residual <= settings.outlier_cutoff) & (own <= settings.own_cutoff)
+    any_inside = np.where(inside, robust, 0.0).sum(axis=1, keepdims=True) > 0
+    return np.where(any_inside & ~inside, 0.0, robust)
+
+
+def weighted_mean(values: np.ndarray, weights: np.ndarray) -> np.ndarray:
+    """``(M, J, 3)`` the ``weights`` ``(M, C, J)`` mean over C of the finite ``values`` rows."""
+    finite = np.isfinite(values).all(axis=-1)
+    weights = np.where(finite, weights, 0.0)
+    total = np.where(finite[..., None], values * weights[..., None], 0.0).sum(axis=1)
+    return _mean_or_nan(total, weights.sum(axis=1)[..., None])
+
+
+def link_direction(
+    units: np.ndarray, weights: np.ndarray, settings: DirectionSettings
+) -> np.ndarray:
+    """The weighted spherical median of ``units`` ``(C, 3)``, from their weighted mean.
+
+    Weiszfeld steps on the sphere: ``u <- normalise(Σ w u_c / max(angle(u, u_c), eps))``.
+    """
+    direction = _unit((weights[:, None] * units).sum(axis=0))
+    for _ in range(settings.iterations):
+        angle = np.arctan2(np.linalg.norm(np.cross(direction, units), axis=1), units @ direction)
+        step = ((weights / np.maximum(angle, settings.eps))[:, None] * units).sum(axis=0)
+        if not np.linalg.norm(step) > 0:
+            break
+        direction = _unit(step)
+    return direction
+
+
+def follow_directions(
+    positions: np.ndarray,
+    final: np.ndarray,
+    fused: np.ndarray,
+    body: BodyLayout,
+    settings: DirectionSettings,
+) -> np.ndarray:
+    """Each limb rebuilt root-outward along the cameras' link directions, then shifted back.
+
+    A link ``p -> j`` inside a limb keeps its fused length and takes the spherical median of
+    the cameras' unit vectors, weighted ``sqrt(final_j · final_p)`` (its fused offset where
+    no camera has it); then each limb moves so that its mean joint is the fused one.
+    """
+    groups, parents = body.groups, settings.parents
+    out = fused.copy()
+    for m in range(len(fused)):
+        for j in body.order:
+            p = parents[j]
+            if p < 0 or groups[p] != groups[j]:
+                continue
+            offset = fused[m, j] - fused[m, p]
+            length = np.linalg.norm(offset)
+            if not np.isfinite(length):
+                continue
+            vectors = positions[m, :, j] - positions[m, :, p]
+            norms = np.linalg.norm(vectors, axis=1)
+            weights = np.sqrt(final[m, :, j] * final[m, :, p])
+            seen = np.isfinite(norms) & (weights > 0) & (norms > 0)
+            if seen.any() and np.linalg.norm(weights[seen] @ vectors[seen]) > 0:
+                units = vectors[seen] / norms[seen, None]
+                offset = length * link_direction(units, weights[seen], settings)
+            out[m, j] = out[m, p] + offset
+        for g in np.unique(groups):
+            limb = (groups == g) & np.isfinite(fused[m, :, 0]) & np.isfinite(out[m, :, 0])
+            if limb.any():
+                out[m, groups == g] += (fused[m, limb] - out[m, limb]).mean(axis=0)
+    return out
+
+
+def reference_fuse(detections: TrackDetections, settings: FuseSettings, body: BodyLayout) -> Fusion:
+    """``kernels.fuse`` in numpy: weights, median, facing and occlusion, robust mean, means."""
+    weighting, robust = settings.weights, settings.robust
+    positions, velocities, confidences, weight = detections_at(
+        detections, weighting, len(body.groups)
+    )
+    fused = weighted_median(positions, weight)
+    if body.has_front:
+        weight = (
+            weight
+            * facing_factors(fused, positions, detections.cameras, body, weighting)[..., None]
+        )
+    known = np.isfinite(detections.cameras).all(axis=-1)
+    if weighting.occlusion_radius > 0 and len(fused) > 1 and known.any():
+        weight = occluded(
+            fused,
+            positions,
+            detections.cameras,
+            body.torso,
+            weight,
+            weighting.occlusion_radius,
+            weighting.occlusion_weight,
+        )
+    for _ in range(robust.iterations):
+        _, limb, peak = judged_residuals(positions, fused, body.groups, robust.limb_residuals)
+        fused = weighted_mean(positions, cauchy_weights(weight, limb, peak, robust))
+    residual, limb, peak = judged_residuals(positions, fused, body.groups, robust.limb_residuals)
+    final = cauchy_weights(weight, limb, peak, robust)
+    positive = np.where(final > 0, final, 0.0)
+    confidence = _mean_or_nan((confidences * positive).sum(axis=1), positive.sum(axis=1))
+    velocity = weighted_mean(velocities, final)
+    finite = np.isfinite(residual)
+    capped = np.where(finite, np.minimum(residual, 0.5), 0.0).sum(axis=2)
+    disagreement = _mean_or_nan(capped, finite.sum(axis=2))
+    if settings.directions.enabled:
+        fused = follow_directions(positions, final, fused, body, settings.directions)
+    return Fusion(fused, final, confidence, velocity, disagreement)
