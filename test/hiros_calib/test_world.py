@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -181,3 +182,24 @@ def test_compare_world_measures_a_known_tilt_and_height() -> None:
     accuracy = compare_world(estimate, truth, np.zeros(2))
     assert accuracy.up_error_deg == pytest.approx(2.0, abs=1e-9)
     assert accuracy.floor_error_cm == pytest.approx(3.0 / math.cos(math.radians(2.0)), abs=0.2)
+
+
+@pytest.mark.slow
+def test_a_real_kinect_v2_session_gets_a_level_floor(tmp_path: Path) -> None:
+    # two real Kinect v2 (KinectMultiTrack Study_10, ../shared/data): no truth, but the
+    # resting feet must lie on one plane and that plane must be trusted
+    from hiros_convert import convert
+    from hiros_core.recording import read_camera_groups
+
+    data = Path(__file__).resolve().parents[3] / "shared" / "data" / "kinect_multitrack"
+    path = data / "Study_10_Kinect_1_Time_4_10_14_PM.csv"
+    if not path.exists():
+        pytest.skip(f"{path} is not available")
+    convert(path, tmp_path / "session.mcap", skeleton_groups=True)
+    groups, arrival_ns = read_camera_groups(tmp_path / "session.mcap")
+    calibration = Calibrator().calibrate(groups, arrival_ns=arrival_ns)
+    quality = calibration.cameras[calibration.reference].quality
+    assert quality["floor_up_from"] == "feet and torsos"
+    assert quality["floor_residual_cm"] < 1.5  # 0.58 measured
+    assert quality["floor_tilt_deg"] < 10.0  # a camera set up roughly level (3.0 measured)
+    assert quality["floor_doubtful"] == ""
