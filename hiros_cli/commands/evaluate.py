@@ -120,9 +120,13 @@ def world_line(path: Path, truth_dir: Path) -> str | None:
     accuracy = compare_world(estimate, true, people)
     doubt = quality.get("floor_doubtful")
     return (
-        f"world: z {accuracy.up_error_deg:.2f} deg from the truth's up, the true floor at "
-        f"{accuracy.floor_error_cm:+.1f} cm below the people (targets 1 deg, 2 cm); the file "
-        + (f"calls its floor doubtful: {doubt}" if doubt else "does not call its floor doubtful")
+        f"world: z {accuracy.up_error_deg:.2f} deg from the truth's up; below the people the "
+        f"true floor is at z = {accuracy.floor_error_cm:+.1f} cm in it (targets 1 deg, 2 cm); "
+        + (
+            f"the file calls its floor doubtful: {doubt}"
+            if doubt
+            else "the file does not call its floor doubtful"
+        )
     )
 
 

@@ -73,3 +73,36 @@ def test_a_calibration_file_is_judged_alone_relative_to_its_reference(tmp_path, 
     ]  # fmt: skip
     assert main([*args, "--report", str(tmp_path / "report")]) == 1
     assert "--report needs a run's output" in capsys.readouterr().err
+
+
+def test_a_calibration_file_in_a_floor_world_gets_its_up_and_floor_judged(tmp_path, capsys):
+    """The estimate's world is tilted 2° about x and its floor 3 cm below the truth's."""
+    from hiros_cli.main import main
+    from hiros_core.calibration import Calibration, save_calibration
+    from hiros_core.geometry import RigidTransform
+
+    truth = Calibration(reference="cam0", world_frame="world")
+    truth.cameras = {"cam0": _camera([0.0, 0.0, 1.5], Rotation.identity())}
+    tilt = RigidTransform(Rotation.from_euler("x", 2.0, degrees=True), np.zeros(3))
+    placed = tilt @ RigidTransform(Rotation.identity(), np.array([0.0, 0.0, 1.53]))
+    estimate = Calibration(reference="cam0", world_frame="world")
+    estimate.cameras = {"cam0": _camera(placed.translation, placed.rotation)}
+    estimate.cameras["cam0"].quality = {"floor_up_from": "feet and torsos", "floor_doubtful": ""}
+    (tmp_path / "truth").mkdir()
+    save_calibration(truth, tmp_path / "truth" / "calibration.yaml")
+    save_calibration(estimate, tmp_path / "estimate.yaml")
+    # one person whose pelvis stands above the origin
+    positions = np.zeros((1, 2, 32, 3))
+    positions[..., 2] = 1.0
+    np.savez_compressed(
+        tmp_path / "truth" / "truth.npz", times=np.array([0.0, 1.0]), positions=positions,
+        person_ids=np.array([1]), clip_names=np.array(["clip"]),
+    )  # fmt: skip
+    args = ["evaluate", str(tmp_path / "estimate.yaml"), "--truth", str(tmp_path / "truth")]
+    assert main(args) == 0
+    out = " ".join(capsys.readouterr().out.split())
+    assert (
+        "world: z 2.00 deg from the truth's up; below the people the true floor is at z = +3.0"
+        in out
+    )
+    assert "does not call its floor doubtful" in out
