@@ -5,8 +5,10 @@ How hiros chooses between compiled and numpy code, one rule for the whole code b
 1. numba is a hard dependency. A helper that has a compiled kernel always runs it: the same
    call takes the same path whatever else the process has imported (a branch on the input,
    such as float64 rows or the driver's usual message, is the only choice left).
-2. A kernel's numpy form is kept as the reference its test holds it equal to, bit for bit,
-   and for the inputs the kernel does not take; never as a switch.
+2. A kernel's numpy form is kept as the reference its test holds it equal to, never as a
+   switch (no parameter, no branch on what is imported): beside the kernel where the product
+   needs it too (for the inputs the kernel does not take; held equal bit for bit), else in
+   ``test/support/`` (the stages' maths, held equal on random input by property tests).
 3. ``hiros_core`` is imported by every command, and numba's import costs ~1 s: its callers
    import kernel modules (this one, ``fill``, ``driver.kernels``) inside the function, at the
    first call, not at module level. Live nodes and runs load them before their first

@@ -15,6 +15,8 @@ import math
 import os
 import sys
 import typing
+import warnings
+from collections.abc import Iterable
 from pathlib import Path
 from typing import Any, TypeVar
 
@@ -24,12 +26,38 @@ from hiros_core.safe_yaml import load_yaml
 T = TypeVar("T")
 
 __all__ = [
+    "REMOVED_PARAMETERS",
+    "RemovedParameterWarning",
     "build_params",
     "config_path",
     "dataclass_defaults",
     "load_config_defaults",
+    "removed_parameters",
     "stage_config_defaults",
 ]
+
+REMOVED_PARAMETERS: dict[str, str] = {
+    "compiled": "the optimizer and the filter always run their compiled kernels",
+}
+"""Parameters hiros had and dropped (by name, any node): a file that still sets one loads,
+with a ``RemovedParameterWarning``, so that older parameter files keep working."""
+
+
+class RemovedParameterWarning(FutureWarning):
+    """A parameter file sets a parameter hiros no longer has; it is ignored.
+
+    A ``FutureWarning``: Python shows it to whoever runs the command, whose file it is (a
+    ``DeprecationWarning`` is hidden outside ``__main__``).
+    """
+
+
+def removed_parameters(names: Iterable[str]) -> dict[str, str]:
+    """The dotted ``names`` that are ``REMOVED_PARAMETERS`` (by their last part), with why."""
+    return {
+        name: REMOVED_PARAMETERS[name.rsplit(".", 1)[-1]]
+        for name in names
+        if name.rsplit(".", 1)[-1] in REMOVED_PARAMETERS
+    }
 
 
 def config_path(node_name: str) -> Path | None:
@@ -50,6 +78,9 @@ def config_path(node_name: str) -> Path | None:
 
 def load_config_defaults(node_name: str, path: Path | None = None) -> dict[str, Any]:
     """Flat ``{dotted.name: value}`` of a node's parameter file (empty when there is none).
+
+    A parameter hiros no longer has (``REMOVED_PARAMETERS``) is left out with a
+    ``RemovedParameterWarning``.
 
     Raises:
         ConfigError: the file cannot be read; or ``path`` was given and holds no section
@@ -76,6 +107,13 @@ def load_config_defaults(node_name: str, path: Path | None = None) -> dict[str, 
             msg = f"{path}: ros__parameters of {node_name} must be a mapping, not {parameters!r}"
             raise ConfigError(msg)
         values.update(_flatten(parameters or {}))
+    for name, reason in removed_parameters(values).items():
+        del values[name]
+        warnings.warn(
+            f"{path}: parameter {name} is ignored ({reason}); remove it from the file",
+            RemovedParameterWarning,
+            stacklevel=2,
+        )
     return values
 
 

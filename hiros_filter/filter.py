@@ -28,7 +28,6 @@ from __future__ import annotations
 
 from collections import deque
 from dataclasses import dataclass
-from functools import lru_cache
 from typing import NamedTuple
 
 import numpy as np
@@ -37,8 +36,8 @@ from hiros_core.accounting import Accounted, Drops
 from hiros_core.errors import ConfigError
 from hiros_core.layouts import Layout
 from hiros_core.model import Skeleton, SkeletonGroup, SkeletonRows, link_rows
-from hiros_filter.estimators import ButterworthBank, KalmanBank, rotation_vectors, slerp
-from hiros_filter.lengths import LengthKeeper, held_links
+from hiros_filter.estimators import ButterworthBank, KalmanBank
+from hiros_filter.lengths import LengthKeeper
 from hiros_optimizer.kinematics import KinematicTree
 from hiros_optimizer.stacking import LayoutRows, output_skeletons, stack_frame
 
@@ -71,9 +70,6 @@ class FilterParams:
         orientation_cutoff_frequency: Hz of the orientation smoothing.
         max_gap: seconds a track or joint may be unseen before it restarts.
         track_timeout: seconds after which an unseen track's state is freed.
-        compiled: run the Kalman step and the length projection as numba kernels
-            (:mod:`hiros_filter.compiled`; the same results as the numpy versions, several
-            times faster; compiled when the stage is built, cached on disk), else with numpy.
         keep_link_lengths: links whose input length does not change from frame to frame (the
             optimizer's calibrated links) keep that length in the output, with velocities and
             accelerations that agree with it (:mod:`hiros_filter.lengths`).
@@ -92,7 +88,6 @@ class FilterParams:
     max_gap: float = 0.5
     track_timeout: float = 5.0
     keep_link_lengths: bool = True
-    compiled: bool = True
 
     def __post_init__(self) -> None:
         if self.filter not in _FILTERS:
@@ -242,8 +237,7 @@ class Filter(Accounted):
         self._layouts: dict[str, _Tracks] = {}
         self._layout_of: dict[int, str] = {}
         self._intervals: deque[float] = deque(maxlen=_RATE_WINDOW)
-        if self.params.compiled:
-            _warm_up()
+        _warm_up()
 
     @property
     def sample_frequency(self) -> float | None:
@@ -258,7 +252,7 @@ class Filter(Accounted):
         """Filter with ``params`` from the next frame on; the tracks keep their state.
 
         Meant for the noise, cutoff and timing parameters (the node's live ones); ``filter``
-        and ``compiled`` are chosen at construction.
+        is chosen at construction.
         """
         self.params = params
         for tracks in self._layouts.values():
@@ -377,15 +371,16 @@ class Filter(Accounted):
 
         Every track of the frame in one batch: their rows of the frame's stack (already
         copies) are filtered in place, and the output skeletons are views of them (links
-        rebuilt for all of them at once, boxes copied). In Kalman mode, compiled, that is one
-        kernel call.
+        rebuilt for all of them at once, boxes copied). In Kalman mode that is one kernel
+        call (``compiled.filter_step``); in Butterworth mode, the Kalman, length and
+        orientation kernels around the low-pass (``_step_rows``).
         """
         skeletons = [step.skeleton for step in steps]
         indices = [step.row for step in steps]
         markers, present = stack.take(indices)
         rows = np.array([tracks.slots[s.id] for s in skeletons], dtype=np.int64)
         stamps = np.array([s.src_time_ns for s in skeletons], dtype=np.int64)
-        if self.params.compiled and self.params.filter == "kalman":
+        if self.params.filter == "kalman":
             links, link_present = self._step_compiled(tracks, rows, stamps, markers, present)
         else:
             self._step_rows(tracks, rows, stamps, markers, present)
@@ -429,11 +424,9 @@ class Filter(Accounted):
         restart = present & (stamps[:, None] - joint_time_ns > max_gap_ns)
         kalman = tracks.kalman
         any_restart = restart.any()
-        if self.params.compiled:
-            kalman.step(rows, dt, present & ~restart if any_restart else present, measured)
-        else:
-            kalman.predict(rows, dt)
-            kalman.correct(rows, present & ~restart if any_restart else present, measured)
+        self._kalman_step(
+            tracks, rows, dt, present & ~restart if any_restart else present, measured
+        )
         if any_restart:
             index, joints = np.nonzero(restart)
             kalman.reset(rows[index], joints, measured[index, joints])
@@ -447,34 +440,49 @@ class Filter(Accounted):
             low_pass_input = np.where(present[..., None], measured, state[:, :, 0])
             low_pass_input[lost] = np.nan
             smoothed = self._low_pass(tracks, rows, low_pass_input, restart, dt)
-        velocities, accelerations = state[:, :, 1], state[:, :, 2]
-        if self.params.keep_link_lengths and self.params.compiled:
-            from hiros_filter.compiled import keep_lengths
-
-            states = np.array([smoothed, velocities, accelerations])
-            tracks.last_lengths[rows] = keep_lengths(
-                tracks.keeper.tree.parents,
-                tracks.keeper.tree.order,
-                states,
-                np.ascontiguousarray(measured),
-                present,
-                tracks.last_lengths[rows],
-            )
-            smoothed, velocities, accelerations = states
-        elif self.params.keep_link_lengths:
-            lengths = tracks.keeper.lengths(np.where(present[..., None], measured, np.nan))
-            held = held_links(lengths, tracks.last_lengths[rows])
-            tracks.last_lengths[rows] = lengths
-            if held.any():
-                smoothed, velocities, accelerations = tracks.keeper.project(
-                    (smoothed, velocities, accelerations), lengths, held, present
-                )
+        states = (smoothed, state[:, :, 1], state[:, :, 2])
+        if self.params.keep_link_lengths:
+            states = self._keep_lengths(tracks, rows, states, measured, present)
+        smoothed, velocities, accelerations = states
         tracks.time_ns[rows] = stamps
         self._smooth_orientations(tracks, rows, markers, present, dt)
         mask = present[..., None]
         np.copyto(markers[..., 1:4], smoothed, where=mask)
         np.copyto(markers[..., 8:11], velocities, where=mask)
         np.copyto(markers[..., 14:17], accelerations, where=mask)
+
+    def _kalman_step(
+        self,
+        tracks: _Tracks,
+        rows: np.ndarray,
+        dt: np.ndarray,
+        mask: np.ndarray,
+        measured: np.ndarray,
+    ) -> None:
+        """Predict the ``rows``' Kalman states by ``dt`` and correct them where ``mask`` is set."""
+        tracks.kalman.step(rows, dt, mask, measured)
+
+    def _keep_lengths(
+        self,
+        tracks: _Tracks,
+        rows: np.ndarray,
+        states: tuple[np.ndarray, np.ndarray, np.ndarray],
+        measured: np.ndarray,
+        present: np.ndarray,
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``states`` with the links held in the input kept at their length (``lengths``)."""
+        from hiros_filter.compiled import keep_lengths
+
+        stacked = np.array(states)
+        tracks.last_lengths[rows] = keep_lengths(
+            tracks.keeper.tree.parents,
+            tracks.keeper.tree.order,
+            stacked,
+            np.ascontiguousarray(measured),
+            present,
+            tracks.last_lengths[rows],
+        )
+        return stacked[0], stacked[1], stacked[2]
 
     def _low_pass(
         self,
@@ -540,7 +548,7 @@ class Filter(Accounted):
         Orientations, angular velocities and accelerations of the valid joints are written
         into ``markers``; every joint is computed at once and the results are kept by mask.
         """
-        if self.params.compiled and dt is not None:
+        if dt is not None:
             from hiros_filter.compiled import smooth_orientations
 
             smooth_orientations(
@@ -548,46 +556,18 @@ class Filter(Accounted):
                 tracks.angular_accelerations, self.params.orientation_cutoff_frequency,
             )  # fmt: skip
             return
+        # A start: the valid orientations as they are, without angular rates.
         quaternions = markers[..., 4:8]
         norms = np.sqrt(np.add.reduce(quaternions * quaternions, axis=-1))  # as np.linalg.norm
         valid = present & np.isfinite(norms) & (norms > 0.5)
         unit = quaternions / np.where(valid, norms, 1.0)[..., None]
-        previous = tracks.quaternions[rows]
-        angular_velocities = tracks.angular_velocities[rows]
-        angular_accelerations = tracks.angular_accelerations[rows]
-        fresh = valid
-        smoothed = previous
-        if dt is not None:
-            carry = valid & np.isfinite(previous).all(axis=-1)
-            if carry.any():
-                fresh = valid & ~carry
-                cutoff = self.params.orientation_cutoff_frequency
-                weight = 1.0 - np.exp(-2.0 * np.pi * cutoff * dt)
-                with np.errstate(invalid="ignore", divide="ignore"):
-                    turned = slerp(previous, unit, weight[:, None])
-                    step = dt[:, None, None]
-                    velocity = rotation_vectors(previous, turned) / step
-                    acceleration = np.where(
-                        np.isfinite(angular_velocities),
-                        (velocity - angular_velocities) / step,
-                        0.0,
-                    )
-                keep = carry[..., None]
-                smoothed = np.where(keep, turned, previous)
-                angular_accelerations = np.where(keep, acceleration, angular_accelerations)
-                angular_velocities = np.where(keep, velocity, angular_velocities)
-        if fresh.any():
-            keep = fresh[..., None]
-            smoothed = np.where(keep, unit, smoothed)
-            angular_velocities = np.where(keep, np.nan, angular_velocities)
-            angular_accelerations = np.where(keep, np.nan, angular_accelerations)
-        tracks.quaternions[rows] = smoothed
-        tracks.angular_velocities[rows] = angular_velocities
-        tracks.angular_accelerations[rows] = angular_accelerations
         keep = valid[..., None]
-        np.copyto(markers[..., 4:8], smoothed, where=keep)
-        np.copyto(markers[..., 11:14], angular_velocities, where=keep)
-        np.copyto(markers[..., 17:20], angular_accelerations, where=keep)
+        tracks.quaternions[rows] = np.where(keep, unit, tracks.quaternions[rows])
+        for rates in (tracks.angular_velocities, tracks.angular_accelerations):
+            rates[rows] = np.where(keep, np.nan, rates[rows])
+        np.copyto(markers[..., 4:8], tracks.quaternions[rows], where=keep)
+        np.copyto(markers[..., 11:14], tracks.angular_velocities[rows], where=keep)
+        np.copyto(markers[..., 17:20], tracks.angular_accelerations[rows], where=keep)
 
     def _forget_old_tracks(self, stamp_ns: int) -> None:
         timeout_ns = round(self.params.track_timeout * 1e9)
@@ -599,7 +579,9 @@ class Filter(Accounted):
                     self._layout_of.pop(track_id, None)
 
 
-@lru_cache(maxsize=1)
+_WARM = False
+
+
 def _warm_up() -> None:
     """Compile (or load from numba's disk cache) the kernels when the first stage is built.
 
@@ -607,12 +589,15 @@ def _warm_up() -> None:
     person through each mode (Kalman: the one-call frame kernel; Butterworth: the Kalman,
     length and orientation kernels one by one).
     """
+    global _WARM  # noqa: PLW0603 - once per process
+    if _WARM:
+        return
+    _WARM = True
     from hiros_core.layouts import AZURE_KINECT
 
     positions = np.zeros((AZURE_KINECT.n_joints, 3))
     for mode in _FILTERS:
-        stage = Filter(FilterParams(filter=mode, compiled=False))  # no recursion into here
-        stage.params.compiled = True
+        stage = Filter(FilterParams(filter=mode))
         for frame in range(2):
             stamp = frame * 33_333_333
             skeleton = Skeleton.from_positions(

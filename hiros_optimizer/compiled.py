@@ -1,9 +1,10 @@
 """The fixed-length fit of :mod:`hiros_optimizer.kinematics`, compiled with numba.
 
 The same algorithm, step for step (start, block-coordinate sweeps, Gauss-Newton with the same
-damping, retraction and acceptance test), written as loops over people and joints: the numpy
-version spends nearly all its time in the overhead of ~150 small array calls per frame, these
-loops do the arithmetic only. Two parts are computed differently, with the same results up to
+damping, retraction and acceptance test), written as loops over people and joints. Its numpy
+statement (``test/support/optimizer_reference.py``, which a test holds these kernels to)
+spends nearly all its time in the overhead of ~150 small array calls per frame; these loops
+do the arithmetic only. Two parts are computed differently, with the same results up to
 rounding:
 
 - sums over subtrees are accumulated leaves -> root in one pass (instead of products with the
@@ -37,7 +38,7 @@ from hiros_core.compiled import _link_rows, refresh_stale_caches
 __all__ = ["fit_frame", "fit_frame_links", "fit_people", "learn_frame", "unusable_rows"]
 
 _EPS = 1e-12
-_MIN_VELOCITY_DT = 1e-3  # s; as ``hiros_optimizer.memory``
+_MIN_VELOCITY_DT = 1e-3  # s; closer frames (duplicates) would turn noise into huge velocities
 
 
 @njit(cache=True, error_model="numpy")

@@ -4,9 +4,9 @@ One row per track id (:class:`Memory` hands rows out and takes them back): the l
 of measured link lengths, and the motion the fit predicts from (last output positions, their
 velocity, the fitted link vectors, the stamp). Keeping them stacked lets one call do a whole
 frame's work for all its people: :meth:`Memory.fit` (prior, outlier weights, fit, new motion)
-and :meth:`Memory.learn` (window, motion), each either as one numba kernel
-(:mod:`hiros_optimizer.compiled`, the stage's default) or as the numpy reference here, which
-computes the same numbers in the same order (a test compares the two).
+and :meth:`Memory.learn` (window, motion), each one numba kernel (:mod:`hiros_optimizer.compiled`).
+Their numpy statement, the same numbers in the same order, is ``ReferenceMemory`` of
+``test/support/optimizer_reference.py``, which a test holds them to.
 
 "No motion known" (a new track, or one unseen for longer than the timeout) is a row with
 ``timed`` False, NaN positions and vectors and zero velocities: the prior and the fallback
@@ -20,12 +20,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from hiros_core.layouts import Layout
-from hiros_core.model import link_rows
-from hiros_optimizer.kinematics import KinematicTree, fit_fixed_lengths, link_lengths
+from hiros_optimizer.kinematics import KinematicTree, link_lengths
 
 __all__ = ["FitSettings", "Memory"]
-
-_MIN_VELOCITY_DT = 1e-3  # s; closer frames (duplicates) would turn noise into huge velocities
 
 
 @dataclass(frozen=True)
@@ -39,7 +36,6 @@ class FitSettings:
     track_timeout: float
     sweeps: int
     refinements: int
-    compiled: bool
 
     @property
     def kernel_values(self) -> tuple[float, float, float, float, float, int, int]:
@@ -122,37 +118,6 @@ class Memory:
 
     # ------------------------------------------------------------------ one frame, numpy
 
-    def forget_stale(self, rows: np.ndarray, stamps: np.ndarray, timeout: float) -> None:
-        """Forget the motion of rows unseen for over ``timeout`` s or stamped before it."""
-        last = self.time_ns[rows]
-        stale = self.timed[rows] & (((stamps - last) * 1e-9 > timeout) | (stamps < last))
-        if stale.any():
-            self.forget_motion(rows[stale])
-
-    def remember(
-        self, rows: np.ndarray, stamps: np.ndarray, seen: np.ndarray, vectors: np.ndarray
-    ) -> None:
-        """Take this frame's ``seen`` ``(P, J, 3)`` positions (NaN where absent) and vectors.
-
-        A joint missing this frame keeps its last position (the prediction survives); the
-        velocity is updated when the frames are at least 1 ms apart.
-        """
-        timed = self.timed[rows]
-        previous = self.positions[rows]
-        dt = np.where(timed, (stamps - self.time_ns[rows]) * 1e-9, 0.0)
-        with np.errstate(invalid="ignore", divide="ignore"):
-            velocities = (seen - previous) / np.where(dt > 0, dt, 1.0)[:, None, None]
-        velocities = np.where(np.isfinite(velocities), velocities, 0.0)
-        kept = np.where(np.isfinite(seen), seen, previous)
-        self.positions[rows] = np.where(timed[:, None, None], kept, seen)
-        update = (timed & (dt >= _MIN_VELOCITY_DT))[:, None, None]
-        self.velocities[rows] = np.where(
-            update, velocities, np.where(timed[:, None, None], self.velocities[rows], 0.0)
-        )
-        self.vectors[rows] = vectors
-        self.time_ns[rows] = stamps
-        self.timed[rows] = True
-
     # ------------------------------------------------------------------ one frame
 
     def learn(
@@ -169,19 +134,13 @@ class Memory:
         ``markers`` ``(P, J, 20)`` and ``present`` ``(P, J)`` are the people's rows; a joint
         counts towards a length only when its confidence is above 0 (NaN counts as 1).
         """
-        if settings.compiled:
-            from hiros_optimizer.compiled import learn_frame
+        from hiros_optimizer.compiled import learn_frame
 
-            learn_frame(
-                self.tree.parents, markers, present, rows, stamps, self.time_ns, self.timed,
-                self.positions, self.velocities, self.vectors, self.window, self.filled,
-                float(settings.track_timeout),
-            )  # fmt: skip
-            return
-        self.forget_stale(rows, stamps, settings.track_timeout)
-        self.record(rows, markers, present)
-        seen = np.where(present[..., None], markers[..., 1:4], np.nan)
-        self.remember(rows, stamps, seen, np.full_like(seen, np.nan))
+        learn_frame(
+            self.tree.parents, markers, present, rows, stamps, self.time_ns, self.timed,
+            self.positions, self.velocities, self.vectors, self.window, self.filled,
+            float(settings.track_timeout),
+        )  # fmt: skip
 
     def record(self, rows: np.ndarray, markers: np.ndarray, present: np.ndarray) -> None:
         """Push the people's measured link lengths into their windows (no motion).
@@ -214,31 +173,14 @@ class Memory:
         fitted people's link rows and link presence (``model.link_rows``; the compiled fit
         builds them in the same call).
         """
-        tree = self.tree
-        if settings.compiled:
-            from hiros_optimizer.compiled import fit_frame_links
+        from hiros_optimizer.compiled import fit_frame_links
 
-            return fit_frame_links(
-                tree.parents, tree.order, tree.level_starts, markers, present, lengths, rows,
-                stamps, self.time_ns, self.timed, self.positions, self.velocities, self.vectors,
-                *settings.kernel_values, *self._link_ends,
-            )  # fmt: skip
-        self.forget_stale(rows, stamps, settings.track_timeout)
-        dt = np.maximum(np.where(self.timed[rows], (stamps - self.time_ns[rows]) * 1e-9, 0.0), 0.0)
-        prior = self.positions[rows] + self.velocities[rows] * dt[:, None, None]
-        measured = markers[..., 1:4].copy()
-        weights = _weights(markers, present, settings.confidence_floor)
-        weights = weights * _outlier_factors(tree, measured, lengths, prior, settings)
-        positions, vectors = fit_fixed_lengths(
-            tree, measured, weights, lengths, prior=prior, prior_weight=settings.prior_weight,
-            fallback_vectors=self.vectors[rows], sweeps=settings.sweeps,
-            refinements=settings.refinements,
+        tree = self.tree
+        return fit_frame_links(
+            tree.parents, tree.order, tree.level_starts, markers, present, lengths, rows,
+            stamps, self.time_ns, self.timed, self.positions, self.velocities, self.vectors,
+            *settings.kernel_values, *self._link_ends,
         )  # fmt: skip
-        np.copyto(markers[..., 1:4], positions, where=present[..., None])
-        self.remember(
-            rows, stamps, np.where(present[..., None], markers[..., 1:4], np.nan), vectors
-        )
-        return link_rows(markers, present, self.layout)
 
 
 def _weights(markers: np.ndarray, present: np.ndarray, floor: float) -> np.ndarray:
@@ -246,20 +188,3 @@ def _weights(markers: np.ndarray, present: np.ndarray, floor: float) -> np.ndarr
     confidence = markers[..., 0]
     confidence = np.where(np.isfinite(confidence), confidence, 1.0)
     return np.where(present, np.clip(confidence, floor, None), 0.0)
-
-
-def _outlier_factors(
-    tree: KinematicTree,
-    measured: np.ndarray,
-    lengths: np.ndarray,
-    prior: np.ndarray,
-    settings: FitSettings,
-) -> np.ndarray:
-    """``(P, J)`` weight factors: < 1 for joints off both the body and the motion."""
-    with np.errstate(invalid="ignore", divide="ignore"):
-        error = np.abs(link_lengths(measured, tree.parents) - lengths) / lengths
-        broken = error > settings.outlier_threshold  # (P, J) by child joint
-        suspect = broken | ((broken.astype(float) @ tree.parent_of) > 0)
-        distance = np.linalg.norm(measured - prior, axis=-1)
-        factor = np.minimum(1.0, (settings.outlier_distance / distance) ** 2)
-    return np.where(suspect & np.isfinite(factor), factor, 1.0)

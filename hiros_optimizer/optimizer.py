@@ -45,6 +45,7 @@ from hiros_optimizer.stacking import LayoutRows, output_skeletons, stack_frame
 
 __all__ = ["Optimizer", "OptimizerParams", "PersonCalibration", "PersonProgress"]
 
+
 @dataclass
 class OptimizerParams:
     """Parameters of the optimizer node (ROS parameter names and defaults).
@@ -68,9 +69,6 @@ class OptimizerParams:
             confidence (0) still carries a usable estimate, far better than extrapolation.
         sweeps: block-coordinate sweeps of the fit (its starting point).
         refinements: Gauss-Newton steps of the fit.
-        compiled: run the fit as a numba kernel (:mod:`hiros_optimizer.compiled`; the same
-            results as the numpy version to ~1e-11 m, ~40x faster; compiled on the first fit
-            and cached on disk), else with numpy.
         track_timeout: seconds unseen after which a track's prediction is forgotten (its
             calibration is kept).
         export_calibration: node only: write the person calibrations on each new one.
@@ -89,7 +87,6 @@ class OptimizerParams:
     confidence_floor: float = 0.1
     sweeps: int = 1
     refinements: int = 2
-    compiled: bool = True
     track_timeout: float = 1.0
     export_calibration: bool = False
     load_calibration: bool = False
@@ -190,12 +187,8 @@ class _Track:
         """Take ``calibration`` (None: learn again from scratch); accepted at ``stamp_ns``."""
         self.calibration = calibration
         lengths = None if calibration is None else calibration.lengths
-        self.learning = lengths is None or bool(
-            np.isnan(lengths[self.layout.link_children]).any()
-        )
-        accepted = lengths is not None and bool(
-            np.isfinite(lengths[limb_links(self.layout)]).all()
-        )
+        self.learning = lengths is None or bool(np.isnan(lengths[self.layout.link_children]).any())
+        accepted = lengths is not None and bool(np.isfinite(lengths[limb_links(self.layout)]).all())
         if not accepted:
             self.progress.accepted_ns = None
         elif self.progress.accepted_ns is None:
@@ -235,14 +228,12 @@ class Optimizer(Accounted):
         self._settings = FitSettings(
             params.confidence_floor, params.outlier_threshold, params.outlier_distance,
             params.prior_weight, params.track_timeout, params.sweeps, params.refinements,
-            params.compiled,
         )  # fmt: skip
         self.new_calibrations: list[int] = []
         """Track ids with links learnt by the last :meth:`update` (the node exports on these)."""
         self.new_overdue: list[int] = []
         """Track ids the last :meth:`update` found not accepted within ``acceptance_timeout``."""
-        if self.params.compiled:
-            _warm_up()
+        _warm_up()
 
     # ----------------------------------------------------------------- person calibrations
 
@@ -433,9 +424,10 @@ class Optimizer(Accounted):
         fitting = [calibration is not None for calibration in calibrations]
         everyone = all(fitting)
         recording = np.flatnonzero(
-            [calibration is not None and item.track.learning for calibration, item in zip(
-                calibrations, items, strict=True
-            )]
+            [
+                calibration is not None and item.track.learning
+                for calibration, item in zip(calibrations, items, strict=True)
+            ]
         )
         if recording.size:
             memory.record(rows[recording], markers[recording], present[recording])
@@ -490,8 +482,10 @@ class Optimizer(Accounted):
             self._learn_links(memory, due)
         for item in items:
             progress = item.track.progress
-            if progress.accepted_ns is None and not progress.overdue and (
-                progress.seen_for > timeout
+            if (
+                progress.accepted_ns is None
+                and not progress.overdue
+                and (progress.seen_for > timeout)
             ):
                 progress.overdue = True
                 self.new_overdue.append(item.track_id)
@@ -509,8 +503,8 @@ class Optimizer(Accounted):
         for row, item in enumerate(due):
             track = item.track
             old = track.calibration
-            known = np.zeros(layout.n_joints, dtype=bool) if old is None else np.isfinite(
-                old.lengths
+            known = (
+                np.zeros(layout.n_joints, dtype=bool) if old is None else np.isfinite(old.lengths)
             )
             kept = np.full(layout.n_joints, np.nan) if old is None else old.lengths
             steady = np.where(statistics.learnt[row], statistics.lengths[row], np.nan)
@@ -543,7 +537,7 @@ def _warm_up() -> None:
     rows = np.array([memory.allocate()])
     markers = np.zeros((1, layout.n_joints, 20))
     present = np.ones((1, layout.n_joints), dtype=bool)
-    settings = FitSettings(0.1, 0.2, 0.15, 0.01, 1.0, 1, 2, compiled=True)
+    settings = FitSettings(0.1, 0.2, 0.15, 0.01, 1.0, 1, 2)
     memory.learn(rows, np.zeros(1, dtype=np.int64), markers, present, settings=settings)
     lengths = np.where(memory.tree.has_parent, 0.1, np.nan)[None]
     memory.fit(rows, np.ones(1, dtype=np.int64), markers, present, lengths, settings=settings)

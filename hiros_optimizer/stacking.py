@@ -9,7 +9,6 @@ frame's skeletons usually come as one stack already (the previous stage made the
 
 from __future__ import annotations
 
-import sys
 from collections import Counter
 from dataclasses import dataclass
 
@@ -97,14 +96,14 @@ def stack_frame(
 def _unusable_rows(markers: np.ndarray, present: np.ndarray) -> np.ndarray:
     """``(n,)`` True where a present joint's position is not finite.
 
-    The compiled check when numba is loaded (the stages load it), else numpy: at a few people
-    the five numpy calls cost more than the rest of the stacking.
+    A compiled kernel (``hiros_optimizer.compiled.unusable_rows``; its numpy statement is
+    ``test/support/optimizer_reference.py``'s): at a few people the five numpy calls it takes
+    cost more than the rest of the stacking. Imported at the first call, as the stages load
+    their kernels (``hiros_core.compiled`` states the rule).
     """
-    if "numba" in sys.modules:
-        from hiros_optimizer.compiled import unusable_rows
+    from hiros_optimizer.compiled import unusable_rows
 
-        return unusable_rows(markers, present)
-    return (present & ~np.isfinite(markers[..., 1:4]).all(axis=-1)).any(axis=-1)
+    return unusable_rows(markers, present)
 
 
 def output_skeletons(

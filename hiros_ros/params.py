@@ -41,7 +41,7 @@ from rclpy.exceptions import ParameterUninitializedException
 from rclpy.parameter import Parameter
 
 from hiros_core.errors import ConfigError
-from hiros_core.parameters import build_params, dataclass_defaults
+from hiros_core.parameters import build_params, dataclass_defaults, removed_parameters
 
 T = TypeVar("T")
 
@@ -62,10 +62,23 @@ RANGES: dict[str, tuple[float, float]] = {
     # fractions, probabilities and weights in [0, 1]
     **dict.fromkeys(
         (
-            "agreement_smoothing", "best_fraction", "blend", "confidence_floor", "flip_misread",
-            "flip_prior", "flip_prior_back", "flipped_weight", "joint_weight_decay",
-            "max_ambiguity", "min_calibrated_fraction", "min_confidence", "min_link_presence",
-            "min_peak", "occlusion_weight", "position_smoothing", "replace_margin",
+            "agreement_smoothing",
+            "best_fraction",
+            "blend",
+            "confidence_floor",
+            "flip_misread",
+            "flip_prior",
+            "flip_prior_back",
+            "flipped_weight",
+            "joint_weight_decay",
+            "max_ambiguity",
+            "min_calibrated_fraction",
+            "min_confidence",
+            "min_link_presence",
+            "min_peak",
+            "occlusion_weight",
+            "position_smoothing",
+            "replace_margin",
             "view_weight_min",
         ),
         (0.0, 1.0),
@@ -73,9 +86,17 @@ RANGES: dict[str, tuple[float, float]] = {
     # counts of at least one
     **dict.fromkeys(
         (
-            "association_frames", "butterworth_order", "confidence_levels", "id_stride",
-            "max_correspondences", "max_frames", "min_cameras", "min_hits", "ransac_checks",
-            "ransac_iterations", "replace_after",
+            "association_frames",
+            "butterworth_order",
+            "confidence_levels",
+            "id_stride",
+            "max_correspondences",
+            "max_frames",
+            "min_cameras",
+            "min_hits",
+            "ransac_checks",
+            "ransac_iterations",
+            "replace_after",
         ),
         (1, _INT_MAX),
     ),
@@ -102,8 +123,7 @@ VALUE_ALIASES: dict[str, dict[str, str]] = {"filter": {"statespace": "kalman"}}
 SHARED_DESCRIPTIONS: dict[str, str] = {
     "input_topic": "Topic the node subscribes to (SkeletonGroup).",
     "output_topic": "Topic the node publishes its result on (SkeletonGroup).",
-    "input_qos": "QoS of the input: sensor_data (best effort: hears every publisher) or "
-    "reliable.",
+    "input_qos": "QoS of the input: sensor_data (best effort: hears every publisher) or reliable.",
     "camera_qos": "QoS of the camera topics: sensor_data (best effort: hears every publisher) "
     "or reliable.",
     "cameras": "Camera names: the topic namespaces (/<camera>/...).",
@@ -348,6 +368,15 @@ class NodeParameters(Generic[T]):
         }
         self.params: T = self._build(self._values)
         node.add_on_set_parameters_callback(self.on_set)
+        self._warn_removed()
+
+    def _warn_removed(self) -> None:
+        """Log each given parameter hiros no longer has (rclpy ignores it: never declared)."""
+        given = getattr(self._node, "_parameter_overrides", {})
+        for name, reason in removed_parameters(given).items():
+            self._node.get_logger().warning(
+                f"parameter {name} is ignored ({reason}); remove it from the parameter file"
+            )
 
     def _alias_values(self, aliases: dict[str, str]) -> dict[str, Any]:
         """Declare each alias (unset unless given) and return the values given as defaults."""

@@ -1,10 +1,10 @@
-"""Compiled (numba) filling of a drawn frame's MarkerArray, same bytes as the numpy form.
+"""Compiled (numba) filling of a drawn frame's MarkerArray, the general encoding's bytes.
 
 ``markers.encode_skeleton_markers`` fills a cached message template per frame shape: the
 points of every sphere and line list, the label positions and the stamps. In numpy that is a
 template copy, three scatters and a dozen small calls for the label heights (~60 us per frame
-for four people); here it is one call. Imported only when numba is loaded already (the
-pipeline's stages load it), like ``hiros_core.compiled``.
+for four people); here it is one call, always (``hiros_core.compiled`` states the rule;
+``markers`` imports this module at its first call).
 """
 
 from __future__ import annotations

@@ -6,13 +6,12 @@ across frames. Markers carry a short lifetime: a person who leaves disappears by
 ``encode_skeleton_markers`` gives the CDR bytes of ``encode_marker_array(skeleton_markers(...))``
 without building the columns: for a frame shaped like an earlier one (same people, layout and
 visible joints), the earlier message is the template and only the stamps, the label positions
-and the points change, each in one numpy scatter.
+and the points change, in one compiled call.
 """
 
 from __future__ import annotations
 
 import colorsys
-import sys
 from dataclasses import dataclass, fields
 from functools import lru_cache
 
@@ -169,13 +168,7 @@ _DRAWING_FIELDS = tuple(f.name for f in fields(VisualizerParams))  # not a subcl
 
 
 def warm_up() -> None:
-    """Load the compiled drawing now (numba's disk cache, ~30 ms), not on the first frame.
-
-    Only where numba is loaded already, as ``encode_skeleton_markers`` takes its compiled
-    path only then.
-    """
-    if "numba" not in sys.modules:
-        return
+    """Load the compiled drawing now (numba's disk cache, ~30 ms), not on the first frame."""
     encode_skeleton_markers(warm_up_group(), "warm_up")
 
 
@@ -185,9 +178,12 @@ def encode_skeleton_markers(
     """``encode_marker_array(skeleton_markers(group, namespace, params))``, faster.
 
     Frames of a known shape (people, their layout and visible joints, frame, namespace,
-    parameters) cost a template copy and three scatters; others go the general way once and
-    become the template of their shape.
+    parameters) fill the template of their shape in one compiled call
+    (``hiros_visualizer.compiled.draw``); others go the general way once and become the
+    template of their shape. The general way is the reference its test holds it equal to.
     """
+    from hiros_visualizer.compiled import draw, visible_joints
+
     params = params or VisualizerParams()
     skeletons = group.skeletons
     sec, nanosec = divmod(group.stamp_ns, 1_000_000_000)
@@ -204,14 +200,7 @@ def encode_skeleton_markers(
     else:
         rows, column = np.array([s.positions for s in skeletons], dtype=float), 0
         present = np.array([s.marker_present for s in skeletons])
-    positions = rows[..., column : column + 3]  # (P, J, 3)
-    compiled = "numba" in sys.modules
-    if compiled:
-        from hiros_visualizer.compiled import draw, visible_joints
-
-        visible = visible_joints(rows, column, present)
-    else:
-        visible = present & np.isfinite(positions).all(axis=2)
+    visible = visible_joints(rows, column, present)
     ids = tuple(s.id for s in skeletons)
     drawing = tuple(getattr(params, name) for name in _DRAWING_FIELDS)
     key = (group.frame_id, namespace, drawing, layout, ids, visible.tobytes())
@@ -221,16 +210,8 @@ def encode_skeleton_markers(
             _DRAW_PLANS.clear()
         data = skeleton_markers(group, namespace, params)
         plan = _DRAW_PLANS[key] = _draw_plan(data, encode_marker_array(data), visible, layout)
-    if compiled:
-        out = draw(plan.template, rows, column, visible, plan.points, plan.sources, plan.tops,
-                   plan.stamps, sec, nanosec)  # fmt: skip
-    else:
-        out = plan.template.copy()
-        out.view("<f8")[plan.points] = positions.reshape(-1)[plan.sources]
-        out.view("<f8")[plan.tops] = _label_tops(positions, visible).ravel()
-        stamps = out.view("<i4")
-        stamps[plan.stamps] = sec
-        stamps[plan.stamps + 1] = nanosec
+    out = draw(plan.template, rows, column, visible, plan.points, plan.sources, plan.tops,
+               plan.stamps, sec, nanosec)  # fmt: skip
     return out[LEAD : LEAD + plan.size].tobytes()
 
 

@@ -17,7 +17,7 @@ from hiros_core.codec import decode_group
 from hiros_ros import HirosNode, run_node
 from hiros_ros.node import pipeline_qos
 from hiros_ros.tf import tf_message
-from hiros_visualizer.markers import VisualizerParams
+from hiros_visualizer.markers import VisualizerParams, warm_up
 from hiros_visualizer.overlays import Drawing, OverlayParams, joint_transforms
 
 LIVE = tuple(f.name for f in (*fields(VisualizerParams), *fields(OverlayParams)))
@@ -40,6 +40,7 @@ class VisualizerNode(HirosNode):
     def __init__(self) -> None:
         super().__init__("visualizer")
         self.declare_params(VisualizerNodeParams, live=LIVE)
+        warm_up()  # the compiled drawing, before the first frame
         self._tf = self.create_publisher(TFMessage, "/tf", 100) if self.params.joint_tf else None
         for topic in self.params.topics:
             publisher = self.create_raw_publisher(MarkerArray, f"{topic}/markers", pipeline_qos())

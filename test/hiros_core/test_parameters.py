@@ -7,7 +7,7 @@ from pathlib import Path
 import pytest
 
 from hiros_core.errors import ConfigError
-from hiros_core.parameters import config_path, load_config_defaults
+from hiros_core.parameters import RemovedParameterWarning, config_path, load_config_defaults
 
 
 @pytest.mark.parametrize(
@@ -33,3 +33,18 @@ def test_a_parameter_file_for_all_nodes_is_read(tmp_path: Path) -> None:
     shipped = config_path("pipeline")
     assert shipped is not None
     assert load_config_defaults("pipeline", shipped) == load_config_defaults("pipeline")
+
+
+def test_an_old_file_setting_a_removed_parameter_loads_with_a_warning(tmp_path: Path) -> None:
+    path = tmp_path / "params.yaml"
+    path.write_text(
+        "pipeline:\n  ros__parameters:\n    filter: {compiled: true, max_gap: 0.4}\n"
+        "    optimizer: {compiled: false}\n"
+    )
+    with pytest.warns(RemovedParameterWarning) as caught:
+        values = load_config_defaults("pipeline", path)
+    assert values == {"filter.max_gap": 0.4}
+    assert sorted(str(w.message).split(": parameter ")[1].split()[0] for w in caught) == [
+        "filter.compiled",
+        "optimizer.compiled",
+    ]

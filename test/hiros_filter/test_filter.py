@@ -1,12 +1,14 @@
+import filter_reference
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from scipy.signal import butter, sosfilt
 from scipy.spatial.transform import Rotation
 
 from hiros_core.errors import ConfigError
 from hiros_core.model import Skeleton, SkeletonGroup, sec_to_ns
 from hiros_filter import Filter, FilterParams
-from hiros_filter.estimators import slerp
 
 RATE = 30.0
 J = 32
@@ -161,13 +163,13 @@ def test_a_stamp_far_ahead_does_not_stop_the_track_for_good():
 def test_slerp():
     start = Rotation.identity().as_quat()
     end = Rotation.from_rotvec([0.0, 0.0, 1.0]).as_quat()
-    np.testing.assert_allclose(slerp(start, end, 0.0), start, atol=1e-12)
+    np.testing.assert_allclose(filter_reference.slerp(start, end, 0.0), start, atol=1e-12)
     np.testing.assert_allclose(
-        slerp(start, -end, 1.0), end, atol=1e-12
+        filter_reference.slerp(start, -end, 1.0), end, atol=1e-12
     )  # q and -q are one rotation
-    half = Rotation.from_quat(slerp(start, end, 0.5))
+    half = Rotation.from_quat(filter_reference.slerp(start, end, 0.5))
     np.testing.assert_allclose(half.as_rotvec(), [0.0, 0.0, 0.5], atol=1e-12)
-    np.testing.assert_allclose(slerp(start, start, 0.3), start)
+    np.testing.assert_allclose(filter_reference.slerp(start, start, 0.3), start)
 
 
 def test_params_are_checked():
@@ -192,27 +194,34 @@ def test_adaptive_noise_follows_a_movement_start_sooner():
 def test_process_noise_is_filterpys():
     from filterpy.common import Q_continuous_white_noise
 
-    from hiros_filter.estimators import _process_noise
-
     for dt in (0.001, 0.033333, 0.1, 0.5):
         expected = Q_continuous_white_noise(dim=3, dt=dt, spectral_density=300.0)
-        np.testing.assert_array_equal(_process_noise(dt, 300.0), expected)
+        np.testing.assert_array_equal(filter_reference.process_noise(dt, 300.0), expected)
 
 
-def test_masked_correction_matches_pairwise_update():
+@settings(max_examples=40, deadline=None)
+@given(
+    seed=st.integers(0, 2**32 - 1),
+    slots=st.sampled_from([[3, 1, 4], [1, 2, 3], [0]]),
+    max_noise_scale=st.sampled_from([1.0, 10.0]),
+)
+def test_kalman_step_equals_predict_then_masked_correction(seed, slots, max_noise_scale):
+    """Scattered and consecutive slots (a block: numpy's views), partial and full masks."""
     from hiros_filter.estimators import KalmanBank
 
-    rng = np.random.default_rng(3)
-    banks = [KalmanBank((5, 6), 300.0, 0.01, max_noise_scale=10.0) for _ in range(2)]
-    slots = np.array([3, 1, 4])  # not one block: the scattered path
+    rng = np.random.default_rng(seed)
+    slots = np.array(slots)
+    banks = [KalmanBank((5, 6), 300.0, 0.01, max_noise_scale=max_noise_scale) for _ in range(2)]
+    start = rng.normal(size=(len(slots) * 6, 3))
     for bank in banks:
-        bank.reset(np.repeat(slots, 6), np.tile(np.arange(6), 3), rng.normal(size=(18, 3)) * 0)
-        bank.predict(slots, np.array([0.03, 0.04, 0.05]))
-    measured = rng.normal(scale=0.05, size=(3, 6, 3))
-    mask = rng.random((3, 6)) > 0.3
-    banks[0].correct(slots, mask, np.where(mask[..., None], measured, np.nan))
-    index, joints = np.nonzero(mask)
-    banks[1].update(slots[index], joints, measured[index, joints])
-    np.testing.assert_allclose(banks[0].x, banks[1].x, rtol=1e-12, atol=1e-15)
-    np.testing.assert_allclose(banks[0].P, banks[1].P, rtol=1e-12, atol=1e-15)
-    np.testing.assert_array_equal(banks[0].scale, banks[1].scale)
+        bank.reset(np.repeat(slots, 6), np.tile(np.arange(6), len(slots)), start)
+    for _ in range(3):
+        dt = rng.uniform(0.01, 0.1, len(slots))
+        measured = rng.normal(scale=0.05, size=(len(slots), 6, 3))
+        mask = rng.random((len(slots), 6)) > rng.choice([0.0, 0.3])
+        filter_reference.predict(banks[0], slots, dt)
+        filter_reference.correct(banks[0], slots, mask, np.where(mask[..., None], measured, np.nan))
+        banks[1].step(slots, dt, mask, measured)
+        np.testing.assert_allclose(banks[1].x, banks[0].x, rtol=1e-12, atol=1e-15)
+        np.testing.assert_allclose(banks[1].P, banks[0].P, rtol=1e-12, atol=1e-15)
+        np.testing.assert_allclose(banks[1].scale, banks[0].scale, rtol=1e-12)

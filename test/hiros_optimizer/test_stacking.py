@@ -1,10 +1,13 @@
 from collections import Counter
 
 import numpy as np
+import optimizer_reference
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from hiros_core.layouts import AZURE_KINECT
 from hiros_core.model import Skeleton, SkeletonRows, stack_rows
-from hiros_optimizer.stacking import output_skeletons, stack_frame
+from hiros_optimizer.stacking import _unusable_rows, output_skeletons, stack_frame
 
 J = AZURE_KINECT.n_joints
 
@@ -46,3 +49,15 @@ def test_output_skeletons_are_views_of_the_rows_when_frames_agree_else_built_one
     mixed = output_skeletons(people, [7, 8, 9], copies)
     assert [s.src_frame for s in mixed] == ["world", "elsewhere", "world"]
     assert np.shares_memory(mixed[1].markers, copies.markers)
+
+
+@settings(max_examples=50, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), people=st.integers(0, 5))
+def test_unusable_rows_equal_the_numpy_statement(seed, people):
+    """Non-finite values in and out of the position columns, of present and absent joints."""
+    rng = np.random.default_rng(seed)
+    markers = rng.normal(size=(people, J, 20))
+    markers[rng.random(markers.shape) < 0.02] = rng.choice([np.nan, np.inf, -np.inf])
+    present = rng.random((people, J)) < 0.7
+    want = optimizer_reference.unusable_rows(markers, present)
+    assert np.array_equal(_unusable_rows(markers, present), want)

@@ -87,6 +87,21 @@ def test_command_line_overrides_and_no_file_is_read(make_node, tmp_path, monkeyp
     assert declare_params(node, DemoParams).params.cameras == ["k01", "k02"]
 
 
+def test_a_removed_parameter_given_is_ignored_with_a_warning(make_node, monkeypatch) -> None:
+    node = make_node("-p", "compiled:=true", "-p", "rate:=20.0")
+    logged = []
+
+    class Logger:  # the node's logger, keeping what it is told
+        def warning(self, message: str) -> None:
+            logged.append(message)
+
+    monkeypatch.setattr(node, "get_logger", Logger)
+    assert declare_params(node, DemoParams).params.rate == 20.0
+    assert not node.has_parameter("compiled")
+    assert len(logged) == 1
+    assert "parameter compiled is ignored" in logged[0]
+
+
 def test_descriptors_tell_description_range_and_read_only(node) -> None:
     declare_params(node, DemoParams, live=LIVE)
     rate, name, order, gate, choice = node.describe_parameters(

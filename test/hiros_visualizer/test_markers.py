@@ -1,7 +1,4 @@
-import sys
-
 import numpy as np
-import pytest
 
 from hiros_core.codec import encode_marker_array
 from hiros_core.layouts import AZURE_KINECT, KINECT_V2
@@ -54,12 +51,7 @@ def test_mixed_layouts_and_empty_groups():
     assert len(skeleton_markers(SkeletonGroup(0, "w", []))) == 0
 
 
-@pytest.mark.parametrize("compiled", [True, False])
-def test_encoded_markers_equal_the_general_encoding_frame_after_frame(compiled, monkeypatch):
-    import numba  # noqa: F401 - the compiled filler runs when numba is loaded
-
-    if not compiled:
-        monkeypatch.delitem(sys.modules, "numba")
+def test_encoded_markers_equal_the_general_encoding_frame_after_frame():
     rng = np.random.default_rng(5)
     params = VisualizerParams(joint_size=0.03)
     people = [person(4, skeleton_id=3), person(5, skeleton_id=8)]
