@@ -15,8 +15,10 @@ SDKs gave them or swapped, whichever fits), then the median over the frames of c
 every candidate shares. The decision:
 
 - the lag the motion prefers and the one the poses prefer agree: taken;
-- the motion cannot decide (the runner-up correlates ``max_ambiguity`` as well or more) and
-  the poses prefer one lag by ``min_lag_margin``: the poses' lag is taken;
+- the motion cannot decide (the runner-up correlates ``max_ambiguity`` as well or more
+  over the whole recording, and the best lag does not correlate better window by window:
+  :func:`~hiros_calib.sync.contest_candidates`) and the poses prefer one lag by
+  ``min_lag_margin``: the poses' lag is taken;
 - the motion decides but the poses clearly prefer another lag: the motion's lag is kept and
   the pair is flagged as doubtful;
 - neither can decide: the pair is refused, listing the candidate lags.
@@ -42,7 +44,7 @@ from hiros_calib.extrinsics import (
     relative_error,
     second_half,
 )
-from hiros_calib.sync import CameraClock, PairOffset
+from hiros_calib.sync import CONTEST_DECISIVE_T, CameraClock, PairOffset
 from hiros_calib.tracks import BodyTrack
 from hiros_core.geometry import RigidTransform
 
@@ -208,7 +210,7 @@ def settle_lag(
             return kept
     by_fit = sorted(range(len(fits)), key=lambda k: fits[k].residual_m)
     motion_ratio = float(pair.candidates[1, 1] / pair.candidates[0, 1]) if len(fits) > 1 else 0.0
-    ambiguous = motion_ratio >= max_ambiguity
+    ambiguous = motion_ratio >= max_ambiguity and not _motion_decides(pair)
     best = by_fit[0]
     margin = _margin(fits, best)
     chosen, flag = 0, ""
@@ -232,6 +234,15 @@ def settle_lag(
     if flag:
         settled.quality["flagged"] = flag
     return settled
+
+
+def _motion_decides(pair: PairOffset) -> bool:
+    """Whether the best lag correlates better than every other one window by window.
+
+    See :func:`~hiros_calib.sync.contest_candidates`: the whole-recording correlations of
+    two lags may be alike while every window prefers one of them.
+    """
+    return float(pair.quality.get("motion_window_t", 0.0)) >= CONTEST_DECISIVE_T
 
 
 def _keep_prior(
@@ -305,9 +316,15 @@ def _undecided(
         else f"{f.lag:+.2f} s (correlation {f.correlation:.2f}, no fit)"
         for f in fits
     )
+    lead = pair.quality.get("motion_window_t")
+    windows = (
+        f", window by window the best leads by only t = {lead:.1f} (need {CONTEST_DECISIVE_T:.0f})"
+        if lead is not None
+        else ""
+    )
     reason = (
         f"the lag is ambiguous: the motion repeats, so lags {listed} correlate alike "
-        f"(within {max_ambiguity:.0%}), and the skeletons fit none of them "
+        f"(within {max_ambiguity:.0%}){windows}, and the skeletons fit none of them "
         f"{min_lag_margin:.2f}x better than the others. Record a stretch of motion that "
         "does not repeat (walk across the room, turn, move each arm differently), or give "
         "--max-offset to leave the other lags out"

@@ -156,6 +156,8 @@ def _check_poses(
                 reasons[name].append(text)
     for name, camera in cameras.items():
         _final_pose_spread(name, camera, tolerances, reasons[name])
+        if not reasons[name]:
+            _combined_rotation(name, camera, tolerances, reasons[name])
 
 
 def _uncertainty(
@@ -222,6 +224,31 @@ def _lag_figures(cameras: dict[str, CameraCalibration], pair: PairOffset) -> Non
         margin = figures.get("time_lag_fit_margin")
         if current is None or (_number(margin) > _number(current)):
             quality.update(figures)
+
+
+def _combined_rotation(
+    name: str, camera: CameraCalibration, tolerances: LoopTolerances, reasons: list[str]
+) -> None:
+    """A reason when the rotation checks, each within tolerance, together are not.
+
+    The pair poses' split halves, the final pose's split halves and the loop's miss are
+    three separate signs of how far the rotation is pinned down. Each may stay below its
+    tolerance while all three are sizeable, as with one person gesturing on the spot before
+    two cameras; their root sum of squares is then taken as the rotation's uncertainty and
+    compared with ``rotation_deg``.
+    """
+    parts = [
+        max(_number(camera.quality.get(key, 0.0)), 0.0)
+        for key in ("pose_uncertainty_deg", "pose_split_deg", "loop_rotation_deg")
+    ]
+    combined = float(np.sqrt(np.sum(np.square(parts))))
+    camera.quality["pose_combined_deg"] = round(combined, 3)
+    if combined > tolerances.rotation_deg:
+        reasons.append(
+            f"the pose of {name} is doubtful: its split halves and its loop together put its "
+            f"rotation's uncertainty at {combined:.1f} deg (pairs' halves {parts[0]:.1f}, "
+            f"the final pose's halves {parts[1]:.1f}, loop {parts[2]:.1f} deg)"
+        )
 
 
 def _number(value: Any) -> float:

@@ -51,6 +51,7 @@ __all__ = [
     "SyncParams",
     "clock_epochs",
     "close_loops",
+    "contest_candidates",
     "estimate_pair_offset",
     "solve_clocks",
     "synchronise",
@@ -913,6 +914,82 @@ def _windows(tau: float, pairs: list[_RefinePair], params: SyncParams) -> np.nda
     return np.array(rows).reshape(-1, 4)
 
 
+CONTEST_WINDOW = 5.0
+"""Seconds per window when a pair's candidate lags are compared window by window."""
+
+CONTEST_MIN_WINDOWS = 6
+"""Fewest windows both lags must share for their comparison to count."""
+
+CONTEST_DECISIVE_T = 4.0
+"""Paired t-statistic at which the best lag's lead over another is taken as decisive."""
+
+WINDOW_REACH = 0.03
+"""How far (s) a window's lag may lie from the lag found over the whole overlap."""
+
+
+def contest_candidates(
+    pair: PairOffset,
+    tracks_a: list[BodyTrack],
+    tracks_b: list[BodyTrack],
+    params: SyncParams,
+    work: _TrackWork | None = None,
+) -> None:
+    """Compare the pair's best candidate lag with each other one, window by window.
+
+    One repetition away, a repeated motion can correlate over the whole recording nearly as
+    well as at the true lag; window by window it cannot: at the true lag the two cameras see
+    the same motion in every window, while repetitions differ in speed and form, so the other
+    lag matches some windows well and others badly. Per window of ``CONTEST_WINDOW`` s
+    (camera a's clock) each lag's refined correlation is taken as a Fisher z; the best lag's
+    lead over another is the paired t-statistic of those differences over the windows both
+    cover. Sets the pair's quality ``motion_window_t``, the smallest lead over the other
+    candidates (0 when a candidate shares fewer than ``CONTEST_MIN_WINDOWS`` windows with
+    the best), which :func:`~hiros_calib.lags.settle_lag` reads as the motion deciding.
+    Motion that repeats exactly leaves every lead near 0, and nothing is decided.
+    """
+    if not pair.ok or len(pair.candidates) < 2 or not pair.body_pairs:
+        return
+    work = work if work is not None else _TrackWork(params)
+    sig_a, sig_b = work.signatures(tracks_a), work.signatures(tracks_b)
+    pairs = [
+        _RefinePair.build(work.spline(sig_a[i]), work.spline(sig_b[j])) for i, j in pair.body_pairs
+    ]
+    start = min(p.a.start for p in pairs)
+    end = max(p.a.end for p in pairs)
+    count = max(1, round((end - start) / CONTEST_WINDOW))
+    bounds = list(itertools.pairwise(np.linspace(start, end, count + 1)))
+    scores = [
+        _window_scores(_refine(float(lag), 0.1, pairs)[0], pairs, bounds)
+        for lag in pair.candidates[:, 0]
+    ]
+    leads = [_paired_t(scores[0] - other) for other in scores[1:]]
+    pair.quality["motion_window_t"] = round(min(leads), 2)
+
+
+def _window_scores(
+    tau: float, pairs: list[_RefinePair], bounds: list[tuple[float, float]]
+) -> np.ndarray:
+    """Per window the Fisher z of the refined correlation near ``tau`` (NaN: too little data)."""
+    scores = np.full(len(bounds), np.nan)
+    for k, (lo, hi) in enumerate(bounds):
+        if sum(p.overlap(tau, (lo, hi)) for p in pairs) >= 0.5 * (hi - lo):
+            correlation = _refine(tau, WINDOW_REACH, pairs, (lo, hi))[1]
+            scores[k] = np.arctanh(np.clip(correlation, -0.99, 0.99))
+    return scores
+
+
+def _paired_t(differences: np.ndarray) -> float:
+    """The one-sample t-statistic of the finite differences (0 with too few of them)."""
+    shared = differences[np.isfinite(differences)]
+    if len(shared) < CONTEST_MIN_WINDOWS:
+        return 0.0
+    spread = float(np.std(shared, ddof=1))
+    mean = float(np.mean(shared))
+    if spread == 0.0:
+        return math.copysign(math.inf, mean) if mean else 0.0
+    return mean / (spread / math.sqrt(len(shared)))
+
+
 # --------------------------------------------------------------------------- N cameras
 
 
@@ -1088,6 +1165,7 @@ def synchronise(
                 tracks[a], tracks[b], params, camera_a=a, camera_b=b, prior=prior, work=work
             )
             repin = functools.partial(_repin, tracks[a], tracks[b], pair, work)
+            contest_candidates(pair, tracks[a], tracks[b], params, work)
             if settle is not None:
                 pair = settle(pair, repin)
             pairs.append(_unless_uncorrelated(pair, params))

@@ -3,7 +3,14 @@ import pytest
 
 from hiros_calib.calibrator import Calibrator, CalibratorParams
 from hiros_calib.signature import pose_signature, select_joints
-from hiros_calib.sync import PairOffset, SyncParams, estimate_pair_offset, solve_clocks, synchronise
+from hiros_calib.sync import (
+    PairOffset,
+    SyncParams,
+    contest_candidates,
+    estimate_pair_offset,
+    solve_clocks,
+    synchronise,
+)
 from hiros_calib.tracks import extract_tracks
 from hiros_core.errors import CalibrationError
 from hiros_core.layouts import AZURE_KINECT
@@ -137,3 +144,35 @@ def test_a_repeated_walk_is_refused_as_ambiguous_unless_the_lag_is_pinned():
     narrow = Calibrator(CalibratorParams(reference="k01", max_offset=3.0))
     estimate = narrow.calibrate(recording.camera_groups)
     assert estimate.cameras["k02"].time_offset == pytest.approx(truth, abs=0.01)
+
+
+def _contest(tracks, pair, lags):
+    pair.candidates = np.array([[lag, 0.5] for lag in lags])
+    contest_candidates(pair, tracks["a"], tracks["b"], SyncParams())
+    return pair.quality["motion_window_t"]
+
+
+def test_windows_tell_the_true_lag_from_one_that_correlates_alike_overall(make_scene):
+    # motion that never repeats exactly: every 5 s window correlates better at the true lag
+    scene = make_scene(angles_deg=(0.0, 90.0), duration=40.0, offsets=(0.0, 0.4123), seed=3)
+    found = _tracks(scene)
+    tracks = {"a": found["cam0"], "b": found["cam1"]}
+    pair = estimate_pair_offset(tracks["a"], tracks["b"], SyncParams())
+    assert pair.ok, pair.reason
+    assert _contest(tracks, pair, [pair.offset, pair.offset + 2.5]) >= 4.0
+    assert _contest(tracks, pair, [pair.offset + 2.5, pair.offset]) < 0.0  # the wrong one first
+
+
+def test_windows_do_not_decide_between_exact_repetitions():
+    # the simulator's walk loops one clip exactly: one repetition away every window fits alike
+    recording = simulate(SimParams(n_cameras=2, n_people=1, duration=40.0, seed=2))
+    found = _tracks(recording)
+    tracks = {"a": found["k01"], "b": found["k02"]}
+    pair = estimate_pair_offset(tracks["a"], tracks["b"], SyncParams())
+    assert pair.ok, pair.reason
+    truth = recording.calibration.cameras["k02"].time_offset
+    repetitions = pair.candidates[np.abs(pair.candidates[:, 0] - truth) > 1.0, 0]
+    assert len(repetitions) >= 1
+    for other in repetitions[:2]:  # the nearest, sharing enough windows with the true lag
+        assert abs(_contest(tracks, pair, [truth, other])) < 4.0
+        assert abs(_contest(tracks, pair, [other, truth])) < 4.0
