@@ -100,7 +100,7 @@ from hiros_sim.bvh import read_bvh
 from hiros_sim.mapping import map_to_azure
 
 if TYPE_CHECKING:
-    from hiros_sim.simulate import SimParams
+    from hiros_sim.params import SimParams
 
 __all__ = [
     "NoiseFit",
@@ -570,7 +570,8 @@ def simulated_errors(
     where the body faces the camera within 60°), is the take's situation: one camera 3.3 m
     from one person playing the take's own Xsens motion.
     """
-    from hiros_sim.simulate import SimParams, simulate
+    from hiros_sim.params import SimParams
+    from hiros_sim.simulate import simulate
 
     if params is None:
         params = SimParams(

@@ -17,8 +17,8 @@ from types import MappingProxyType
 from typing import TYPE_CHECKING
 
 from hiros_core.errors import ConfigError
+from hiros_sim.params import SimParams, default_bvh_files
 from hiros_sim.shared import bandai_files
-from hiros_sim.simulate import SimParams, default_bvh_files
 
 if TYPE_CHECKING:
     from collections.abc import Mapping

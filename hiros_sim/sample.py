@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from hiros_sim.simulate import SimParams
+from hiros_sim.params import SimParams
 
 __all__ = ["sample_params"]
 

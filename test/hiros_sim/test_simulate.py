@@ -6,7 +6,7 @@ import pytest
 from hiros_core.errors import ConfigError
 from hiros_core.layouts import AZURE_KINECT
 from hiros_sim import CONFIDENCE_OF_LEVEL, SimParams, simulate
-from hiros_sim.simulate import bumped_pose
+from hiros_sim.sdk import bumped_pose
 
 IDX = AZURE_KINECT.index
 SHORT = SimParams(n_cameras=3, n_people=3, duration=8.0, seed=3)
