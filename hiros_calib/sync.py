@@ -942,13 +942,17 @@ def contest_candidates(
     lag matches some windows well and others badly. Per window of ``CONTEST_WINDOW`` s
     (camera a's clock) each lag's refined correlation is taken as a Fisher z; the best lag's
     lead over another is the paired t-statistic of those differences over the windows both
-    cover. Sets the pair's quality ``motion_window_t``, the smallest lead over the other
-    candidates (0 when a candidate shares fewer than ``CONTEST_MIN_WINDOWS`` windows with
-    the best), which :func:`~hiros_calib.lags.settle_lag` reads as the motion deciding.
-    Motion that repeats exactly leaves every lead near 0, and nothing is decided.
+    cover. Where the whole-recording correlations are alike (the runner-up's within
+    ``max_ambiguity`` of the best's), sets the pair's quality ``motion_window_t``, the
+    smallest lead over the other candidates (0 when a candidate shares fewer than
+    ``CONTEST_MIN_WINDOWS`` windows with the best), which
+    :func:`~hiros_calib.lags.settle_lag` reads as the motion deciding. Motion that repeats
+    exactly leaves every lead near 0, and nothing is decided.
     """
     if not pair.ok or len(pair.candidates) < 2 or not pair.body_pairs:
         return
+    if pair.candidates[1, 1] < params.max_ambiguity * pair.candidates[0, 1]:
+        return  # the whole recording decides already
     work = work if work is not None else _TrackWork(params)
     sig_a, sig_b = work.signatures(tracks_a), work.signatures(tracks_b)
     pairs = [
@@ -958,10 +962,11 @@ def contest_candidates(
     end = max(p.a.end for p in pairs)
     count = max(1, round((end - start) / CONTEST_WINDOW))
     bounds = list(itertools.pairwise(np.linspace(start, end, count + 1)))
-    scores = [
-        _window_scores(_refine(float(lag), 0.1, pairs)[0], pairs, bounds)
+    lags = [
+        pair.offset if abs(lag - pair.offset) < 0.1 else _refine(float(lag), 0.1, pairs)[0]
         for lag in pair.candidates[:, 0]
-    ]
+    ]  # the pair's own lag is refined already
+    scores = [_window_scores(lag, pairs, bounds) for lag in lags]
     leads = [_paired_t(scores[0] - other) for other in scores[1:]]
     pair.quality["motion_window_t"] = round(min(leads), 2)
 
