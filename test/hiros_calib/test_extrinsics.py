@@ -114,7 +114,8 @@ def test_no_common_view_refuses():
 
 def test_frames_kept_grow_with_the_recording():
     """A long recording keeps frames in proportion to its length, up to ``max_frames``."""
-    from hiros_calib.extrinsics import Correspondences, _frame_budget
+    from hiros_calib.extrinsics import Correspondences
+    from hiros_calib.extrinsics.pair_pose import _frame_budget
 
     def pairs(seconds, rate=30.0):
         times = np.arange(0.0, seconds, 1.0 / rate)

@@ -1,0 +1,69 @@
+"""The parameters of the pose estimation."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+from hiros_calib.signature import DEFAULT_JOINTS
+
+__all__ = ["ExtrinsicsParams"]
+
+
+@dataclass
+class ExtrinsicsParams:
+    """Parameters of the pose estimation (same names as the ``calib`` node's)."""
+
+    joints: list[str] = field(default_factory=lambda: list(DEFAULT_JOINTS))
+    """Joints whose distances identify a person across cameras (see signature.py)."""
+    max_signature_mismatch: float = 0.1
+    """Largest median signature difference (m) for two tracks to be the same person."""
+    min_common_time: float = 2.0
+    """Two tracks must be seen together this long (s) to be paired (short ghosts are not)."""
+    association_frames: int = 300
+    """Common instants (evenly subsampled) over which two tracks' signatures are compared."""
+    pose_joints: list[str] = field(default_factory=list)
+    """Joints used as correspondences; empty = every joint of the layout (more joints
+    average out more of the SDK's fixed per-joint errors)."""
+    max_interpolation_gap: float = 0.1
+    """Camera b's frames around an instant must be closer than this (s) to interpolate."""
+    inlier_threshold: float = 0.25
+    """Largest distance (m) for a joint correspondence to count as an inlier; the working
+    threshold adapts to the data's spread (``inlier_sigmas`` times the robust scale)."""
+    inlier_sigmas: float = 3.0
+    """Inliers lie within this many robust residual scales (median residual / 1.54)."""
+    frame_outlier_ratio: float = 2.5
+    """Frames whose median residual exceeds this times the typical one are left out (an
+    SDK that took the back for the front moves every limb)."""
+    ransac_iterations: int = 400
+    """Minimal samples tried per camera pair."""
+    ransac_checks: int = 1000
+    """Correspondences (random) each RANSAC sample is scored on."""
+    loss: str = "soft_l1"
+    """Robust loss of the refinements (``soft_l1``, ``huber``, ``cauchy`` or ``linear``), on
+    the length of each joint's 3D residual."""
+    loss_scale: float = 0.0
+    """Residual (m) where the robust loss starts to flatten; 0 = the data's robust scale."""
+    joint_offset_rounds: int = 3
+    """Rounds of estimating the fixed per-person, per-joint disagreement between two
+    cameras' SDKs alternately with the poses (0: assume the SDKs agree on average)."""
+    offset_shrinkage: float = 30.0
+    """Samples' worth of pull towards 0 on each joint offset, so short tracks stay sane."""
+    max_correspondences: int = 200000
+    """Joint correspondences per camera pair kept for the refinements (evenly subsampled);
+    the default keeps every joint of the frames kept: on the simulator, keeping a fifth of
+    them gave about 6 % more rotation error."""
+    frame_weights: bool = True
+    """Weight each frame by the inverse of its residual variance (the SDKs' error changes
+    with the view; on the simulator about 4 % less rotation error than equal weights)."""
+    frames_per_minute: float = 1000.0
+    """Frames (body pairs at one instant) per camera pair and minute of recording kept for
+    the pose, evenly subsampled. The SDK's errors are correlated over about 0.2 s, so at 30 Hz
+    neighbouring frames add little information; but a count that does not grow with the
+    recording wastes a long one (on the simulator, 3 minutes: 0.34 deg with 1000 frames in
+    all, 0.28-0.30 deg with 1000 a minute; 1 minute: no better with 3000)."""
+    max_frames: int = 10000
+    """At most this many frames per camera pair, whatever the length (bounds the cost)."""
+    min_correspondences: int = 30
+    """Fewer usable correspondences than this and the pair gives no pose."""
+    seed: int = 0
+    """Random seed of RANSAC, for repeatable results."""
