@@ -17,7 +17,6 @@ import numpy as np
 __all__ = [
     "BodyLayout",
     "CameraTable",
-    "DirectionSettings",
     "FuseSettings",
     "Fusion",
     "MergedFrame",
@@ -43,7 +42,6 @@ class CameraTable(NamedTuple):
     """What the fusion knows of each camera, by camera index."""
 
     positions: np.ndarray  # (K, 3) world positions, NaN: unknown
-    factors: np.ndarray  # (K,) agreement weights
 
 
 class TrackDetections(NamedTuple):
@@ -54,7 +52,6 @@ class TrackDetections(NamedTuple):
     table: np.ndarray  # (M, C) slots, -1: padding
     ages: np.ndarray  # (M, C) seconds from the detection to the output time
     cameras: np.ndarray  # (M, C, 3) the detection's camera position, NaN: unknown
-    agreement: np.ndarray  # (M, C) the camera's agreement factor
 
 
 class Observations(NamedTuple):
@@ -79,7 +76,6 @@ class BodyLayout(NamedTuple):
     pointers: np.ndarray  # (k, 2) joint pairs pointing forward: ankle -> foot, head -> nose
     has_front: bool  # whether the layout names what the facing direction needs
     groups: np.ndarray  # (J,) limb of each joint: 0 torso, then one per subtree off the torso
-    order: np.ndarray  # (J,) joints with every parent before its children
     link_parents: np.ndarray  # the layout's links' parent joints
     link_children: np.ndarray  # and child joints (= link ids)
 
@@ -94,8 +90,6 @@ class WeightSettings(NamedTuple):
     staleness_scale: float
     depth_gain: float
     flipped_weight: float
-    view_weight_min: float
-    view_power: float
     oblique_gain: float
     occlusion_radius: float
     occlusion_weight: float
@@ -111,21 +105,11 @@ class RobustSettings(NamedTuple):
     limb_residuals: bool
 
 
-class DirectionSettings(NamedTuple):
-    """``fuse_directions`` and its parameters."""
-
-    enabled: bool
-    iterations: int
-    eps: float
-    parents: np.ndarray  # (J,) the links rebuilt: parents, -1 at the joints not rebuilt
-
-
 class FuseSettings(NamedTuple):
     """Every parameter of one fusion."""
 
     weights: WeightSettings
     robust: RobustSettings
-    directions: DirectionSettings
 
 
 class Fusion(NamedTuple):
@@ -135,7 +119,6 @@ class Fusion(NamedTuple):
     final: np.ndarray  # (M, C, J) each detection's final weights
     confidence: np.ndarray  # (M, J) weighted mean confidences
     velocity: np.ndarray  # (M, J, 3) weighted mean velocities
-    disagreement: np.ndarray  # (M, C) mean capped distance to the fused skeleton, NaN: none
 
 
 class MergedFrame(NamedTuple):
@@ -149,6 +132,4 @@ class MergedFrame(NamedTuple):
     links: np.ndarray  # link rows (``model.link_rows``')
     link_present: np.ndarray
     confidences: np.ndarray  # (M,) skeleton confidences
-    camera_totals: np.ndarray  # (K,) sum of each camera's detections' disagreements
-    camera_counts: np.ndarray  # (K,) and their number
     oriented: bool  # whether a selected joint has an orientation (averaged outside)

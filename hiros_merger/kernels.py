@@ -2,7 +2,7 @@
 
 A merged frame holds a few tracks of a few detections of 32 joints: numpy's per-call overhead
 dominated. ``merge`` gathers the selected stored detections by track, ``fuse`` weighs and
-fuses them (the maths: ``weights.py``, ``robust.py``, ``directions.py``; stated whole in
+fuses them (the maths: ``weights.py``, ``robust.py``; stated whole in
 numpy in ``test/support/merger_reference.py``, which a property test holds ``fuse`` to), and
 ``merge`` turns the result into output rows. Sums over cameras run in camera order, sums over
 joints pairwise as numpy's are, so results do not depend on how the work is split.
@@ -21,8 +21,7 @@ from numba import njit
 
 from hiros_core import compiled
 from hiros_core.compiled import _link_rows, refresh_stale_caches
-from hiros_merger import directions, numerics, robust, weights
-from hiros_merger.directions import follow_directions
+from hiros_merger import numerics, robust, weights
 from hiros_merger.kernel_args import (
     BodyLayout,
     CameraTable,
@@ -33,13 +32,7 @@ from hiros_merger.kernel_args import (
     TrackDetections,
 )
 from hiros_merger.numerics import finite3, pairwise_sum
-from hiros_merger.robust import (
-    disagreement,
-    final_weights,
-    robust_mean,
-    weighted_means,
-    weighted_median,
-)
+from hiros_merger.robust import final_weights, robust_mean, weighted_means, weighted_median
 from hiros_merger.weights import detections_at, facing_weights, known_cameras, occluded
 
 __all__ = ["fuse", "merge"]
@@ -56,10 +49,8 @@ def fuse(detections: TrackDetections, settings: FuseSettings, body: BodyLayout) 
        where the layout names the joints of a front) and, with two tracks or more, the
        occlusion factor (``occluded``, where a camera is known);
     4. the robust mean from the median (``robust_mean``), its final weights
-       (``final_weights``), the weighted mean confidences and velocities
-       (``weighted_means``) and each detection's ``disagreement``;
-    5. with ``settings.directions.enabled``, the links along the cameras' robust directions
-       (``follow_directions``).
+       (``final_weights``) and the weighted mean confidences and velocities
+       (``weighted_means``).
     """
     weighting = settings.weights
     n_tracks = len(detections.table)
@@ -79,12 +70,10 @@ def fuse(detections: TrackDetections, settings: FuseSettings, body: BodyLayout) 
             seen.weight,
             weighting.occlusion_weight,
         )
-    residual, limb, peak = robust_mean(seen, body.groups, settings.robust, fused)
+    _, limb, peak = robust_mean(seen, body.groups, settings.robust, fused)
     final = final_weights(seen.weight, limb, peak, settings.robust)
     confidence, velocity = weighted_means(final, seen.confidences, seen.velocities)
-    if settings.directions.enabled:
-        fused = follow_directions(seen, final, fused, body, settings.directions)
-    return Fusion(fused, final, confidence, velocity, disagreement(residual))
+    return Fusion(fused, final, confidence, velocity)
 
 
 @njit(cache=True, error_model="numpy")
@@ -111,14 +100,13 @@ def arrange(tracks: np.ndarray, selected: np.ndarray) -> tuple[np.ndarray, np.nd
 def by_track(
     stored: StoredDetections, table: np.ndarray, out_ns: int, cameras: CameraTable
 ) -> TrackDetections:
-    """The ``table``'s detections with their age (s), camera position and agreement factor.
+    """The ``table``'s detections with their age (s) and camera position.
 
-    Padding: age 0, position NaN (unknown camera), factor 1.
+    Padding: age 0, position NaN (unknown camera).
     """
     n_tracks, n_slots = table.shape
     ages = np.zeros((n_tracks, n_slots))
     where = np.full((n_tracks, n_slots, 3), np.nan)
-    agreement = np.ones((n_tracks, n_slots))
     for m in range(n_tracks):
         for c in range(n_slots):
             s = table[m, c]
@@ -126,8 +114,7 @@ def by_track(
                 camera = stored.cameras[s]
                 ages[m, c] = (out_ns - stored.stamps[s]) * 1e-9
                 where[m, c] = cameras.positions[camera]
-                agreement[m, c] = cameras.factors[camera]
-    return TrackDetections(stored.rows, stored.present, table, ages, where, agreement)
+    return TrackDetections(stored.rows, stored.present, table, ages, where)
 
 
 @njit(cache=True, error_model="numpy")
@@ -165,23 +152,6 @@ def output_rows(fusion: Fusion) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 
 
 @njit(cache=True, error_model="numpy")
-def camera_errors(
-    disagreement: np.ndarray, table: np.ndarray, cameras: np.ndarray, n_cameras: int
-) -> tuple[np.ndarray, np.ndarray]:
-    """Per camera index, the sum (in track order) and count of its detections' disagreements."""
-    totals = np.zeros(n_cameras)
-    counts = np.zeros(n_cameras, dtype=np.int64)
-    n_tracks, n_slots = table.shape
-    for m in range(n_tracks):
-        for c in range(n_slots):
-            s = table[m, c]
-            if s >= 0 and not math.isnan(disagreement[m, c]):
-                totals[cameras[s]] += disagreement[m, c]
-                counts[cameras[s]] += 1
-    return totals, counts
-
-
-@njit(cache=True, error_model="numpy")
 def any_orientation(rows: np.ndarray, present: np.ndarray, selected: np.ndarray, n: int) -> bool:
     """Whether a present joint (of the first ``n``) of a ``selected`` slot has an orientation."""
     for s in selected:
@@ -207,13 +177,12 @@ def merge(  # noqa: PLR0917 - one output's inputs
     """One output: ``fuse`` the ``selected`` stored slots at ``out_ns``, as output rows.
 
     The output rows are ``output_rows``', their links ``model.link_rows``' over the layout's
-    links, each camera's disagreement totals ``camera_errors``'.
+    links.
     """
     track_ids, table = arrange(stored.tracks, selected)
     fusion = fuse(by_track(stored, table, out_ns, cameras), settings, body)
     rows, present, skeleton = output_rows(fusion)
     links, link_present = _link_rows(rows, present, body.link_parents, body.link_children)
-    totals, counts = camera_errors(fusion.disagreement, table, stored.cameras, len(cameras.factors))
     oriented = any_orientation(stored.rows, stored.present, selected, len(body.groups))
     return MergedFrame(
         track_ids,
@@ -224,11 +193,9 @@ def merge(  # noqa: PLR0917 - one output's inputs
         links,
         link_present,
         skeleton,
-        totals,
-        counts,
         oriented,
     )
 
 
 # The kernels above call those of these modules (numba's cache sees only this file's edits).
-refresh_stale_caches(globals(), compiled, numerics, weights, robust, directions)
+refresh_stale_caches(globals(), compiled, numerics, weights, robust)

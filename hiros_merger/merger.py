@@ -21,9 +21,6 @@ weight each camera by confidence, distance and view; the product form is ours)::
         × flipped                         ``flipped_weight`` if the detection's feet and nose
                                           point backwards (a front/back flip)
         × occlusion                       another person's torso on the camera's ray
-        × agreement(c)                    1 / (1 + (e_c / agreement_scale)²), e_c the camera's
-                                          recent mean distance to the fused skeletons
-                                          (1 when agreement_scale is 0)
         × staleness                       1 / (1 + (Δt / staleness_scale)²)
 
 then the robust mean multiplies by a Cauchy weight ``1 / (1 + (r / outlier_scale)²)`` of each
@@ -61,7 +58,6 @@ from hiros_merger import kernels
 from hiros_merger.kernel_args import (
     BodyLayout,
     CameraTable,
-    DirectionSettings,
     FuseSettings,
     RobustSettings,
     StoredDetections,
@@ -89,26 +85,16 @@ class MergerParams:
         confidence_power: exponent of the SDK confidence in the weight.
         confidence_floor: smallest confidence used (a NONE joint still counts a little).
         depth_gain: per metre; the depth weight is ``(1 + depth_gain · depth)^-2``.
-        view_weight_min: weight of a camera behind the person; facing it gives 1, the weight is
-            ``max(view_weight_min, ((1 + cos θ) / 2)^view_power)``; 1 turns it off (the
-            default: the back view is as precise as the front, ``oblique_gain`` weighs the
-            side views; flips have ``flipped_weight``).
-        view_power: exponent of the view weight.
-        oblique_gain: the view weight is further divided by ``(1 + oblique_gain · |sin θ|)²``:
-            a body seen from the side has its limbs along the camera's noisy depth axis
-            (0 turns it off).
+        oblique_gain: the view weight is ``1 / (1 + oblique_gain · |sin θ|)²``, θ the angle
+            between the body's front and the direction to the camera: a body seen from the
+            side has its limbs along the camera's noisy depth axis, while the back view is as
+            precise as the front (flips have ``flipped_weight``). 0 turns it off.
         flipped_weight: weight factor of a detection whose feet and nose point backwards
             against the body's front (a front/back flip the tracker relabelled but whose limbs
             are still reflected).
         occlusion_radius: metres; a joint whose camera ray passes this close to another
             person's torso, in front of the joint, is occluded (0 turns the check off).
         occlusion_weight: weight factor of an occluded joint.
-        agreement_scale: metres; scale of the camera agreement weight; 0 (the default) turns
-            it off. The weight feeds back on itself: a camera's distance to a fusion its own
-            weight shapes is smallest for the camera already weighed most, so one camera comes
-            to outweigh others as good as it, and the fused person follows that camera's
-            mistakes (docs/stages-robustness.md weighs both).
-        agreement_smoothing: weight (0..1] of each new residual in a camera's running agreement.
         staleness_scale: seconds; scale of the weight of older detections.
         outlier_scale: metres; Cauchy scale of the robust mean.
         outlier_cutoff: metres; a joint farther than this from the estimate gets no weight (as
@@ -127,14 +113,6 @@ class MergerParams:
             earlier input was stamped far ahead by mistake, or its source restarted (a
             replayed recording looping). Without it every later detection would be older
             than the one kept and dropped, for good.
-        fuse_directions: after the robust mean, place each limb's joints root-outward along
-            the cameras' robust mean link directions (weighted spherical median), with the
-            fused link lengths, and shift the limb back onto its fused mean joint: the angles
-            come from a consensus of directions rather than from stitched positions.
-        direction_iterations: Weiszfeld steps on the sphere from the weighted mean direction
-            towards the weighted spherical median (0: the weighted mean direction).
-        direction_eps: radians; the spherical median's weight is ``w / max(angle, eps)``.
-        direction_torso: ``fuse_directions`` rebuilds the torso's links too (else the limbs').
 
     """
 
@@ -145,14 +123,10 @@ class MergerParams:
     confidence_power: float = 2.0
     confidence_floor: float = 0.05
     depth_gain: float = 0.33
-    view_weight_min: float = 1.0
-    view_power: float = 1.0
     oblique_gain: float = 1.0
     flipped_weight: float = 0.1
     occlusion_radius: float = 0.2
     occlusion_weight: float = 0.5
-    agreement_scale: float = 0.0
-    agreement_smoothing: float = 0.02
     staleness_scale: float = 0.05
     outlier_scale: float = 0.4
     outlier_cutoff: float = 0.4
@@ -161,19 +135,13 @@ class MergerParams:
     max_jump: float = 1.0
     limb_residuals: bool = True
     limb_cutoff: float = 0.8
-    fuse_directions: bool = False
-    direction_iterations: int = 5
-    direction_eps: float = 0.02
-    direction_torso: bool = True
 
 
 @dataclass(frozen=True)
 class _BodyAxes:
-    """A layout's joints for the fusion (``body``), and its two trees of links to rebuild."""
+    """A layout's joints for the fusion."""
 
     body: BodyLayout  # what the weights and the limbs need
-    parents: np.ndarray  # (J,) the layout's parents (-1 at the root)
-    limb_parents: np.ndarray  # (J,) parents, -1 for the torso's joints
 
     @property
     def groups(self) -> np.ndarray:
@@ -195,13 +163,6 @@ class _BodyAxes:
             [(names[a], names[b]) for a, b in pairs if a in names and b in names], dtype=np.int64
         ).reshape(-1, 2)
         has_front = neck >= 0 and bool((left >= 0).all() and (right >= 0).all())
-        parents = np.array(layout.parents, dtype=np.int64)
-        depth = np.zeros(layout.n_joints, dtype=np.int64)
-        for j in range(layout.n_joints):  # once per layout
-            k = j
-            while parents[k] >= 0:
-                k = parents[k]
-                depth[j] += 1
         body = BodyLayout(
             root=root,
             neck=neck,
@@ -211,12 +172,10 @@ class _BodyAxes:
             pointers=pointers,
             has_front=has_front,
             groups=_limbs(layout, torso),
-            order=np.argsort(depth, kind="stable").astype(np.int64),
             link_parents=np.asarray(layout.link_parents, dtype=np.intp),
             link_children=np.asarray(layout.link_children, dtype=np.intp),
         )
-        limb_parents = np.where(np.isin(np.arange(layout.n_joints), torso), -1, parents)
-        return cls(body, parents, limb_parents)
+        return cls(body)
 
 
 def _limbs(layout: Layout, torso: np.ndarray) -> np.ndarray:
@@ -261,19 +220,12 @@ def _read(bundle: type[T], params: MergerParams, **given: object) -> T:
     return bundle(**{name: kind(getattr(params, name)) for name, kind in declared.items()}, **given)
 
 
-def _fuse_settings(params: MergerParams, axes: _BodyAxes) -> FuseSettings:
+def _fuse_settings(params: MergerParams) -> FuseSettings:
     """The fusion's parameters as the kernels read them."""
     cutoff = params.limb_cutoff if params.limb_residuals else params.outlier_cutoff
-    directions = DirectionSettings(
-        enabled=bool(params.fuse_directions),
-        iterations=int(params.direction_iterations),
-        eps=float(params.direction_eps),
-        parents=axes.parents if params.direction_torso else axes.limb_parents,
-    )
     return FuseSettings(
         _read(WeightSettings, params),
         _read(RobustSettings, params, own_cutoff=float(cutoff)),
-        directions,
     )
 
 
@@ -302,8 +254,6 @@ class Merger(Accounted):
             again after ``set_params``).
         drops: reason -> count of input left out (detections; a frame is never dropped
             whole: each ``update`` is processed, see ``Accounted``).
-        agreement: camera name -> running mean distance (m) of its detections to the fused
-            skeletons.
 
     """
 
@@ -313,11 +263,9 @@ class Merger(Accounted):
         warm_up()
         self.params = params or MergerParams()
         self.drops = Drops()
-        self.agreement: dict[str, float] = {}
         self._latest = LatestDetections()
         self._cameras: dict[str, int] = {}  # camera name -> index into the arrays below
         self._camera_positions = np.empty((0, 3))  # (K, 3), NaN: unknown
-        self._camera_factors = np.empty(0)  # (K,) agreement weights of ``agreement``
         self._frame_names: dict[str, str] = {}  # calibrated frame id -> camera name
         self._frame_cameras: dict[str, int] = {}  # frame id -> camera index, as found
         self._next_tick_ns: int | None = None
@@ -330,7 +278,7 @@ class Merger(Accounted):
             self.set_calibration(calibration)
 
     def set_params(self, params: MergerParams) -> None:
-        """Fuse with ``params`` from the next update on (tracks and agreements are kept)."""
+        """Fuse with ``params`` from the next update on (the tracks are kept)."""
         self.params = params
         self._constants.clear()  # they hold the parameters (``_fusion_constants``)
 
@@ -361,7 +309,6 @@ class Merger(Accounted):
         if index is None:
             index = self._cameras[name] = len(self._cameras)
             self._camera_positions = np.vstack([self._camera_positions, np.full(3, np.nan)])
-            self._camera_factors = np.append(self._camera_factors, 1.0)
         return index
 
     def _camera_of(self, frame_id: str) -> int:
@@ -498,13 +445,12 @@ class Merger(Accounted):
         stored = StoredDetections(
             latest.rows, latest.present, latest.stamps, latest.tracks, latest.cameras
         )
-        cameras = CameraTable(self._camera_positions, self._camera_factors)
+        cameras = CameraTable(self._camera_positions)
         settings, body = self._fusion_constants(layout)
         selection = np.array(selected, dtype=np.int64)
         frame = kernels.merge(stored, selection, out_ns, cameras, settings, body)
         rows, present = frame.rows, frame.present
         links, link_present = frame.links, frame.link_present
-        self._update_agreement(frame.camera_totals, frame.camera_counts)
         if frame.oriented:
             quaternions = self._stored_orientations(frame.table, layout.n_joints)
             rows[..., 4:8] = np.where(
@@ -524,9 +470,8 @@ class Merger(Accounted):
         """
         constants = self._constants.get(layout.name)
         if constants is None:
-            params = self.params
-            axes = _axes(layout)
-            constants = self._constants[layout.name] = (_fuse_settings(params, axes), axes.body)
+            settings = _fuse_settings(self.params)
+            constants = self._constants[layout.name] = (settings, _axes(layout).body)
         return constants
 
     def _stored_orientations(self, table: np.ndarray, n_joints: int) -> np.ndarray:
@@ -534,27 +479,6 @@ class Merger(Accounted):
         latest = self._latest
         valid = (table >= 0)[..., None] & latest.present[table, :n_joints]
         return np.where(valid[..., None], latest.rows[table, :n_joints, 4:8], np.nan)
-
-    def _update_agreement(self, totals: np.ndarray, counts: np.ndarray) -> None:
-        """Fold each camera's mean joint distance to the fused skeletons into its agreement.
-
-        ``totals`` and ``counts`` per camera index: the sum (in track order) and number of
-        its detections' mean distances. A camera without a name (no frame id) has none. Its
-        weight in the next fusions is ``1 / (1 + (agreement / agreement_scale)²)`` (1 with
-        ``agreement_scale`` 0).
-        """
-        alpha = self.params.agreement_smoothing
-        scale = self.params.agreement_scale
-        totals_list, counts_list = totals.tolist(), counts.tolist()
-        for name, index in self._cameras.items():
-            count = counts_list[index]
-            if not (name and count):
-                continue
-            value = totals_list[index] / count
-            previous = self.agreement.get(name)
-            error = value if previous is None else previous + alpha * (value - previous)
-            self.agreement[name] = error
-            self._camera_factors[index] = 1.0 / (1.0 + (error / scale) ** 2) if scale > 0 else 1.0
 
 
 _WARM = False

@@ -24,9 +24,9 @@ from numba import njit
 from hiros_core.compiled import refresh_stale_caches
 from hiros_merger import numerics
 from hiros_merger.kernel_args import Observations, RobustSettings
-from hiros_merger.numerics import finite3, n_groups, pairwise_sum
+from hiros_merger.numerics import finite3, n_groups
 
-__all__ = ["disagreement", "final_weights", "robust_mean", "weighted_means", "weighted_median"]
+__all__ = ["final_weights", "robust_mean", "weighted_means", "weighted_median"]
 
 
 @njit(cache=True, error_model="numpy")
@@ -267,27 +267,6 @@ def weighted_means(
             confidence[m, j] = mean / total if total != 0 else np.nan
             weighted_mean3(velocities, final, m, j, velocity)
     return confidence, velocity
-
-
-@njit(cache=True, error_model="numpy")
-def disagreement(residual: np.ndarray) -> np.ndarray:
-    """``(M, C)`` each detection's mean finite joint distance (capped at 0.5 m), NaN: none."""
-    n_tracks, n_slots, n_joints = residual.shape
-    out = np.full((n_tracks, n_slots), np.nan)
-    capped = np.empty(n_joints)
-    for m in range(n_tracks):
-        for c in range(n_slots):
-            count = 0
-            for j in range(n_joints):
-                r = residual[m, c, j]
-                if math.isfinite(r):
-                    capped[j] = min(r, 0.5)
-                    count += 1
-                else:
-                    capped[j] = 0.0
-            if count:
-                out[m, c] = pairwise_sum(capped, n_joints) / count
-    return out
 
 
 refresh_stale_caches(globals(), numerics)  # the kernels above call numerics' kernels

@@ -5,10 +5,9 @@ velocity (``detections_at``), weighs::
 
     w = max(conf, confidence_floor)^confidence_power     (0 where the joint is not finite)
         / (1 + (age / staleness_scale)²)                  staleness
-        × agreement(c)                                    the camera's agreement factor
         × (1 + depth_gain · |p - camera|)^-2              depth, where the camera is known
         × flipped_weight                                  if the detection points backwards
-        × view(cos θ)                                     the camera's angle to the body front
+        / (1 + oblique_gain · |sin θ|)²                   θ: the camera's angle to the body front
         × occlusion_weight                                another track's torso on its ray
 
 ``facing_weights`` and ``occluded`` judge the last three against the weighted median of the
@@ -50,7 +49,7 @@ def detections_at(
     A joint's position is ``p + v · clip(age, ±max_extrapolation)`` with ``extrapolate``
     (a non-finite velocity counts 0); an absent joint or a padding slot reads as NaN. Its
     confidence is the SDK's (1 where it is not finite). The weight is the module docstring's
-    product of confidence, staleness, agreement and depth.
+    product of confidence, staleness and depth.
 
     ``known`` ``(M, C)``: whether each detection's camera position is.
     """
@@ -86,7 +85,6 @@ def detections_at(
                 if not is_finite:
                     w = 0.0
                 w = w / (1.0 + stale * stale)
-                w = w * detections.agreement[m, c]
                 if known[m, c]:
                     dx = positions[m, c, j, 0] - detections.cameras[m, c, 0]
                     dy = positions[m, c, j, 1] - detections.cameras[m, c, 1]
@@ -168,15 +166,14 @@ def view_weight(
 ) -> float:
     """The view factor of a camera at ``camera`` for a body at ``root`` facing ``front``.
 
-    ``max(view_weight_min, ((1 + cos θ) / 2)^view_power) / (1 + oblique_gain · |sin θ|)²``,
-    θ the angle between the front and the direction to the camera (NaN: undefined).
+    ``1 / (1 + oblique_gain · |sin θ|)²``, θ the angle between the front and the direction to
+    the camera (NaN: undefined).
     """
     tx, ty, tz = unit3(camera[0] - root[0], camera[1] - root[1], camera[2] - root[2])
     cosine = front[0] * tx + front[1] * ty + front[2] * tz
-    view = power((1.0 + cosine) / 2.0, settings.view_power)
-    if not math.isfinite(view):
-        return view
-    view = max(view, settings.view_weight_min)
+    if not math.isfinite(cosine):
+        return cosine
+    view = 1.0
     if settings.oblique_gain > 0:
         sine = math.sqrt(max(1.0 - cosine * cosine, 0.0))
         view = view / power(1.0 + settings.oblique_gain * sine, 2.0)

@@ -110,17 +110,18 @@ def test_confident_camera_outweighs_an_unsure_one():
     np.testing.assert_allclose(offset, 0.1 * (1 / 9) / (4 / 9 + 1 / 9), atol=1e-5)
 
 
-def test_camera_facing_the_front_outweighs_one_behind():
+def test_camera_behind_the_person_counts_as_much_as_one_in_front():
+    """The back view is as precise as the front: only side views weigh less (the random
+    pose's front is skewed a little, so the two cameras' side factors differ by < 2 %)."""
     pose = _person()  # faces +x
     calibration = _calibration({"k01": (4.0, 0.0, 1.5), "k02": (-4.0, 0.0, 1.5)})
-    params = MergerParams(outlier_scale=10.0, depth_gain=0.0, view_weight_min=0.2)
+    params = MergerParams(outlier_scale=10.0, depth_gain=0.0)
     front = _detection(pose, "k01")
     back = _detection(pose + np.array([0.0, 0.0, 0.1]), "k02")
     merged = Merger(params, calibration).update(_group([front, back])).skeletons[0]
-    offset = np.median(merged.positions[:, 2] - pose[:, 2])
-    assert 0.0 < offset < 0.03
     blind = Merger(params).update(_group([front, back])).skeletons[0]
     np.testing.assert_allclose(blind.positions[:, 2] - pose[:, 2], 0.05, atol=1e-9)
+    assert np.median(merged.positions[:, 2] - pose[:, 2]) == pytest.approx(0.05, abs=0.005)
 
 
 def test_camera_seeing_the_side_counts_less():
@@ -128,7 +129,7 @@ def test_camera_seeing_the_side_counts_less():
     to (1 + 1)^-2 = 1/4 exactly at the side; the random pose's front is skewed a little)."""
     pose = _person()  # faces +x
     calibration = _calibration({"k01": (4.0, 0.0, 1.0), "k02": (0.0, 4.0, 1.0)})
-    params = MergerParams(outlier_scale=100.0, depth_gain=0.0, view_weight_min=1.0)
+    params = MergerParams(outlier_scale=100.0, depth_gain=0.0)
     front = _detection(pose, "k01")
     side = _detection(pose + np.array([0.0, 0.0, 0.1]), "k02")
     merged = Merger(params, calibration).update(_group([front, side])).skeletons[0]
@@ -143,7 +144,7 @@ def test_occluded_joints_count_less():
     pose = _person()
     other = pose + np.array([2.0, 0.0, 0.0])  # a second person between k01 and the first one
     calibration = _calibration({"k01": (4.0, 0.0, 1.5), "k02": (0.0, 4.0, 1.5)})
-    params = MergerParams(outlier_scale=10.0, depth_gain=0.0, view_weight_min=1.0, oblique_gain=0.0)
+    params = MergerParams(outlier_scale=10.0, depth_gain=0.0, oblique_gain=0.0)
     through = _detection(pose + np.array([0.0, 0.0, 0.1]), "k01")
     clear = _detection(pose, "k02")
     group = _group(
@@ -156,7 +157,6 @@ def test_occluded_joints_count_less():
         MergerParams(
             outlier_scale=10.0,
             depth_gain=0.0,
-            view_weight_min=1.0,
             occlusion_radius=0.0,
             oblique_gain=0.0,
         ),
@@ -206,44 +206,6 @@ def test_each_input_gives_one_output_and_stale_tracks_leave():
     out = merger.update(_group([_detection(pose, "k01", track=4, t_ns=later)], later))
     assert [s.id for s in out.skeletons] == [4]
     assert merger.update(_group([], later)).skeletons == []
-
-
-def test_a_camera_that_disagrees_loses_its_agreement():
-    rng = np.random.default_rng(5)
-    pose = _person()
-    merger = Merger(MergerParams(agreement_scale=0.1))  # the weight is off by default
-    for k in range(30):
-        t = T0 + k * 33_000_000
-        views = [pose + rng.normal(0.0, 0.01, pose.shape) for _ in range(3)]
-        views[1] = views[1] + [0.0, 0.08, 0.0]
-        merger.update(_group([_detection(v, f"k0{i + 1}", t_ns=t) for i, v in enumerate(views)], t))
-    assert merger.agreement["k02"] > 2 * max(merger.agreement["k01"], merger.agreement["k03"])
-
-
-def test_agreement_scale_0_keeps_the_weight_of_the_camera_the_fusion_follows():
-    """With the agreement weight on, the camera weighed most agrees best with the fusion it
-    shapes and gains still more weight; ``agreement_scale`` 0 records the agreement but keeps
-    the weights as confidence, depth and view give them."""
-    pose = _person()
-    offsets = {"k01": [0.0, 0.1, 0.0], "k02": [0.0, -0.1, 0.0], "k03": [0.0, 0.0, 0.0]}
-
-    def fused_over(params: MergerParams) -> tuple[Merger, list[np.ndarray]]:
-        merger, out = Merger(params), []
-        for k in range(60):
-            t = T0 + k * 33_000_000
-            views = [
-                _detection(pose + o, name, t_ns=t, confidence=0.9 if name == "k01" else 0.6)
-                for name, o in offsets.items()
-            ]
-            out.append(merger.update(_group(views, t)).skeletons[0].positions)
-        return merger, out
-
-    merger, steady = fused_over(MergerParams(agreement_scale=0.0))
-    np.testing.assert_allclose(steady[-1], steady[0], atol=1e-12)
-    assert steady[0][0, 1] > pose[0, 1] + 0.01  # k01, the most confident, counts most
-    assert set(merger.agreement) == set(offsets)
-    _, fed_back = fused_over(MergerParams(agreement_scale=0.1))
-    assert fed_back[-1][0, 1] - pose[0, 1] > 1.5 * (steady[0][0, 1] - pose[0, 1])
 
 
 def test_bad_input_is_dropped_with_a_reason():
@@ -310,103 +272,6 @@ def test_a_camera_limb_is_kept_or_dropped_whole():
     per_joint = Merger(MergerParams(limb_residuals=False)).update(group).skeletons[0]
     elbow = AZURE_KINECT.index("ElbowLeft")
     assert abs(per_joint.positions[elbow, 2] - pose[elbow, 2]) > 0.01
-
-
-def _link_angle(positions: np.ndarray, other: np.ndarray, child: str) -> float:
-    """Degrees between link parent -> ``child`` of two poses."""
-    j = AZURE_KINECT.index(child)
-    p = AZURE_KINECT.parents[j]
-    a, b = positions[j] - positions[p], other[j] - other[p]
-    return float(
-        np.degrees(np.arccos(np.clip(a @ b / np.linalg.norm(a) / np.linalg.norm(b), -1, 1)))
-    )
-
-
-def _turn_shank(pose: np.ndarray, degrees: float) -> np.ndarray:
-    """The pose with the left shank (knee -> ankle -> foot) turned sideways about the knee
-    (about the forward axis x, so that the foot still points forward: not a flip)."""
-    bent = pose.copy()
-    knee = AZURE_KINECT.index("KneeLeft")
-    rotation = Rotation.from_euler("x", degrees, degrees=True)
-    for name in ("AnkleLeft", "FootLeft"):
-        j = AZURE_KINECT.index(name)
-        bent[j] = pose[knee] + rotation.apply(pose[j] - pose[knee])
-    return bent
-
-
-def test_fused_directions_follow_cameras_that_agree_on_them_when_offset():
-    """Cameras that see the same pose shifted give that pose's link directions, lengths and
-    the positions' consensus (their weighted mean position)."""
-    pose = _person()
-    shifts = {"k01": (0.05, 0.0, 0.0), "k02": (0.0, -0.04, 0.02), "k03": (-0.03, 0.03, -0.04)}
-    group = _group(
-        [
-            _detection(pose + np.array(shift), cam, confidence=confidence)
-            for (cam, shift), confidence in zip(shifts.items(), (2 / 3, 1 / 3, 2 / 3), strict=True)
-        ]
-    )
-    by_position = Merger(MergerParams()).update(group).skeletons[0].positions
-    fused = Merger(MergerParams(fuse_directions=True)).update(group).skeletons[0].positions
-    from hiros_merger.merger import _axes
-
-    groups = _axes(AZURE_KINECT).groups
-    for g in np.unique(groups):  # each limb a shifted copy of the pose
-        offset = fused[groups == g] - pose[groups == g]
-        np.testing.assert_allclose(offset, np.broadcast_to(offset[0], offset.shape), atol=1e-9)
-    np.testing.assert_allclose(fused.mean(axis=0), by_position.mean(axis=0), atol=1e-9)
-
-
-def test_one_camera_bent_limb_is_outvoted_in_direction():
-    """Two cameras see the straight shank, one sees it turned 25 degrees (not far enough for
-    the outlier cut): the fused shank follows the two, the fused positions bend it (the
-    front/back flip check is off: the turned foot may point backwards)."""
-    pose = _person()
-    bent = _turn_shank(pose, 25.0)
-    group = _group([_detection(pose, "k01"), _detection(pose, "k02"), _detection(bent, "k03")])
-    by_position = Merger(MergerParams(flipped_weight=1.0)).update(group).skeletons[0].positions
-    fused = (
-        Merger(MergerParams(fuse_directions=True, flipped_weight=1.0))
-        .update(group)
-        .skeletons[0]
-        .positions
-    )
-    assert _link_angle(by_position, pose, "AnkleLeft") > 5.0
-    assert _link_angle(fused, pose, "AnkleLeft") < 1.0
-    assert _link_angle(fused, pose, "KneeLeft") < 1e-6
-    # Lengths of the position fusion, and each limb's mean joint where the positions put it.
-    from hiros_merger.merger import _axes
-
-    groups = _axes(AZURE_KINECT).groups
-    parents = np.array(AZURE_KINECT.parents)
-    inside = (parents >= 0) & (groups[np.maximum(parents, 0)] == groups)
-    lengths = np.linalg.norm(fused - fused[np.maximum(parents, 0)], axis=1)
-    expected = np.linalg.norm(by_position - by_position[np.maximum(parents, 0)], axis=1)
-    np.testing.assert_allclose(lengths[inside], expected[inside], atol=1e-9)
-    for g in np.unique(groups):
-        np.testing.assert_allclose(
-            fused[groups == g].mean(axis=0), by_position[groups == g].mean(axis=0), atol=1e-9
-        )
-
-
-def test_fused_directions_weighted_mean_without_iterations():
-    """With no median steps, two equally weighted cameras (no Cauchy weights) give the
-    bisecting direction, where the fused positions lean to the longer shank."""
-    pose = _person()
-    views = [_turn_shank(pose, 10.0), _turn_shank(pose, -30.0)]
-    ankle, knee = AZURE_KINECT.index("AnkleLeft"), AZURE_KINECT.index("KneeLeft")
-    views[1][ankle] = pose[knee] + 1.5 * (views[1][ankle] - pose[knee])  # a longer shank
-    group = _group([_detection(view, cam) for view, cam in zip(views, ("k01", "k02"), strict=True)])
-    params = MergerParams(
-        fuse_directions=True, direction_iterations=0, flipped_weight=1.0, outlier_scale=1e6
-    )
-    fused = Merger(params).update(group).skeletons[0].positions
-    units = [(v[ankle] - v[knee]) / np.linalg.norm(v[ankle] - v[knee]) for v in views]
-    expected = pose.copy()
-    expected[ankle] = pose[knee] + units[0] + units[1]
-    assert _link_angle(fused, expected, "AnkleLeft") < 1e-6
-    by_position = Merger(MergerParams(flipped_weight=1.0, outlier_scale=1e6)).update(group)
-    by_position = by_position.skeletons[0].positions
-    assert _link_angle(by_position, expected, "AnkleLeft") > 0.1  # (the two differ)
 
 
 def test_a_frame_s_later_detection_of_a_track_and_camera_replaces_the_earlier_one():

@@ -1,7 +1,7 @@
 """The merger's fusion stated in numpy: the readable specification of ``hiros_merger.kernels.fuse``.
 
 Whole-array formulas written from the maths in ``hiros_merger/merger.py``'s docstring and the
-kernels' docstrings (``weights.py``, ``robust.py``, ``directions.py``), not from the kernels'
+kernels' docstrings (``weights.py``, ``robust.py``), not from the kernels'
 loops; ``test/hiros_merger/test_kernel_reference.py`` holds the kernel equal to it on random
 frames. Shapes: ``M`` tracks, ``C`` detections per track (padded), ``J`` joints.
 """
@@ -12,7 +12,6 @@ import numpy as np
 
 from hiros_merger.kernel_args import (
     BodyLayout,
-    DirectionSettings,
     FuseSettings,
     Fusion,
     RobustSettings,
@@ -41,9 +40,8 @@ def detections_at(
     """``(M, C, J, 3)`` positions at the output time and velocities, confidences, weights.
 
     ``p + v · clip(age, ±max_extrapolation)`` (non-finite ``v`` as 0); the weight is
-    ``max(conf, floor)^power / (1 + (age / staleness_scale)²) × agreement
-    × (1 + depth_gain · depth)^-2`` (the last where the camera is known; 0 where the
-    position is not finite).
+    ``max(conf, floor)^power / (1 + (age / staleness_scale)²) × (1 + depth_gain · depth)^-2``
+    (the last where the camera is known; 0 where the position is not finite).
     """
     table = detections.table
     valid = (table >= 0)[..., None] & detections.present[np.maximum(table, 0), :n_joints]
@@ -61,7 +59,6 @@ def detections_at(
     weight = np.maximum(confidences, settings.confidence_floor) ** settings.confidence_power
     weight = np.where(np.isfinite(positions).all(axis=-1), weight, 0.0)
     weight = weight / (1.0 + (ages / settings.staleness_scale) ** 2)[..., None]
-    weight = weight * detections.agreement[..., None]
     known = np.isfinite(detections.cameras).all(axis=-1)
     depth = np.linalg.norm(positions - detections.cameras[:, :, None], axis=-1)
     with np.errstate(invalid="ignore"):
@@ -100,8 +97,8 @@ def facing_factors(
     Up: root -> neck; front: ``side × up`` with ``side`` from the mean right to the mean left
     hip and shoulder. A detection whose forward pointers, taken across up and summed as unit
     vectors, point against the front is flipped. The view factor is
-    ``max(view_weight_min, ((1 + cos θ) / 2)^view_power) / (1 + oblique_gain · |sin θ|)²``, θ
-    between the front and the direction from the root to the camera (1 where unknown).
+    ``1 / (1 + oblique_gain · |sin θ|)²``, θ between the front and the direction from the root
+    to the camera (1 where unknown).
     """
     up = _unit(fused[:, body.neck] - fused[:, body.root])  # (M, 3)
     side = fused[:, body.left].mean(axis=1) - fused[:, body.right].mean(axis=1)
@@ -117,11 +114,8 @@ def facing_factors(
         factor = np.where(backwards, settings.flipped_weight, factor)
     towards = _unit(cameras - fused[:, None, body.root])  # (M, C, 3)
     cosine = np.einsum("mca,ma->mc", towards, front)
-    with np.errstate(invalid="ignore"):
-        view = np.maximum(((1.0 + cosine) / 2.0) ** settings.view_power, settings.view_weight_min)
-        if settings.oblique_gain > 0:
-            sine = np.sqrt(np.maximum(1.0 - cosine**2, 0.0))
-            view = view / (1.0 + settings.oblique_gain * sine) ** 2
+    sine = np.sqrt(np.maximum(1.0 - cosine**2, 0.0))
+    view = np.where(np.isfinite(cosine), 1.0 / (1.0 + settings.oblique_gain * sine) ** 2, np.nan)
     known = np.isfinite(cameras).all(axis=-1)
     return factor * np.where(known & np.isfinite(view), view, 1.0)
 
@@ -201,62 +195,6 @@ def weighted_mean(values: np.ndarray, weights: np.ndarray) -> np.ndarray:
     return _mean_or_nan(total, weights.sum(axis=1)[..., None])
 
 
-def link_direction(
-    units: np.ndarray, weights: np.ndarray, settings: DirectionSettings
-) -> np.ndarray:
-    """The weighted spherical median of ``units`` ``(C, 3)``, from their weighted mean.
-
-    Weiszfeld steps on the sphere: ``u <- normalise(Σ w u_c / max(angle(u, u_c), eps))``.
-    """
-    direction = _unit((weights[:, None] * units).sum(axis=0))
-    for _ in range(settings.iterations):
-        angle = np.arctan2(np.linalg.norm(np.cross(direction, units), axis=1), units @ direction)
-        step = ((weights / np.maximum(angle, settings.eps))[:, None] * units).sum(axis=0)
-        if not np.linalg.norm(step) > 0:
-            break
-        direction = _unit(step)
-    return direction
-
-
-def follow_directions(
-    positions: np.ndarray,
-    final: np.ndarray,
-    fused: np.ndarray,
-    body: BodyLayout,
-    settings: DirectionSettings,
-) -> np.ndarray:
-    """Each limb rebuilt root-outward along the cameras' link directions, then shifted back.
-
-    A link ``p -> j`` inside a limb keeps its fused length and takes the spherical median of
-    the cameras' unit vectors, weighted ``sqrt(final_j · final_p)`` (its fused offset where
-    no camera has it); then each limb moves so that its mean joint is the fused one.
-    """
-    groups, parents = body.groups, settings.parents
-    out = fused.copy()
-    for m in range(len(fused)):
-        for j in body.order:
-            p = parents[j]
-            if p < 0 or groups[p] != groups[j]:
-                continue
-            offset = fused[m, j] - fused[m, p]
-            length = np.linalg.norm(offset)
-            if not np.isfinite(length):
-                continue
-            vectors = positions[m, :, j] - positions[m, :, p]
-            norms = np.linalg.norm(vectors, axis=1)
-            weights = np.sqrt(final[m, :, j] * final[m, :, p])
-            seen = np.isfinite(norms) & (weights > 0) & (norms > 0)
-            if seen.any() and np.linalg.norm(weights[seen] @ vectors[seen]) > 0:
-                units = vectors[seen] / norms[seen, None]
-                offset = length * link_direction(units, weights[seen], settings)
-            out[m, j] = out[m, p] + offset
-        for g in np.unique(groups):
-            limb = (groups == g) & np.isfinite(fused[m, :, 0]) & np.isfinite(out[m, :, 0])
-            if limb.any():
-                out[m, groups == g] += (fused[m, limb] - out[m, limb]).mean(axis=0)
-    return out
-
-
 def reference_fuse(detections: TrackDetections, settings: FuseSettings, body: BodyLayout) -> Fusion:
     """``kernels.fuse`` in numpy: weights, median, facing and occlusion, robust mean, means."""
     weighting, robust = settings.weights, settings.robust
@@ -283,14 +221,9 @@ def reference_fuse(detections: TrackDetections, settings: FuseSettings, body: Bo
     for _ in range(robust.iterations):
         _, limb, peak = judged_residuals(positions, fused, body.groups, robust.limb_residuals)
         fused = weighted_mean(positions, cauchy_weights(weight, limb, peak, robust))
-    residual, limb, peak = judged_residuals(positions, fused, body.groups, robust.limb_residuals)
+    _, limb, peak = judged_residuals(positions, fused, body.groups, robust.limb_residuals)
     final = cauchy_weights(weight, limb, peak, robust)
     positive = np.where(final > 0, final, 0.0)
     confidence = _mean_or_nan((confidences * positive).sum(axis=1), positive.sum(axis=1))
     velocity = weighted_mean(velocities, final)
-    finite = np.isfinite(residual)
-    capped = np.where(finite, np.minimum(residual, 0.5), 0.0).sum(axis=2)
-    disagreement = _mean_or_nan(capped, finite.sum(axis=2))
-    if settings.directions.enabled:
-        fused = follow_directions(positions, final, fused, body, settings.directions)
-    return Fusion(fused, final, confidence, velocity, disagreement)
+    return Fusion(fused, final, confidence, velocity)
