@@ -32,6 +32,7 @@ from hiros_calib.sync import (
     SyncParams,
     synchronise,
 )
+from hiros_calib.sync.params import MIN_LAG_MARGIN
 from hiros_calib.tracks import BodyTrack, extract_tracks
 from hiros_calib.world import align_to_floor, fit_floor
 from hiros_core.calibration import Calibration, CameraCalibration
@@ -223,7 +224,7 @@ class Calibrator:
                 params,
                 repin,
                 max_ambiguity=params.max_ambiguity,
-                min_lag_margin=params.min_lag_margin,
+                min_lag_margin=MIN_LAG_MARGIN,
             )
 
         return settle

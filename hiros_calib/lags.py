@@ -18,7 +18,7 @@ every candidate shares. The decision:
 - the motion cannot decide (the runner-up correlates ``max_ambiguity`` as well or more
   over the whole recording, and the best lag does not correlate better window by window:
   :func:`~hiros_calib.sync.contest_candidates`) and the poses prefer one lag by
-  ``min_lag_margin``: the poses' lag is taken;
+  ``MIN_LAG_MARGIN``: the poses' lag is taken;
 - the motion decides but the poses clearly prefer another lag: the motion's lag is kept and
   the pair is flagged as doubtful;
 - neither can decide: the pair is refused, listing the candidate lags.
@@ -194,7 +194,7 @@ def settle_lag(
 
     ``repin(lag)`` re-estimates the pair's offset in the lobe of another candidate lag. The
     motion is ambiguous when the runner-up lag correlates ``max_ambiguity`` as well as the
-    best or more; the poses decide when one lag's fit residual is ``min_lag_margin`` times
+    best or more; the poses decide when one lag's fit residual is ``MIN_LAG_MARGIN`` times
     smaller than every other's.
     """
     if not pair.ok or len(pair.candidates) == 0:
@@ -255,7 +255,7 @@ def _keep_prior(
 
     The motion contradicted the arrival times (a more significant lag elsewhere). Arrival
     times on one receiver are rarely wrong by seconds and a chance correlation often is, so
-    the prior's lag stays unless the skeletons fit ``min_lag_margin`` times better at the
+    the prior's lag stays unless the skeletons fit ``MIN_LAG_MARGIN`` times better at the
     motion's lag. Returns None when they do (the motion's lag then stands).
     """
     prior = pair.quality["prior_lag"]

@@ -8,9 +8,9 @@
   the window still holds all the data the current one rests on (after the start or a
   recalibration), and is blended in (``blend``) once frames slide out, so the calibration
   keeps refining as data accumulate;
-- every ``check_period`` seconds, a cheap check of the last ``check_length`` seconds: with the
+- every ``check_period`` seconds, a cheap check of the last ``CHECK_LENGTH`` seconds: with the
   current calibration, the same people seen by two cameras should land on the same points.
-  When every pair a camera belongs to disagrees by more than ``moved_ratio`` times its usual
+  When every pair a camera belongs to disagrees by more than ``MOVED_RATIO`` times its usual
   residual (and ``moved_floor``), or its joints are all displaced the same way by more than
   ``moved_shift``, the camera was moved or its clock jumped: its older frames are dropped and
   it is recalibrated from ``recalibrate_after`` seconds of new data;
@@ -51,7 +51,18 @@ from hiros_core.errors import CalibrationError
 from hiros_core.geometry import RigidTransform
 from hiros_core.model import SkeletonGroup
 
-__all__ = ["EVENTS_KEPT", "MAX_FRAME_RATE", "LiveCalibrator", "LiveCalibratorParams"]
+__all__ = [
+    "AGREE_ROTATION",
+    "AGREE_TIME",
+    "AGREE_TRANSLATION",
+    "CHECK_LENGTH",
+    "EVENTS_KEPT",
+    "MAX_FRAME_RATE",
+    "MOVED_RATIO",
+    "RESTART_AFTER_BACKWARDS",
+    "LiveCalibrator",
+    "LiveCalibratorParams",
+]
 
 EVENTS_KEPT = 500
 """The newest events a :class:`LiveCalibrator` keeps. A node logs each as it comes; one that
@@ -63,6 +74,30 @@ MAX_FRAME_RATE = 120.0
 body-tracking rate we know of). The window is otherwise bounded by stamps only: a camera
 whose stamps crept forward by microseconds would fill it without end, and an estimate's
 arrays grow with it. The oldest frames beyond it leave the window (``window_over_rate``)."""
+
+
+AGREE_TIME: float = 0.02
+"""A new clock estimate within this (s) of the current one agrees with it."""
+
+AGREE_ROTATION: float = 2.0
+"""A new pose estimate within this rotation (deg) and ``AGREE_TRANSLATION`` of the current one
+agrees with it."""
+
+AGREE_TRANSLATION: float = 0.1
+"""A new pose estimate within this translation (m) and ``AGREE_ROTATION`` of the current one
+agrees with it."""
+
+CHECK_LENGTH: float = 3.0
+"""Seconds of the newest frames a check looks at."""
+
+MOVED_RATIO: float = 2.5
+"""A pair residual this many times its usual value flags a change, if it also exceeds
+``moved_floor``."""
+
+RESTART_AFTER_BACKWARDS: float = 1.0
+"""A frame stamped this many seconds before its camera's newest one starts the camera's
+buffer again (its clock restarted, or the newest frame was a glitch); a smaller step back
+is dropped as ``out_of_order``."""
 
 
 @dataclass
@@ -78,20 +113,11 @@ class LiveCalibratorParams(CalibratorParams):
     blend: float = 0.3
     """Weight of a new estimate that agrees with the current one once the window slides (1:
     replace); while the window is still filling, a new estimate replaces the current one."""
-    agree_time: float = 0.02
-    """A new clock estimate within this (s) of the current one agrees with it."""
-    agree_rotation: float = 2.0
-    """A new pose estimate within this rotation (deg) ..."""
-    agree_translation: float = 0.1
-    """... and this translation (m) of the current one agrees with it."""
     check_period: float = 1.0
     """Seconds between moved-camera checks."""
-    check_length: float = 3.0
-    """Seconds of the newest frames a check looks at."""
-    moved_ratio: float = 2.5
-    """A pair residual this many times its usual value flags a change ..."""
     moved_floor: float = 0.12
-    """... if it also exceeds this (m)."""
+    """A pair residual ``MOVED_RATIO`` times its usual value flags a change if it also exceeds
+    this (m)."""
     moved_shift: float = 0.12
     """A pair whose joints are displaced the same way by more than this (m; the length of the
     per-axis median of the residual vectors) flags a change too. A knock of 2° moves every
@@ -107,10 +133,6 @@ class LiveCalibratorParams(CalibratorParams):
     """... if it also fits the frames it came from this much better (relative drop of its
     camera's median joint distance): data that cannot pin a pose down (one person walking on
     the spot) would otherwise let a consistent but wrong estimate replace a right one."""
-    restart_after_backwards: float = 1.0
-    """A frame stamped this many seconds before its camera's newest one starts the camera's
-    buffer again (its clock restarted, or the newest frame was a glitch); a smaller step back
-    is dropped as ``out_of_order``."""
     silent_after: float = 5.0
     """Seconds without a frame from a camera before it is reported silent (an event, and in
     :meth:`LiveCalibrator.snapshot`); its calibration is kept, and its return is reported."""
@@ -143,13 +165,9 @@ def _difference(old: CameraCalibration, new: CameraCalibration) -> tuple[float, 
     return abs(old_offset - new.time_offset), angle, distance
 
 
-def _agrees(old: CameraCalibration, new: CameraCalibration, params: LiveCalibratorParams) -> bool:
+def _agrees(old: CameraCalibration, new: CameraCalibration) -> bool:
     clock, angle, distance = _difference(old, new)
-    return (
-        clock <= params.agree_time
-        and angle <= params.agree_rotation
-        and distance <= params.agree_translation
-    )
+    return clock <= AGREE_TIME and angle <= AGREE_ROTATION and distance <= AGREE_TRANSLATION
 
 
 def _clock(name: str, cam: CameraCalibration) -> CameraClock:
@@ -245,7 +263,7 @@ class LiveCalibrator(Accounted):
         of the camera's clock offset is then found by ``check`` like a clock jump.
         """
         back = frames[-1][0].stamp_ns - stamp_ns
-        if back <= self.params.restart_after_backwards * 1e9:
+        if back <= RESTART_AFTER_BACKWARDS * 1e9:
             return False
         frames.clear()
         self._since.pop(camera, None)
@@ -384,7 +402,7 @@ class LiveCalibrator(Accounted):
         if old is None or camera in self._changed:
             self._changed.discard(camera)
             self._event(now_ns, f"{camera}: calibrated", "calibrated")
-        elif _agrees(old, new, self.params):
+        elif _agrees(old, new):
             if not grown:
                 new = _blend(old, new, self.params.blend)
         elif not self._replaces(camera, old, new, grown=grown, tracks=tracks, now_ns=now_ns):
@@ -451,14 +469,14 @@ class LiveCalibrator(Accounted):
     def _outvoted(self, camera: str, new: CameraCalibration) -> bool:
         """Whether ``new`` makes ``replace_after`` disagreeing estimates that agree in a row."""
         rivals = self._rivals.setdefault(camera, [])
-        if rivals and not _agrees(rivals[-1], new, self.params):
+        if rivals and not _agrees(rivals[-1], new):
             rivals.clear()
         rivals.append(new)
         return len(rivals) >= self.params.replace_after
 
     def check(self, now_ns: int) -> bool:
         """Look for moved cameras or jumped clocks in the newest frames; True if one is found."""
-        groups, _ = self._window(self.params.check_length)
+        groups, _ = self._window(CHECK_LENGTH)
         params = self.params
         residuals = self._residuals(self._tracks(groups))
         suspicious = {
@@ -467,7 +485,7 @@ class LiveCalibrator(Accounted):
             if shift > params.moved_shift
             or (
                 distance > params.moved_floor
-                and distance > params.moved_ratio * self._baseline.get(pair, distance)
+                and distance > MOVED_RATIO * self._baseline.get(pair, distance)
             )
         }
         flagged = set()
@@ -486,9 +504,7 @@ class LiveCalibrator(Accounted):
             for camera in flagged:
                 frames = self._frames.get(camera)
                 if frames:
-                    self._since[camera] = frames[-1][0].stamp_ns - round(
-                        self.params.check_length * 1e9
-                    )
+                    self._since[camera] = frames[-1][0].stamp_ns - round(CHECK_LENGTH * 1e9)
                 self._changed.add(camera)
                 self._changed_at[camera] = now_ns
         for camera in sorted(flagged):

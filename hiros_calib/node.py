@@ -37,7 +37,7 @@ from hiros_ros.memory import release_freed_memory
 from hiros_ros.node import camera_qos
 from hiros_ros.tf import tf_message
 
-__all__ = ["LIVE", "CalibNode", "CalibNodeParams", "main"]
+__all__ = ["LIVE", "STEP_PERIOD", "CalibNode", "CalibNodeParams", "main"]
 
 LIVE = (
     "buffer_length",
@@ -45,20 +45,20 @@ LIVE = (
     "update_period",
     "blend",
     "check_period",
-    "check_length",
-    "moved_ratio",
     "moved_floor",
     "moved_shift",
     "recalibrate_after",
     "replace_after",
     "replace_margin",
     "silent_after",
-    "step_period",
     "save_file",
     "publish_tf",
 )
 """The live schedule, windows and outputs: applied while the node runs (the calibrator reads
 its parameters at every step)."""
+
+STEP_PERIOD = 0.2
+"""Seconds between the worker's looks at whether a check or an estimate is due."""
 
 
 @dataclass
@@ -86,8 +86,6 @@ class CalibNodeParams(LiveCalibratorParams):
     )
     """The driver's fixed base -> skeleton frame transform: x, y, z (m), qx, qy, qz, qw
     (default: the Azure Kinect ROS driver's camera_base -> depth_camera_link)."""
-    step_period: float = 0.2
-    """Seconds between the worker's looks at whether a check or an estimate is due."""
 
 
 def _flat_quality(quality: dict[str, Any], prefix: str) -> dict[str, Any]:
@@ -208,7 +206,7 @@ class CalibNode(HirosNode):
         self.live.update(group, self.get_clock().now().nanoseconds)
 
     def _work(self) -> None:
-        while not self._stop.wait(self.params.step_period):
+        while not self._stop.wait(STEP_PERIOD):
             try:
                 estimates = self.live.estimates
                 if self.live.step(self.get_clock().now().nanoseconds):

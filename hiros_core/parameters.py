@@ -36,8 +36,42 @@ __all__ = [
     "stage_config_defaults",
 ]
 
+_CALIB_CONSTANTS = (
+    "grid_step",
+    "refine_step",
+    "min_prior_significance",
+    "prior_contradiction",
+    "min_motion",
+    "min_sharpness",
+    "min_repeated_peak",
+    "candidate_ratio",
+    "max_candidates",
+    "best_fraction",
+    "consensus_tolerance",
+    "loop_overrule_strength",
+    "min_lag_margin",
+    "inlier_sigmas",
+    "frame_outlier_ratio",
+    "ransac_checks",
+    "joint_offset_rounds",
+    "offset_shrinkage",
+    "association_frames",
+    "agree_time",
+    "agree_rotation",
+    "agree_translation",
+    "check_length",
+    "moved_ratio",
+    "restart_after_backwards",
+    "step_period",
+)
+"""Parameters of the ``calib`` node that became constants of hiros_calib (the same name in
+capitals): the method's statistical and numerical choices, which no recording should need
+changed."""
+
 REMOVED_PARAMETERS: dict[str, str] = {
     "compiled": "the optimizer and the filter always run their compiled kernels",
+    **{name: f"hiros_calib fixes it as the constant {name.upper()}" for name in _CALIB_CONSTANTS},
+    "loss_scale": "the calibration's robust loss flattens at the data's own robust scale",
 }
 """Parameters hiros had and dropped (by name, any node): a file that still sets one loads,
 with a ``RemovedParameterWarning``, so that older parameter files keep working."""

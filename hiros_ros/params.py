@@ -63,7 +63,6 @@ RANGES: dict[str, tuple[float, float]] = {
     **dict.fromkeys(
         (
             "agreement_smoothing",
-            "best_fraction",
             "blend",
             "confidence_floor",
             "flip_misread",
@@ -86,7 +85,6 @@ RANGES: dict[str, tuple[float, float]] = {
     # counts of at least one
     **dict.fromkeys(
         (
-            "association_frames",
             "butterworth_order",
             "confidence_levels",
             "id_stride",
@@ -94,7 +92,6 @@ RANGES: dict[str, tuple[float, float]] = {
             "max_frames",
             "min_cameras",
             "min_hits",
-            "ransac_checks",
             "ransac_iterations",
             "replace_after",
         ),

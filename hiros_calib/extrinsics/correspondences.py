@@ -14,7 +14,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from hiros_calib.extrinsics.params import ExtrinsicsParams
+from hiros_calib.extrinsics.params import ASSOCIATION_FRAMES, ExtrinsicsParams
 from hiros_calib.signature import pose_signature, select_joints
 from hiros_calib.sync import CameraClock
 from hiros_calib.tracks import BodyTrack
@@ -155,7 +155,7 @@ def associate(
                 continue
             start, end = float(t_b[common[0]]), float(t_b[common[-1]])
             # a median over a few hundred instants tells people apart as well as all of them
-            common = common[subsample(len(common), params.association_frames)]
+            common = common[subsample(len(common), ASSOCIATION_FRAMES)]
             part_b = BodyTrack(tb.camera, tb.body_id, tb.layout, *_at(tb, t_b[common], params))
             sig_b = pose_signature(part_b, joints)
             w = sig_a.weights[common] * sig_b.weights

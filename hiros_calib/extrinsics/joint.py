@@ -10,7 +10,12 @@ import numpy as np
 from hiros_calib.extrinsics.correspondences import subsample
 from hiros_calib.extrinsics.halves import relative_error, second_half
 from hiros_calib.extrinsics.pair_pose import PairPose
-from hiros_calib.extrinsics.params import ExtrinsicsParams
+from hiros_calib.extrinsics.params import (
+    INLIER_SIGMAS,
+    JOINT_OFFSET_ROUNDS,
+    OFFSET_SHRINKAGE,
+    ExtrinsicsParams,
+)
 from hiros_calib.extrinsics.robust import Terms, flatten_pairs, loss_weights, robust_solve
 from hiros_core.geometry import RigidTransform
 
@@ -122,7 +127,7 @@ def solve_poses(
     Minimises ``sum rho(|T_a p_a - T_b p_b - d|^2)`` over every camera pair's correspondences
     (weights applied, reference camera fixed at the identity), starting from the poses
     chained along the most reliable pairs. ``d`` are per (person, joint) offsets, estimated
-    alternately with the poses (``joint_offset_rounds``): SDKs place a given person's joint a
+    alternately with the poses (``JOINT_OFFSET_ROUNDS``): SDKs place a given person's joint a
     few centimetres differently in each camera for the whole recording, and left unmodelled
     those fixed disagreements tilt the solution. Cameras no usable pair links to the
     reference are refused with the pairs' reasons.
@@ -146,14 +151,12 @@ def solve_poses(
         if p.ok and p.correspondences and p.camera_a in initial and p.camera_b in initial
     ]
     poses = {c: initial[c] for c in cameras if c in initial}
-    scale = params.loss_scale or float(
-        np.median([b.pair.quality["scale_m"] for b in blocks]) if blocks else 0.05
-    )
+    scale = float(np.median([b.pair.quality["scale_m"] for b in blocks]) if blocks else 0.05)
     if unknown:
-        for round_index in range(params.joint_offset_rounds + 1):
+        for round_index in range(JOINT_OFFSET_ROUNDS + 1):
             if round_index:
                 for block in blocks:
-                    block.update_offsets(poses, scale, params.offset_shrinkage, params.loss)
+                    block.update_offsets(poses, scale, OFFSET_SHRINKAGE, params.loss)
             poses = robust_solve(
                 poses, unknown, [b.terms() for b in blocks], loss=params.loss, scale=scale
             )
@@ -241,7 +244,7 @@ def _pose_quality(
     joint = np.concatenate([b.joint for b in mine])
     offsets = np.concatenate([np.linalg.norm(b.offsets, axis=1) for b in mine])
     scale = float(np.median(residual)) / 1.54
-    inliers = residual < min(params.inlier_threshold, params.inlier_sigmas * scale)
+    inliers = residual < min(params.inlier_threshold, INLIER_SIGMAS * scale)
     rms = np.sqrt(np.bincount(joint[inliers], residual[inliers] ** 2, len(names))
                   / np.maximum(np.bincount(joint[inliers], None, len(names)), 1))  # fmt: skip
     return {

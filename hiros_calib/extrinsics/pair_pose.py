@@ -18,7 +18,12 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from hiros_calib.extrinsics.correspondences import Correspondences, subsample
-from hiros_calib.extrinsics.params import ExtrinsicsParams
+from hiros_calib.extrinsics.params import (
+    FRAME_OUTLIER_RATIO,
+    INLIER_SIGMAS,
+    RANSAC_CHECKS,
+    ExtrinsicsParams,
+)
 from hiros_calib.extrinsics.robust import (
     Terms,
     flatten_pairs,
@@ -104,7 +109,7 @@ def _ransac(
         np.cross(sample_b[:, 1] - sample_b[:, 0], sample_b[:, 2] - sample_b[:, 0]), axis=1
     )
     rotation, translation = kabsch_batch(sample_a, sample_b)
-    check = rng.choice(n, size=min(n, params.ransac_checks), replace=False)
+    check = rng.choice(n, size=min(n, RANSAC_CHECKS), replace=False)
     moved = np.einsum("hij,nj->hni", rotation, points_b[check]) + translation[:, None]
     residual = np.linalg.norm(moved - points_a[check][None], axis=2)
     score = ((residual < params.inlier_threshold) * weights[check][None]).sum(axis=1)
@@ -236,7 +241,7 @@ def estimate_pair_pose(
         points_b[sub],
         w[sub],
         pose,
-        scale=params.loss_scale or scale,
+        scale=scale,
         params=params,
     )
     chosen_a, chosen_b, weights, choice = _choose_view(c, pose)
@@ -300,7 +305,7 @@ def _trusted(
     """Inlier mask of the correspondences and the robust residual scale (m).
 
     The scale is the median residual over 1.54 (the median length of a 3D Gaussian vector
-    of unit sigma per axis); frames whose median residual is ``frame_outlier_ratio`` times
+    of unit sigma per axis); frames whose median residual is ``FRAME_OUTLIER_RATIO`` times
     the median of all frames are left out whole.
     """
     residual = np.linalg.norm(pose.apply(points_b) - points_a, axis=1)
@@ -311,8 +316,8 @@ def _trusted(
     per_frame = median_rows(table, valid)
     with np.errstate(all="ignore"):
         typical = float(np.nanmedian(per_frame))
-    good_frame = per_frame <= params.frame_outlier_ratio * typical
+    good_frame = per_frame <= FRAME_OUTLIER_RATIO * typical
     in_good = good_frame[frame]
     scale = float(np.median(residual[in_good])) / 1.54 if in_good.any() else typical
-    threshold = min(params.inlier_threshold, params.inlier_sigmas * scale)
+    threshold = min(params.inlier_threshold, INLIER_SIGMAS * scale)
     return in_good & (residual < threshold), scale

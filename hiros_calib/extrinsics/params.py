@@ -1,4 +1,8 @@
-"""The parameters of the pose estimation."""
+"""The parameters of the pose estimation, and the method's constants.
+
+``ExtrinsicsParams`` holds what a user may tune (the node's parameters of the same names);
+the constants below are the method's statistical and numerical choices.
+"""
 
 from __future__ import annotations
 
@@ -6,7 +10,36 @@ from dataclasses import dataclass, field
 
 from hiros_calib.signature import DEFAULT_JOINTS
 
-__all__ = ["ExtrinsicsParams"]
+__all__ = [
+    "ASSOCIATION_FRAMES",
+    "FRAME_OUTLIER_RATIO",
+    "INLIER_SIGMAS",
+    "JOINT_OFFSET_ROUNDS",
+    "OFFSET_SHRINKAGE",
+    "RANSAC_CHECKS",
+    "ExtrinsicsParams",
+]
+
+
+ASSOCIATION_FRAMES: int = 300
+"""Common instants (evenly subsampled) over which two tracks' signatures are compared."""
+
+INLIER_SIGMAS: float = 3.0
+"""Inliers lie within this many robust residual scales (median residual / 1.54)."""
+
+FRAME_OUTLIER_RATIO: float = 2.5
+"""Frames whose median residual exceeds this times the typical one are left out (an
+SDK that took the back for the front moves every limb)."""
+
+RANSAC_CHECKS: int = 1000
+"""Correspondences (random) each RANSAC sample is scored on."""
+
+JOINT_OFFSET_ROUNDS: int = 3
+"""Rounds of estimating the fixed per-person, per-joint disagreement between two
+cameras' SDKs alternately with the poses (0: assume the SDKs agree on average)."""
+
+OFFSET_SHRINKAGE: float = 30.0
+"""Samples' worth of pull towards 0 on each joint offset, so short tracks stay sane."""
 
 
 @dataclass
@@ -19,8 +52,6 @@ class ExtrinsicsParams:
     """Largest median signature difference (m) for two tracks to be the same person."""
     min_common_time: float = 2.0
     """Two tracks must be seen together this long (s) to be paired (short ghosts are not)."""
-    association_frames: int = 300
-    """Common instants (evenly subsampled) over which two tracks' signatures are compared."""
     pose_joints: list[str] = field(default_factory=list)
     """Joints used as correspondences; empty = every joint of the layout (more joints
     average out more of the SDK's fixed per-joint errors)."""
@@ -28,26 +59,12 @@ class ExtrinsicsParams:
     """Camera b's frames around an instant must be closer than this (s) to interpolate."""
     inlier_threshold: float = 0.25
     """Largest distance (m) for a joint correspondence to count as an inlier; the working
-    threshold adapts to the data's spread (``inlier_sigmas`` times the robust scale)."""
-    inlier_sigmas: float = 3.0
-    """Inliers lie within this many robust residual scales (median residual / 1.54)."""
-    frame_outlier_ratio: float = 2.5
-    """Frames whose median residual exceeds this times the typical one are left out (an
-    SDK that took the back for the front moves every limb)."""
+    threshold adapts to the data's spread (``INLIER_SIGMAS`` times the robust scale)."""
     ransac_iterations: int = 400
     """Minimal samples tried per camera pair."""
-    ransac_checks: int = 1000
-    """Correspondences (random) each RANSAC sample is scored on."""
     loss: str = "soft_l1"
     """Robust loss of the refinements (``soft_l1``, ``huber``, ``cauchy`` or ``linear``), on
     the length of each joint's 3D residual."""
-    loss_scale: float = 0.0
-    """Residual (m) where the robust loss starts to flatten; 0 = the data's robust scale."""
-    joint_offset_rounds: int = 3
-    """Rounds of estimating the fixed per-person, per-joint disagreement between two
-    cameras' SDKs alternately with the poses (0: assume the SDKs agree on average)."""
-    offset_shrinkage: float = 30.0
-    """Samples' worth of pull towards 0 on each joint offset, so short tracks stay sane."""
     max_correspondences: int = 200000
     """Joint correspondences per camera pair kept for the refinements (evenly subsampled);
     the default keeps every joint of the frames kept: on the simulator, keeping a fifth of

@@ -3,14 +3,14 @@
 Method (Eichler et al., Sensors 2022, section 3.2, extended):
 
 1. Every body track gets a camera-independent :mod:`~hiros_calib.signature`, resampled on a
-   common grid of camera-clock multiples of ``grid_step``; for the coarse search its time
+   common grid of camera-clock multiples of ``GRID_STEP``; for the coarse search its time
    derivative is used, which whitens the slow posture changes and sharpens the peak.
 2. For a camera pair, every pair of body tracks (one per camera) gives a normalised
    cross-correlation curve over all lags at once (FFT; channels pooled: the sum of
    per-channel covariances over the square root of the summed variances).
 3. Consensus: curves whose peak is high and sharp (robust z-score of the peak over the
    curve, the role of Eichler's coefficient of variation) vote for their peak lag, the best
-   ``best_fraction`` choose the winning lag and every good curve near it joins.
+   ``BEST_FRACTION`` choose the winning lag and every good curve near it joins.
 4. Sub-frame refinement: a parabola through the pooled curve's peak, then the lag that
    maximises the pooled correlation of the cubic-spline interpolated signatures, searched as
    a continuous variable, so 30 Hz streams give millisecond offsets. Both signatures are

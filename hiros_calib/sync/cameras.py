@@ -11,7 +11,7 @@ from hiros_calib.sync.clock import CameraClock, PairOffset, Settle
 from hiros_calib.sync.contest import contest_candidates
 from hiros_calib.sync.loops import close_loops, overrule_weak_pairs, unless_uncorrelated
 from hiros_calib.sync.pair import estimate_pair_offset
-from hiros_calib.sync.params import SyncParams
+from hiros_calib.sync.params import GRID_STEP, SyncParams
 from hiros_calib.sync.solve import clock_epochs, solve_clocks
 from hiros_calib.sync.work import TrackWork
 from hiros_calib.tracks import BodyTrack
@@ -36,7 +36,7 @@ def synchronise(
     """
     cameras = list(tracks)
     arrival = arrival_offsets or {}
-    step = params.grid_step
+    step = GRID_STEP
     longest = max(
         (math.floor(t.end / step) - math.ceil(t.start / step) + 1 for ts in tracks.values()
          for t in ts),
@@ -57,8 +57,8 @@ def synchronise(
                 pair = settle(pair, repin)
             pairs.append(unless_uncorrelated(pair, params))
             repins.append(repin)
-    pairs = close_loops(pairs, repins, params)
-    pairs = overrule_weak_pairs(pairs, params)
+    pairs = close_loops(pairs, repins)
+    pairs = overrule_weak_pairs(pairs)
     return solve_clocks(cameras, reference, pairs, clock_epochs(tracks), params), pairs
 
 

@@ -1,6 +1,6 @@
 """Every body pair's correlation over all lags at once, and its peak.
 
-A track's signature is resampled on camera-clock multiples of ``grid_step`` and
+A track's signature is resampled on camera-clock multiples of ``GRID_STEP`` and
 differentiated (which whitens slow posture changes and sharpens the peak); a body pair's
 normalised cross-correlation over every lag comes from one FFT, its channels pooled: the
 sum of per-channel covariances over the square root of the summed variances.
@@ -17,7 +17,7 @@ from scipy.fft import irfft, next_fast_len
 
 from hiros_calib.signature import PoseSignature
 from hiros_calib.sync.clock import fisher_significance
-from hiros_calib.sync.params import SyncParams
+from hiros_calib.sync.params import GRID_STEP, MIN_MOTION, SyncParams
 
 if TYPE_CHECKING:
     from hiros_calib.sync.work import TrackWork
@@ -132,7 +132,7 @@ def _peak(
     square root of the overlap: a high correlation over a few seconds of overlap at the edge
     of the lag range is more often chance than one slightly lower over the whole recording.
     """
-    step = params.grid_step
+    step = GRID_STEP
     r = curve.correlation()
     lags = (curve.first + np.arange(len(r))) * step
     overlap = curve.count * step
@@ -165,8 +165,8 @@ def body_pair_candidates(
     work: TrackWork,
 ) -> list[Candidate]:
     """Every moving body pair's correlation curve and peak within ``search``."""
-    grid_a = {i: work.grid(s) for i, s in enumerate(sig_a) if work.motion(s) >= params.min_motion}
-    grid_b = {j: work.grid(s) for j, s in enumerate(sig_b) if work.motion(s) >= params.min_motion}
+    grid_a = {i: work.grid(s) for i, s in enumerate(sig_a) if work.motion(s) >= MIN_MOTION}
+    grid_b = {j: work.grid(s) for j, s in enumerate(sig_b) if work.motion(s) >= MIN_MOTION}
     grid_a = {i: g for i, g in grid_a.items() if g is not None}
     grid_b = {j: g for j, g in grid_b.items() if g is not None}
     if not grid_a or not grid_b:

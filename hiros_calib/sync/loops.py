@@ -14,19 +14,19 @@ from dataclasses import replace
 import numpy as np
 
 from hiros_calib.sync.clock import PairOffset, fisher_significance, refused_pair
-from hiros_calib.sync.params import SyncParams
+from hiros_calib.sync.params import CONSENSUS_TOLERANCE, LOOP_OVERRULE_STRENGTH, SyncParams
 
 __all__ = ["close_loops", "overrule_weak_pairs", "unless_uncorrelated"]
 
 
 def close_loops(
-    pairs: list[PairOffset], repins: list[Callable[[float], PairOffset]], params: SyncParams
+    pairs: list[PairOffset], repins: list[Callable[[float], PairOffset]]
 ) -> list[PairOffset]:
     """Pairs refused as ambiguous, decided where the other pairs imply one of their lags.
 
     With three or more cameras, a pair whose motion repeats may still be timed through the
     others: the lags of a-c and c-b add up to the lag of a-b. A refused pair that listed
-    candidate lags takes the one within ``consensus_tolerance`` of that sum (re-estimated
+    candidate lags takes the one within ``CONSENSUS_TOLERANCE`` of that sum (re-estimated
     there by ``repins[k]``), until no more can be decided. Two such pairs of a camera
     triangle whose third pair is timed are decided together when exactly one combination of
     their candidates closes the triangle (:func:`_decide_two_by_triangle`).
@@ -34,7 +34,7 @@ def close_loops(
     pairs = list(pairs)
     progress = True
     while progress:
-        progress = _decide_two_by_triangle(pairs, repins, params)
+        progress = _decide_two_by_triangle(pairs, repins)
         for k, pair in enumerate(pairs):
             if pair.ok or len(pair.candidates) == 0:
                 continue
@@ -43,7 +43,7 @@ def close_loops(
                 continue
             distance = np.abs(pair.candidates[:, 0] - implied)
             best = int(np.argmin(distance))
-            if distance[best] > params.consensus_tolerance:
+            if distance[best] > CONSENSUS_TOLERANCE:
                 continue
             decided = repins[k](float(pair.candidates[best, 0]))
             if not decided.ok:
@@ -77,12 +77,12 @@ def unless_uncorrelated(pair: PairOffset, params: SyncParams) -> PairOffset:
 
 
 def _decide_two_by_triangle(
-    pairs: list[PairOffset], repins: list[Callable[[float], PairOffset]], params: SyncParams
+    pairs: list[PairOffset], repins: list[Callable[[float], PairOffset]]
 ) -> bool:
     """Two ambiguous pairs decided by the timed third side of their triangle (in place).
 
     Each lists candidate lags; a combination closes the triangle when its lags add up to the
-    third pair's within ``consensus_tolerance``. Only a single closing combination decides:
+    third pair's within ``CONSENSUS_TOLERANCE``. Only a single closing combination decides:
     motion repeated with one period in both pairs closes it as well one repetition up in
     one and down in the other, and then nothing is decided. True when a pair was decided.
     """
@@ -106,7 +106,7 @@ def _decide_two_by_triangle(
                 )
                 - third.offset
             )
-            <= params.consensus_tolerance
+            <= CONSENSUS_TOLERANCE
         ]
         if len(closing) != 1:
             continue
@@ -123,12 +123,12 @@ def _decide_two_by_triangle(
     return False
 
 
-def overrule_weak_pairs(pairs: list[PairOffset], params: SyncParams) -> list[PairOffset]:
+def overrule_weak_pairs(pairs: list[PairOffset]) -> list[PairOffset]:
     """Pairs left out whose chance-level lag the other pairs' loop contradicts.
 
     With three or more cameras the lags around a loop add up to zero. A pair whose lag is
-    more than ``consensus_tolerance`` from the lag the other pairs imply, and whose refined
-    correlation is no more significant than chance gives (``loop_overrule_strength``) while
+    more than ``CONSENSUS_TOLERANCE`` from the lag the other pairs imply, and whose refined
+    correlation is no more significant than chance gives (``LOOP_OVERRULE_STRENGTH``) while
     every other pair's is, measured noise rather than its lag: it is left out, with the
     reason. Any other conflict is left as it is, for the loop check to flag: re-timing the
     weaker pair where the others imply would close a loop around two pairs that are both
@@ -141,10 +141,10 @@ def overrule_weak_pairs(pairs: list[PairOffset], params: SyncParams) -> list[Pai
         pair = pairs[k]
         others = [p for p in pairs if p.ok and p is not pair]
         implied = _implied_lag(pair.camera_a, pair.camera_b, others)
-        if implied is None or abs(pair.offset - implied) <= params.consensus_tolerance:
+        if implied is None or abs(pair.offset - implied) <= CONSENSUS_TOLERANCE:
             continue
         weakest_other = min(_pair_strength(p) for p in others)
-        if not _pair_strength(pair) < params.loop_overrule_strength <= weakest_other:
+        if not _pair_strength(pair) < LOOP_OVERRULE_STRENGTH <= weakest_other:
             continue
         pairs[k] = refused_pair(
             pair.camera_a,

@@ -1,7 +1,7 @@
 """One camera pair's lag: the body pairs' consensus, its candidate lags and the refined lag.
 
 Curves whose peak is high and sharp (robust z-score of the peak over the curve, the role of
-Eichler's coefficient of variation) vote for their peak lag, the best ``best_fraction``
+Eichler's coefficient of variation) vote for their peak lag, the best ``BEST_FRACTION``
 choose the winning lag and every good curve near it joins; a parabola through the pooled
 curve's peak starts the continuous refinement (:mod:`~hiros_calib.sync.refine`).
 """
@@ -17,7 +17,19 @@ from scipy.ndimage import maximum_filter1d
 from hiros_calib.signature import PoseSignature
 from hiros_calib.sync.clock import PairOffset, fisher_significance, refused_pair
 from hiros_calib.sync.correlation import Candidate, body_pair_candidates
-from hiros_calib.sync.params import SyncParams
+from hiros_calib.sync.params import (
+    BEST_FRACTION,
+    CANDIDATE_RATIO,
+    CONSENSUS_TOLERANCE,
+    GRID_STEP,
+    MAX_CANDIDATES,
+    MIN_MOTION,
+    MIN_PRIOR_SIGNIFICANCE,
+    MIN_REPEATED_PEAK,
+    MIN_SHARPNESS,
+    PRIOR_CONTRADICTION,
+    SyncParams,
+)
 from hiros_calib.sync.refine import RefinePair, lag_windows, refine
 from hiros_calib.sync.work import TrackWork
 from hiros_calib.tracks import BodyTrack
@@ -47,7 +59,7 @@ def estimate_pair_offset(
     work = work if work is not None else TrackWork(params)
     names = {"camera_a": camera_a, "camera_b": camera_b}
     if around is not None:
-        return _estimate(tracks_a, tracks_b, params, _lobe(around, params), work=work, **names)
+        return _estimate(tracks_a, tracks_b, params, _lobe(around), work=work, **names)
     anywhere = (-params.max_offset, params.max_offset) if params.max_offset > 0 else None
     free = _estimate(tracks_a, tracks_b, params, anywhere, work=work, **names)
     if prior is None:
@@ -61,16 +73,16 @@ def estimate_pair_offset(
     if near.ok:
         # the poses (the calibrator's settle step) must confirm the motion over the prior
         free.quality["prior_lag"] = near.offset
-        far = np.abs(free.candidates[:, 0] - near.offset) > params.consensus_tolerance
+        far = np.abs(free.candidates[:, 0] - near.offset) > CONSENSUS_TOLERANCE
         if far.all():
             peak = near.quality.get("peak", 0.0)
             free.candidates = np.vstack([free.candidates, [[near.offset, peak]]])
     return free
 
 
-def _lobe(lag: float, params: SyncParams) -> tuple[float, float]:
+def _lobe(lag: float) -> tuple[float, float]:
     """The search range (s) of the correlation lobe around one candidate lag."""
-    reach = max(3 * params.grid_step, 2 * params.consensus_tolerance)
+    reach = max(3 * GRID_STEP, 2 * CONSENSUS_TOLERANCE)
     return lag - reach, lag + reach
 
 
@@ -82,7 +94,7 @@ def _contradicts(free: PairOffset, near: PairOffset, params: SyncParams) -> bool
     def strength(pair: PairOffset) -> float:
         return float(fisher_significance(pair.quality["peak"], pair.quality["overlap_s"]))
 
-    return strength(free) > params.prior_contradiction * strength(near)
+    return strength(free) > PRIOR_CONTRADICTION * strength(near)
 
 
 def _estimate(
@@ -99,7 +111,7 @@ def _estimate(
     """The lag within ``search`` (s; None: every lag), with its candidates.
 
     ``windowed``: ``search`` is the arrival-time prior's window, where a body pair's peak is
-    usable on its significance alone (``min_prior_significance``).
+    usable on its significance alone (``MIN_PRIOR_SIGNIFICANCE``).
     """
     sig_a, sig_b = work.signatures(tracks_a), work.signatures(tracks_b)
     refusal = _refuse_unusable(
@@ -122,23 +134,23 @@ def _estimate(
             camera_a,
             camera_b,
             f"no body pair correlates clearly (best peak {best_any.peak:.2f}, sharpness "
-            f"{best_any.sharpness:.1f}; need {params.min_peak} and {params.min_sharpness}, "
-            f"or a peak of {params.min_repeated_peak})",
+            f"{best_any.sharpness:.1f}; need {params.min_peak} and {MIN_SHARPNESS}, "
+            f"or a peak of {MIN_REPEATED_PEAK})",
             peak=best_any.peak,
             sharpness=best_any.sharpness,
             pairs_considered=len(candidates),
         )
-    used = _consensus(good, params)
+    used = _consensus(good)
     lags = _candidate_lags(used, params, search)
-    chosen = round(lags[0, 0] / params.grid_step)
-    tolerance = max(1, round(params.consensus_tolerance / params.grid_step))
+    chosen = round(lags[0, 0] / GRID_STEP)
+    tolerance = max(1, round(CONSENSUS_TOLERANCE / GRID_STEP))
     if abs(chosen - used[0].lag_index) > tolerance:
         # the prior chose another of the lags the motion supports: redo the consensus there
         near = [c for c in good if abs(c.lag_index - chosen) <= tolerance]
-        used = _consensus(near, params) if near else []
+        used = _consensus(near) if near else []
         if not used:
             pinned = _estimate(
-                tracks_a, tracks_b, params, _lobe(float(lags[0, 0]), params),
+                tracks_a, tracks_b, params, _lobe(float(lags[0, 0])),
                 camera_a=camera_a, camera_b=camera_b, work=work,
             )  # fmt: skip
             pinned.candidates = lags
@@ -172,14 +184,14 @@ def _refuse_unusable(
     """A refusal when a camera saw no moving body for long enough, else None."""
     if not sig_a or not sig_b:
         return refused_pair(camera_a, camera_b, "a camera saw no body track")
-    moving_a = [s for s in sig_a if work.motion(s) >= params.min_motion]
-    moving_b = [s for s in sig_b if work.motion(s) >= params.min_motion]
+    moving_a = [s for s in sig_a if work.motion(s) >= MIN_MOTION]
+    moving_b = [s for s in sig_b if work.motion(s) >= MIN_MOTION]
     if not moving_a or not moving_b:
         still = camera_a if not moving_a else camera_b
         return refused_pair(
             camera_a,
             camera_b,
-            f"the bodies {still} sees hardly move (less than {params.min_motion * 100:.0f} cm "
+            f"the bodies {still} sees hardly move (less than {MIN_MOTION * 100:.0f} cm "
             "of joint-distance change), so their motion cannot time the cameras",
         )
     span_a = max(s.times[-1] - s.times[0] for s in moving_a)
@@ -202,9 +214,9 @@ def _clear(candidate: Candidate, params: SyncParams, *, windowed: bool = False) 
     """
     if candidate.peak < params.min_peak:
         return False
-    if windowed and candidate.significance >= params.min_prior_significance:
+    if windowed and candidate.significance >= MIN_PRIOR_SIGNIFICANCE:
         return True
-    return candidate.sharpness >= params.min_sharpness or candidate.peak >= params.min_repeated_peak
+    return candidate.sharpness >= MIN_SHARPNESS or candidate.peak >= MIN_REPEATED_PEAK
 
 
 def _candidate_lags(
@@ -213,10 +225,10 @@ def _candidate_lags(
     """``(K, 2)`` candidate lags (s) and their pooled correlations, best first.
 
     The candidates are the pooled curve's local maxima of significance at least
-    ``candidate_ratio`` of the best's correlation, plus always the runner-up (so the poses can
+    ``CANDIDATE_RATIO`` of the best's correlation, plus always the runner-up (so the poses can
     show how much worse the next lag fits).
     """
-    step = params.grid_step
+    step = GRID_STEP
     first, pooled, overlap = _pooled_curve(used, step)
     lags = (first + np.arange(len(pooled))) * step
     valid = (overlap >= params.min_overlap) & np.isfinite(pooled)
@@ -228,9 +240,9 @@ def _candidate_lags(
     # rival it (the poses would judge it on a transform fitted to a few seconds)
     peaks = [k for k in peaks if overlap[k] >= 0.5 * overlap[peaks[0]]]
     rows = np.array([(lags[k], pooled[k]) for k in peaks]).reshape(-1, 2)
-    keep = rows[:, 1] >= params.candidate_ratio * rows[0, 1]
+    keep = rows[:, 1] >= CANDIDATE_RATIO * rows[0, 1]
     keep[: min(2, len(rows))] = True
-    return rows[keep][: max(2, params.max_candidates)]
+    return rows[keep][: max(2, MAX_CANDIDATES)]
 
 
 def _local_maxima(values: np.ndarray, separation: int) -> list[int]:
@@ -250,11 +262,11 @@ def _lag_quality(lags: np.ndarray) -> dict[str, Any]:
     return quality
 
 
-def _consensus(good: list[Candidate], params: SyncParams) -> list[Candidate]:
+def _consensus(good: list[Candidate]) -> list[Candidate]:
     """The body pairs agreeing with the lag the sharpest pairs vote for."""
-    tolerance = max(1, round(params.consensus_tolerance / params.grid_step))
+    tolerance = max(1, round(CONSENSUS_TOLERANCE / GRID_STEP))
     ranked = sorted(good, key=lambda c: c.score, reverse=True)
-    voters = ranked[: max(1, math.ceil(params.best_fraction * len(ranked)))]
+    voters = ranked[: max(1, math.ceil(BEST_FRACTION * len(ranked)))]
     lags = np.array([c.lag_index for c in voters])
     weights = np.array([c.score * c.overlap for c in voters])
     support = [(weights * (np.abs(lags - lag) <= tolerance)).sum() for lag in lags]
@@ -311,7 +323,7 @@ def _finish(
     centre: int,
 ) -> PairOffset:
     """The refined lag of the lobe at absolute lag index ``centre``, with its windows."""
-    step = params.grid_step
+    step = GRID_STEP
     first, pooled, _ = _pooled_curve(used, step)
     centre -= first
     half = max(3, round(0.1 / step))

@@ -19,7 +19,7 @@ from scipy.optimize import minimize_scalar
 
 from hiros_calib.signature import PoseSignature
 from hiros_calib.sync.correlation import resample
-from hiros_calib.sync.params import SyncParams
+from hiros_calib.sync.params import GRID_STEP, SyncParams
 
 __all__ = ["RefinePair", "Spline", "lag_windows", "refine"]
 
@@ -151,7 +151,7 @@ def lag_windows(tau: float, pairs: list[RefinePair], params: SyncParams) -> np.n
     count = max(1, round(span / params.window))
     bounds = np.linspace(start, end, count + 1)
     edges = list(itertools.pairwise(bounds))
-    half_width = 2 * params.grid_step + params.max_drift * span
+    half_width = 2 * GRID_STEP + params.max_drift * span
     rows = []
     for lo, hi in edges:
         overlap = sum(p.overlap(tau, (lo, hi)) for p in pairs)

@@ -7,7 +7,7 @@ from scipy.fft import rfft
 
 from hiros_calib.signature import PoseSignature, pose_signature, select_joints
 from hiros_calib.sync.correlation import GridSignal, grid_signal
-from hiros_calib.sync.params import SyncParams
+from hiros_calib.sync.params import GRID_STEP, REFINE_STEP, SyncParams
 from hiros_calib.sync.refine import Spline
 from hiros_calib.tracks import BodyTrack
 
@@ -54,7 +54,7 @@ class TrackWork:
     def grid(self, signature: PoseSignature) -> GridSignal | None:
         """The signature on the coarse correlation grid (None: too short)."""
         if id(signature) not in self._grid:
-            self._grid[id(signature)] = grid_signal(signature, self.params.grid_step)
+            self._grid[id(signature)] = grid_signal(signature, GRID_STEP)
         return self._grid[id(signature)]
 
     def spectra(self, signal: GridSignal, nfft: int) -> tuple[np.ndarray, ...]:
@@ -72,5 +72,5 @@ class TrackWork:
     def spline(self, signature: PoseSignature) -> Spline:
         """The signature's spline for the continuous refinement."""
         if id(signature) not in self._spline:
-            self._spline[id(signature)] = Spline.build(signature, self.params.refine_step)
+            self._spline[id(signature)] = Spline.build(signature, REFINE_STEP)
         return self._spline[id(signature)]

@@ -8,7 +8,7 @@ import pytest
 from hiros_calib import Calibrator, CalibratorParams, LiveCalibrator, LiveCalibratorParams
 from hiros_calib.extrinsics import PairPose
 from hiros_calib.quality import arrival_offsets_from_delays, flag_cameras
-from hiros_calib.sync import PairOffset, SyncParams, close_loops, overrule_weak_pairs
+from hiros_calib.sync import PairOffset, close_loops, overrule_weak_pairs
 from hiros_core.calibration import Calibration, CameraCalibration
 from hiros_eval.calibration import compare_calibration
 from hiros_sim import simulate
@@ -118,17 +118,17 @@ def test_a_chance_level_lag_the_loop_contradicts_is_left_out():
     strong = [_timed("k01", "k02", 0.5, 0.6, 50.0), _timed("k02", "k03", -0.7, 0.5, 40.0)]
     # the loop implies -0.2 s for k01-k03; a correlation of 0.25 over 8 s says -0.4 s
     weak = _timed("k01", "k03", -0.4, 0.25, 8.0)
-    kept = overrule_weak_pairs([*strong, weak], SyncParams())
+    kept = overrule_weak_pairs([*strong, weak])
     assert kept[:2] == strong
     assert not kept[2].ok
     assert "no more than chance gives" in kept[2].reason
     assert kept[2].quality["loop_implied_lag"] == pytest.approx(-0.2)
     # a lag as well supported as the others' stays, for the loop check to flag
     firm = _timed("k01", "k03", -0.4, 0.6, 50.0)
-    assert overrule_weak_pairs([*strong, firm], SyncParams())[2] is firm
+    assert overrule_weak_pairs([*strong, firm])[2] is firm
     # and a weak lag the loop agrees with is kept
     agreeing = _timed("k01", "k03", -0.21, 0.25, 8.0)
-    assert overrule_weak_pairs([*strong, agreeing], SyncParams())[2] is agreeing
+    assert overrule_weak_pairs([*strong, agreeing])[2] is agreeing
 
 
 def test_two_ambiguous_pairs_decided_by_the_third_side_of_their_triangle():
@@ -140,14 +140,14 @@ def test_two_ambiguous_pairs_decided_by_the_third_side_of_their_triangle():
         for a, b in (("k01", "k02"), ("k01", "k03"), ("k02", "k03"))
     ]
     # only 1.14 - 0.30 adds up to k01-k03's 0.85
-    decided = close_loops([first, timed, second], repins, SyncParams())
+    decided = close_loops([first, timed, second], repins)
     assert decided[0].offset == pytest.approx(1.14)
     assert decided[2].offset == pytest.approx(-0.30)
     assert decided[0].quality["lag_decided_by"] == "loop"
     # one period (0.5 s) in both: up in one and down in the other closes it too
     first.candidates = np.array([[1.14, 0.27], [1.64, 0.2]])
     second.candidates = np.array([[-0.30, 0.25], [-0.80, 0.2]])
-    undecided = close_loops([first, timed, second], repins, SyncParams())
+    undecided = close_loops([first, timed, second], repins)
     assert not undecided[0].ok
     assert not undecided[2].ok
 

@@ -48,3 +48,21 @@ def test_an_old_file_setting_a_removed_parameter_loads_with_a_warning(tmp_path: 
         "filter.compiled",
         "optimizer.compiled",
     ]
+
+
+def test_an_old_calib_file_loads_without_the_parameters_that_became_constants(
+    tmp_path: Path,
+) -> None:
+    """The calib node's statistical settings (grid_step ...) became constants, loss_scale went."""
+    path = tmp_path / "calib.yaml"
+    path.write_text(
+        "calib:\n  ros__parameters:\n    max_offset: 2.0\n    grid_step: 0.01\n"
+        "    min_lag_margin: 1.15\n    step_period: 0.2\n    loss_scale: 0.0\n    loss: soft_l1\n"
+    )
+    with pytest.warns(RemovedParameterWarning) as caught:
+        values = load_config_defaults("calib", path)
+    assert values == {"max_offset": 2.0, "loss": "soft_l1"}
+    messages = sorted(str(w.message) for w in caught)
+    assert len(messages) == 4
+    assert "constant GRID_STEP" in messages[0]
+    assert "parameter loss_scale is ignored" in messages[1]

@@ -102,6 +102,25 @@ def test_a_removed_parameter_given_is_ignored_with_a_warning(make_node, monkeypa
     assert "parameter compiled is ignored" in logged[0]
 
 
+def test_a_calib_setting_that_became_a_constant_is_ignored_with_a_warning(
+    make_node, monkeypatch
+) -> None:
+    node = make_node("-p", "grid_step:=0.02", "-p", "rate:=20.0")
+    logged = []
+
+    class Logger:  # the node's logger, keeping what it is told
+        def warning(self, message: str) -> None:
+            logged.append(message)
+
+    monkeypatch.setattr(node, "get_logger", Logger)
+    assert declare_params(node, DemoParams).params.rate == 20.0
+    assert not node.has_parameter("grid_step")
+    assert logged == [
+        "parameter grid_step is ignored (hiros_calib fixes it as the constant GRID_STEP); "
+        "remove it from the parameter file"
+    ]
+
+
 def test_descriptors_tell_description_range_and_read_only(node) -> None:
     declare_params(node, DemoParams, live=LIVE)
     rate, name, order, gate, choice = node.describe_parameters(
