@@ -72,6 +72,25 @@ REMOVED_PARAMETERS: dict[str, str] = {
     "compiled": "the optimizer and the filter always run their compiled kernels",
     **{name: f"hiros_calib fixes it as the constant {name.upper()}" for name in _CALIB_CONSTANTS},
     "loss_scale": "the calibration's robust loss flattens at the data's own robust scale",
+    **dict.fromkeys(
+        ("fuse_directions", "direction_iterations", "direction_eps", "direction_torso"),
+        "the merger no longer rebuilds limbs along the cameras' link directions (it raised the "
+        "joint-angle error)",
+    ),
+    **dict.fromkeys(
+        ("view_weight_min", "view_power"),
+        "the merger weighs a camera behind a person as one in front; oblique_gain weighs side "
+        "views",
+    ),
+    **dict.fromkeys(
+        ("agreement_scale", "agreement_smoothing"),
+        "the merger has no camera agreement weight (it fed back on itself)",
+    ),
+    "rate_tolerance": "hiros_filter fixes it as the constant RATE_TOLERANCE",
+    "sweeps": "hiros_optimizer fixes it as the constant SWEEPS",
+    "refinements": "hiros_optimizer fixes it as the constant REFINEMENTS",
+    "reset_after_backwards": "the bridges fix it as the constant RESET_AFTER_BACKWARDS "
+    "(hiros_core.driver)",
 }
 """Parameters hiros had and dropped (by name, any node): a file that still sets one loads,
 with a ``RemovedParameterWarning``, so that older parameter files keep working."""

@@ -6,7 +6,7 @@ Per track id and per joint, three causal estimators run side by side
 - a Butterworth low-pass (``butterworth_order``, ``cutoff_frequency``; Hi-ROS's filter) on every
   coordinate. Its coefficients assume a constant sampling rate, so the rate is
   ``sample_frequency`` or, when that is <= 0, estimated from the stamps (median interval of the
-  recent frames); when the estimate moves by more than ``rate_tolerance`` the filter is
+  recent frames); when the estimate moves by more than ``RATE_TOLERANCE`` the filter is
   re-designed and restarted at rest on its last output. A late frame (dt ≈ k sampling periods)
   is resampled: the k - 1 missing samples are interpolated linearly before it, so the filter
   keeps its time base;
@@ -47,6 +47,12 @@ _FILTERS = ("butterworth", "kalman")
 _RATE_WINDOW = 64  # recent frame intervals the sampling rate is estimated from
 _NEVER = np.iinfo(np.int64).min // 2  # "joint never seen" stamp, far in the past
 
+RATE_TOLERANCE = 0.15
+"""Relative change of the estimated sampling rate that re-designs the Butterworth low-pass.
+
+A camera's frame rate is fixed (15 or 30 Hz), so the estimate moves only with jitter or a
+changed source: 15 % ignores the jitter and catches a 30 -> 15 Hz change."""
+
 
 @dataclass
 class FilterParams:
@@ -61,7 +67,6 @@ class FilterParams:
         butterworth_order: order of the low-pass.
         cutoff_frequency: Hz, -3 dB point of the low-pass.
         sample_frequency: Hz of the input; <= 0 estimates it from the stamps.
-        rate_tolerance: relative change of the estimated rate that re-designs the low-pass.
         jerk_spectral_density: Kalman process noise, m^2/s^5 (higher: follows faster, smooths less).
         max_noise_scale: adaptive process noise: a joint whose innovations are larger than the
             filter expects (a movement starting) gets its process noise scaled up by their
@@ -80,7 +85,6 @@ class FilterParams:
     butterworth_order: int = 2
     cutoff_frequency: float = 6.0
     sample_frequency: float = -1.0
-    rate_tolerance: float = 0.15
     jerk_spectral_density: float = 300.0
     max_noise_scale: float = 10.0
     measurement_noise: float = 0.01
@@ -497,7 +501,7 @@ class Filter(Accounted):
         n, n_joints = samples.shape[:2]
         channels = 3 * n_joints
         if tracks.low_pass is None or (
-            abs(tracks.low_pass.sample_frequency - rate) > self.params.rate_tolerance * rate
+            abs(tracks.low_pass.sample_frequency - rate) > RATE_TOLERANCE * rate
         ):
             tracks.low_pass = ButterworthBank(
                 self.params.butterworth_order,

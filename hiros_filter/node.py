@@ -13,7 +13,6 @@ LIVE = (
     "cutoff_frequency",
     "butterworth_order",
     "sample_frequency",
-    "rate_tolerance",
     "jerk_spectral_density",
     "max_noise_scale",
     "measurement_noise",

@@ -43,7 +43,21 @@ from hiros_optimizer.learning import PersonProgress, limb_links, window_statisti
 from hiros_optimizer.memory import FitSettings, Memory
 from hiros_optimizer.stacking import LayoutRows, output_skeletons, stack_frame
 
-__all__ = ["Optimizer", "OptimizerParams", "PersonCalibration", "PersonProgress"]
+__all__ = [
+    "REFINEMENTS",
+    "SWEEPS",
+    "Optimizer",
+    "OptimizerParams",
+    "PersonCalibration",
+    "PersonProgress",
+]
+
+SWEEPS = 1
+"""Block-coordinate sweeps (root to leaves) that start each frame's fixed-length fit."""
+
+REFINEMENTS = 2
+"""Gauss-Newton steps on the length spheres that finish it (from the last frame's solution,
+a sweep and two steps are enough: a numerical choice, not a setting)."""
 
 
 @dataclass
@@ -67,8 +81,6 @@ class OptimizerParams:
         prior_weight: weight of the motion prediction relative to a joint confidence of 1.
         confidence_floor: least weight of a present joint in the fit: the SDK's "none"
             confidence (0) still carries a usable estimate, far better than extrapolation.
-        sweeps: block-coordinate sweeps of the fit (its starting point).
-        refinements: Gauss-Newton steps of the fit.
         track_timeout: seconds unseen after which a track's prediction is forgotten (its
             calibration is kept).
         export_calibration: node only: write the person calibrations on each new one.
@@ -85,8 +97,6 @@ class OptimizerParams:
     outlier_distance: float = 0.15
     prior_weight: float = 0.01
     confidence_floor: float = 0.1
-    sweeps: int = 1
-    refinements: int = 2
     track_timeout: float = 1.0
     export_calibration: bool = False
     load_calibration: bool = False
@@ -227,7 +237,7 @@ class Optimizer(Accounted):
         params = self.params
         self._settings = FitSettings(
             params.confidence_floor, params.outlier_threshold, params.outlier_distance,
-            params.prior_weight, params.track_timeout, params.sweeps, params.refinements,
+            params.prior_weight, params.track_timeout, SWEEPS, REFINEMENTS,
         )  # fmt: skip
         self.new_calibrations: list[int] = []
         """Track ids with links learnt by the last :meth:`update` (the node exports on these)."""

@@ -62,7 +62,6 @@ RANGES: dict[str, tuple[float, float]] = {
     # fractions, probabilities and weights in [0, 1]
     **dict.fromkeys(
         (
-            "agreement_smoothing",
             "blend",
             "confidence_floor",
             "flip_misread",
@@ -78,7 +77,6 @@ RANGES: dict[str, tuple[float, float]] = {
             "occlusion_weight",
             "position_smoothing",
             "replace_margin",
-            "view_weight_min",
         ),
         (0.0, 1.0),
     ),

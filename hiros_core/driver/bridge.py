@@ -25,7 +25,7 @@ from hiros_core.codec import (
     encode_marker_array,
 )
 from hiros_core.driver.markers import ADD, DELETE, DELETEALL, group_to_driver_markers
-from hiros_core.driver.params import DriverBridgeParams
+from hiros_core.driver.params import RESET_AFTER_BACKWARDS, DriverBridgeParams
 from hiros_core.errors import CodecError, ConfigError, LayoutError
 from hiros_core.layouts import Layout, get_layout
 from hiros_core.limits import MAX_BODIES, MAX_MARKERS, marker_counts
@@ -135,7 +135,7 @@ class DriverBridge(Accounted):
     * ``duplicate_marker``: a second marker for the same body and joint (the first is kept);
     * ``mixed_stamps``: markers of one message with different stamps (the first is used);
     * ``stamp_backwards`` / ``repeated_stamp``: a message older than, or as old as, the last
-      one (frame); a jump back larger than ``reset_after_backwards`` counts
+      one (frame); a jump back larger than ``RESET_AFTER_BACKWARDS`` counts
       ``source_restarted`` and is accepted.
 
     ``processed`` counts the messages that gave a group; ``lost_before_reception`` the frames
@@ -326,7 +326,7 @@ class DriverBridge(Accounted):
     def _accept_stamp(self, stamp: int) -> bool:
         last = self.last_stamp_ns
         if last is not None and stamp <= last:
-            if last - stamp > self.params.reset_after_backwards * 1e9:
+            if last - stamp > RESET_AFTER_BACKWARDS * 1e9:
                 self.drops["source_restarted"] += 1
             else:
                 self.drops.frame("repeated_stamp" if stamp == last else "stamp_backwards")

@@ -4,7 +4,12 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-__all__ = ["DriverBridgeParams"]
+__all__ = ["RESET_AFTER_BACKWARDS", "DriverBridgeParams"]
+
+RESET_AFTER_BACKWARDS = 1.0
+"""Seconds: a stamp that jumps back by more than this is a restarted source (a replay looping),
+not a late message, and the bridge starts over. A camera's messages are never a second late,
+and a replay goes back by its whole length."""
 
 
 @dataclass
@@ -22,8 +27,6 @@ class DriverBridgeParams:
         confidence_levels: the driver's highest confidence level; model confidence is
             ``level / confidence_levels``.
         frame_id: frame written to the groups; empty keeps the markers' frame.
-        reset_after_backwards: a stamp that jumps back by more than this many seconds is a
-            restarted source (a replay looping), not a late message: the bridge starts over.
 
     """
 
@@ -34,4 +37,3 @@ class DriverBridgeParams:
     position_scale: float = 1.0
     confidence_levels: int = 3
     frame_id: str = ""
-    reset_after_backwards: float = 1.0

@@ -66,3 +66,28 @@ def test_an_old_calib_file_loads_without_the_parameters_that_became_constants(
     assert len(messages) == 4
     assert "constant GRID_STEP" in messages[0]
     assert "parameter loss_scale is ignored" in messages[1]
+
+
+def test_an_old_pipeline_file_loads_without_the_stages_removed_parameters(tmp_path: Path) -> None:
+    """The merger's direction fusion, back-view and agreement weights went; the filter's,
+    optimizer's and bridges' numerical settings became constants."""
+    path = tmp_path / "pipeline.yaml"
+    path.write_text(
+        "pipeline:\n  ros__parameters:\n"
+        "    merger: {fuse_directions: false, view_weight_min: 1.0, agreement_scale: 0.0,"
+        " window: 0.2}\n"
+        "    optimizer: {sweeps: 1, refinements: 2}\n    filter: {rate_tolerance: 0.15}\n"
+    )
+    with pytest.warns(RemovedParameterWarning) as caught:
+        values = load_config_defaults("pipeline", path)
+    assert values == {"merger.window": 0.2}
+    messages = sorted(str(w.message).split(": parameter ")[1] for w in caught)
+    assert [m.split()[0] for m in messages] == [
+        "filter.rate_tolerance",
+        "merger.agreement_scale",
+        "merger.fuse_directions",
+        "merger.view_weight_min",
+        "optimizer.refinements",
+        "optimizer.sweeps",
+    ]
+    assert "constant RATE_TOLERANCE" in messages[0]

@@ -121,6 +121,23 @@ def test_a_calib_setting_that_became_a_constant_is_ignored_with_a_warning(
     ]
 
 
+def test_a_bridge_setting_that_became_a_constant_is_ignored_with_a_warning(
+    make_node, monkeypatch
+) -> None:
+    node = make_node("-p", "reset_after_backwards:=2.0", "-p", "rate:=20.0")
+    logged = []
+
+    class Logger:  # the node's logger, keeping what it is told
+        def warning(self, message: str) -> None:
+            logged.append(message)
+
+    monkeypatch.setattr(node, "get_logger", Logger)
+    assert declare_params(node, DemoParams).params.rate == 20.0
+    assert not node.has_parameter("reset_after_backwards")
+    assert len(logged) == 1
+    assert "constant RESET_AFTER_BACKWARDS" in logged[0]
+
+
 def test_descriptors_tell_description_range_and_read_only(node) -> None:
     declare_params(node, DemoParams, live=LIVE)
     rate, name, order, gate, choice = node.describe_parameters(
