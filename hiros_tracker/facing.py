@@ -245,7 +245,8 @@ def turn_facing(  # noqa: PLR0917 - the tracks, the frame's pairs, the view, bod
     sides are right, set at ``facing_ns[r]``: ``facing[r] = facing[r] * exp(-dt /
     facing_memory) + evidence[u]`` (``dt`` s since then, at least 0). Below
     ``-facing_threshold`` the track is relabelled with ``body.mirror`` (all parts,
-    ``relabel``), its log-odds negated and its flip states' hypotheses exchanged. ``tracks``
+    ``relabel``), its log-odds and held left-right axis negated and its flip states'
+    hypotheses exchanged. ``tracks``
     changes in place, and ``view.up`` too (``_update_up``, before the evidence).
 
     Returns:
@@ -265,6 +266,8 @@ def turn_facing(  # noqa: PLR0917 - the tracks, the frame's pairs, the view, bod
         facing_ns[r] = stamp_ns
         if facing[r] < -threshold:
             relabel(tracks, r, body.mirror)
+            for a in range(3):
+                tracks.sides[r, a] = -tracks.sides[r, a]
             facing[r] = -facing[r]
             for c in range(flip_state.shape[1]):  # the hypotheses trade places
                 flip_state[r, c, 0], flip_state[r, c, 1] = flip_state[r, c, 1], flip_state[r, c, 0]

@@ -15,7 +15,7 @@ from hiros_tracker.kernel_args import (
     HitSettings,
     TrackFields,
 )
-from hiros_tracker.labels import _take_orientations, canonical_poses, label_frame
+from hiros_tracker.labels import _take_orientations, canonical_poses, hold_axes, label_frame
 from hiros_tracker.track_update import fold_hits
 
 __all__ = [
@@ -34,7 +34,8 @@ def hit_frame(  # noqa: PLR0917 - the tracks, the frame, its pairs, view, layout
 ) -> tuple[np.ndarray, bool, np.ndarray, int, np.ndarray, bool]:
     """One frame's matched pairs folded into their tracks, in one call (``Tracker._hit``).
 
-    In order: the detections in their tracks' labelling (``canonical_poses``), folded in
+    In order: the detections in their tracks' labelling (``canonical_poses``), their
+    left-right axes folded into their tracks' held ones (``hold_axes``), folded in
     (``fold_hits``), their orientations taken (``settings.orient``), the tracks' facing
     weighed (``settings.weigh``, ``turn_facing``), and, when every track hit is confirmed,
     the output detections labelled in place (``settings.label``, ``label_frame``); a frame
@@ -52,10 +53,12 @@ def hit_frame(  # noqa: PLR0917 - the tracks, the frame, its pairs, view, layout
 
     """
     rows, dets, flips = pairs
-    held = HeldSides(tracks.positions, rows, layout.body.left, layout.body.right)
+    held = HeldSides(tracks.positions, tracks.sides, rows, layout.body.left, layout.body.right)
     canonical, flips = canonical_poses(
         frame.positions, dets, flips, layout.mirror, settings.align, layout.sides, held
     )
+    if settings.align and len(layout.body.left):
+        hold_axes(held, canonical, tracks.last_hit_ns, view.stamp_ns)
     hits = Hits(rows, canonical, frame.det_ids[dets], view.camera, view.stamp_ns)
     full = fold_hits(tracks, hits, settings.update)
     if settings.orient:

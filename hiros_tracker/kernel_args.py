@@ -98,6 +98,7 @@ class HeldSides(NamedTuple):
     """The tracks a frame's detections are held to (``_reversed_sides``)."""
 
     tracks: np.ndarray  # (T, J, 3) the tracks' poses
+    axes: np.ndarray  # (T, 3) the tracks' held left-right axes (0: none yet, the pose's)
     track_rows: np.ndarray  # (U,) each detection's track row
     left: np.ndarray  # (2,) left shoulder and hip; empty: sides not held
     right: np.ndarray  # (2,) right shoulder and hip
@@ -125,6 +126,7 @@ class TrackFields(NamedTuple):
     record_count: np.ndarray  # (T,) ring length
     facing: np.ndarray  # (T,) log-odds that the track's sides are right
     facing_ns: np.ndarray  # (T,) when ``facing`` was set
+    sides: np.ndarray  # (T, 3) held left-right axis, m (``labels.hold_axes``; 0: none yet)
     flip_state: np.ndarray  # (T, C, 2) P(SDK flipped) under each facing hypothesis
     flip_ns: np.ndarray  # (T, C) the camera's previous detection of the track
     flip_known: np.ndarray  # (T, C) whether ``flip_ns`` is set

@@ -29,7 +29,7 @@ from hiros_tracker.association import (
 )
 from hiros_tracker.facing import turn_facing
 from hiros_tracker.hit import hit_frame
-from hiros_tracker.labels import canonical_poses, label_frame, label_rows, relabel
+from hiros_tracker.labels import canonical_poses, hold_axes, label_frame, label_rows, relabel
 from hiros_tracker.rigid import move_frame, moved_frame
 from hiros_tracker.track_update import fold_hits, live_tracks
 
@@ -41,6 +41,7 @@ __all__ = [
     "frame_pairs",
     "gate_costs",
     "hit_frame",
+    "hold_axes",
     "label_frame",
     "label_rows",
     "live_tracks",

@@ -19,6 +19,7 @@ from hiros_tracker.kernel_args import HeldSides, MirrorLayout, SideLayout, Stack
 __all__ = [
     "REVERSED_COS",
     "canonical_poses",
+    "hold_axes",
     "label_frame",
     "label_rows",
     "relabel",
@@ -51,7 +52,8 @@ def canonical_poses(  # noqa: PLR0917 - one frame's pairs, the layout and the tr
 
     With ``align``, the shoulders' part first follows the detection's torso as its camera
     labelled it: with ``c`` the cosine of its left-right axis (``_sides_cosine``, left
-    shoulder and hip less the right ones) with its track's (``held``), the part is flipped
+    shoulder and hip less the right ones) with its track's held axis (``_reference_axis``:
+    ``held.axes``, else the pose's), the part is flipped
     when ``c < -0.5`` and not when ``c > 0.5``, whatever the part's mean joint distance said:
     a flipped detection's shoulders and hips only trade labels, while its noisy or swinging
     hands can make the arms' labels look right. Then each left/right pair ``(a, b)`` of
@@ -59,8 +61,8 @@ def canonical_poses(  # noqa: PLR0917 - one frame's pairs, the layout and the tr
     ``pair_parts``) pointing against the shoulders ``s = p[left shoulder] - p[right]``,
     ``(p_a - p_b)·s < -0.5 |p_a - p_b| |s|``, flips its part (once, on the pose relabelled so
     far; nothing is flagged where a joint is missing, or without shoulders). Then the whole
-    body's sides are held to the track's (``_reversed_sides`` against ``held.tracks[
-    held.track_rows[u]]``; ``held.left`` empty: not held): a reversed pose flips every part.
+    body's sides are held to the track's (``_reversed_sides`` against the same axis;
+    ``held.left`` empty: not held): a reversed pose flips every part.
 
     Returns:
         ``(U, J, 3)`` canonical poses and ``(U, K)`` the flips used.
@@ -72,13 +74,12 @@ def canonical_poses(  # noqa: PLR0917 - one frame's pairs, the layout and the tr
     flips = flips.copy()
     canonical = np.empty((n_pairs, n_joints, 3))
     order = np.empty(n_joints, dtype=np.int64)
-    tracks, track_rows, left, right = held.tracks, held.track_rows, held.left, held.right
+    track_rows, left, right = held.track_rows, held.left, held.right
     torso = align and len(left) > 0 and len(shoulders) == 2
     for u in range(n_pairs):
         if torso:
-            _follow_torso(
-                flips[u], part[shoulders[0]], positions[rows[u]], tracks[track_rows[u]], held
-            )
+            reference = _reference_axis(held, track_rows[u])
+            _follow_torso(flips[u], part[shoulders[0]], positions[rows[u]], reference, held)
         _order(flips[u], part, mirror, order)
         for j in range(n_joints):
             canonical[u, j] = positions[rows[u], order[j]]
@@ -104,7 +105,8 @@ def canonical_poses(  # noqa: PLR0917 - one frame's pairs, the layout and the tr
             for j in range(n_joints):
                 canonical[u, j] = positions[rows[u], order[j]]
     for u in range(n_pairs if align and len(left) else 0):
-        if _reversed_sides(canonical[u], tracks[track_rows[u]], left, right):
+        reference = _reference_axis(held, track_rows[u])
+        if _reversed_sides(canonical[u], reference, left, right):
             for k in range(flips.shape[1]):
                 flips[u, k] = not flips[u, k]
             _order(flips[u], part, mirror, order)
@@ -115,11 +117,15 @@ def canonical_poses(  # noqa: PLR0917 - one frame's pairs, the layout and the tr
 
 REVERSED_COS = 0.5
 """A detection's left-right axis against its track's beyond this (cos < -it) is reversed."""
+SIDE_MEMORY = 0.2
+"""Seconds over which a track's held left-right axis follows its detections' (``hold_axes``):
+long enough that one camera's noisy torso, taken with its labels, cannot turn it, short
+enough to follow a person turning on the spot."""
 
 
 @njit(cache=True, error_model="numpy")
 def _reversed_sides(
-    detection: np.ndarray, track: np.ndarray, left: np.ndarray, right: np.ndarray
+    detection: np.ndarray, reference: np.ndarray, left: np.ndarray, right: np.ndarray
 ) -> bool:
     """Whether a detection's left points to its track's right (its sides then all swapped).
 
@@ -130,42 +136,85 @@ def _reversed_sides(
     labels and drag its track into the mirrored labelling. Reversed is a cosine under -0.5;
     nothing is said where a joint is missing.
     """
-    return _sides_cosine(detection, track, left, right) < -REVERSED_COS
+    return _sides_cosine(detection, reference, left, right) < -REVERSED_COS
 
 
 @njit(cache=True, error_model="numpy")
 def _follow_torso(
-    flips: np.ndarray, arms: int, detection: np.ndarray, track: np.ndarray, held: HeldSides
+    flips: np.ndarray, arms: int, detection: np.ndarray, reference: np.ndarray, held: HeldSides
 ) -> None:
     """Flip part ``arms`` of ``flips`` ``(K,)`` to what the detection's torso says, if clear.
 
     Flipped when the detection's left-right axis points against its track's (cosine under
     ``-REVERSED_COS``), not flipped when along it (over ``REVERSED_COS``), else unchanged.
     """
-    along = _sides_cosine(detection, track, held.left, held.right)
+    along = _sides_cosine(detection, reference, held.left, held.right)
     if abs(along) > REVERSED_COS:
         flips[arms] = along < 0.0
 
 
 @njit(cache=True, error_model="numpy")
+def _sides_axis(pose: np.ndarray, left: np.ndarray, right: np.ndarray) -> np.ndarray:
+    """``(3,)`` a pose's left-right axis: the sum of its ``left`` joints less its ``right``."""
+    axis = np.zeros(3)
+    for i in range(len(left)):
+        for a in range(3):
+            axis[a] += pose[left[i], a] - pose[right[i], a]
+    return axis
+
+
+@njit(cache=True, error_model="numpy")
+def _reference_axis(held: HeldSides, r: int) -> np.ndarray:
+    """``(3,)`` the left-right axis the detections of track ``r`` are held to.
+
+    The track's held axis (``held.axes[r]``, ``hold_axes``) once it has one, else its pose's.
+    """
+    axis = held.axes[r]
+    if axis[0] != 0.0 or axis[1] != 0.0 or axis[2] != 0.0:
+        return axis
+    return _sides_axis(held.tracks[r], held.left, held.right)
+
+
+@njit(cache=True, error_model="numpy")
 def _sides_cosine(
-    detection: np.ndarray, track: np.ndarray, left: np.ndarray, right: np.ndarray
+    detection: np.ndarray, reference: np.ndarray, left: np.ndarray, right: np.ndarray
 ) -> float:
-    """Cosine of a detection's left-right axis with its track's (``left`` less ``right``).
+    """Cosine of a detection's left-right axis with ``reference`` ``(3,)``.
 
     NaN where a joint is missing.
     """
-    dx = dy = dz = tx = ty = tz = 0.0
-    for i in range(len(left)):
-        dx += detection[left[i], 0] - detection[right[i], 0]
-        dy += detection[left[i], 1] - detection[right[i], 1]
-        dz += detection[left[i], 2] - detection[right[i], 2]
-        tx += track[left[i], 0] - track[right[i], 0]
-        ty += track[left[i], 1] - track[right[i], 1]
-        tz += track[left[i], 2] - track[right[i], 2]
-    along = dx * tx + dy * ty + dz * tz
-    scale = math.sqrt((dx * dx + dy * dy + dz * dz) * (tx * tx + ty * ty + tz * tz))
+    axis = _sides_axis(detection, left, right)
+    along = axis[0] * reference[0] + axis[1] * reference[1] + axis[2] * reference[2]
+    scale = math.sqrt(np.sum(axis * axis) * np.sum(reference * reference))
     return along / scale if scale > 0.0 else np.nan
+
+
+@njit(cache=True, error_model="numpy")
+def hold_axes(held: HeldSides, canonical: np.ndarray, last_hit_ns: np.ndarray, now_ns: int) -> None:
+    """Fold each detection's left-right axis (in its track's labelling) into its track's.
+
+    ``axes[r] <- k axes[r] + (1 - k) axis(canonical[u])`` for ``r = held.track_rows[u]``,
+    ``axis`` the left shoulder and hip less the right ones (m), ``k = exp(-dt /
+    SIDE_MEMORY)`` and ``dt`` s since the track's previous hit (``last_hit_ns`` ``(T,)``,
+    before this frame's); a track without an axis yet (0) takes the detection's. A detection
+    missing one of those joints adds nothing. ``held.axes`` changes in place.
+
+    The held axis is what the next detections' sides are held to (``_reference_axis``): the
+    track's pose follows each detection by ``position_smoothing``, so a run of noisy
+    detections whose torsos point 90-120 deg away (not clearly reversed, so kept as
+    labelled) can turn its shoulders through each other within a tenth of a second, and
+    the detections after are then relabelled to the mirror (repeated-motion, noisy-sdk).
+    """
+    for u in range(len(held.track_rows)):
+        r = held.track_rows[u]
+        axis = _sides_axis(canonical[u], held.left, held.right)
+        if not (math.isfinite(axis[0]) and math.isfinite(axis[1]) and math.isfinite(axis[2])):
+            continue
+        known = held.axes[r, 0] != 0.0 or held.axes[r, 1] != 0.0 or held.axes[r, 2] != 0.0
+        elapsed = max(now_ns - last_hit_ns[r], 0) * 1e-9
+        keep = math.exp(-elapsed / SIDE_MEMORY) if known else 0.0
+        for a in range(3):
+            held.axes[r, a] = keep * held.axes[r, a] + (1.0 - keep) * axis[a]
 
 
 @njit(cache=True, error_model="numpy")

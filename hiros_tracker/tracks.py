@@ -28,6 +28,8 @@ Per track (``J`` joints, ``C`` cameras, ``R`` record slots):
   detections (0 before a detection shows it), ``limb_count`` ``(J,)`` how many it averages,
   capped at ``LIMB_MEMORY`` (a running mean that still follows a slow change): the body's
   shape, which tells a person returning from another one (``Tracker``'s re-identification);
+- ``sides`` ``(3,)``: the held left-right axis its detections' sides are held to (m; 0 before
+  the first, and after a relabelling by ``relabel``), ``labels.hold_axes``;
 - ``votes``/``mirrored``: Python, for the mirror-vote fallback only (camera -> (ns, flips)).
 """
 
@@ -48,7 +50,7 @@ LIMB_MEMORY = 300
 
 _FLOAT_FIELDS = (
     "positions", "orientations", "velocities", "velocity", "facing", "sums", "flip_state",
-    "limbs", "limb_count",
+    "limbs", "limb_count", "sides",
 )  # fmt: skip
 _INT_FIELDS = (
     "ids", "born_ns", "time_ns", "last_hit_ns", "epoch_ns", "facing_ns", "hits", "n_cameras",
@@ -75,7 +77,7 @@ class TrackTable:
             "seen": (cameras,), "record_ns": (records,), "record_camera": (records,),
             "record_terms": (records, joints, 9), "flip_state": (cameras, 2),
             "flip_ns": (cameras,), "flip_known": (cameras,), "limbs": (joints,),
-            "limb_count": (joints,),
+            "limb_count": (joints,), "sides": (3,),
         }  # fmt: skip
         for name in _ROW_FIELDS:
             dtype = float if name in _FLOAT_FIELDS or name == "record_terms" else np.int64
@@ -109,6 +111,7 @@ class TrackTable:
     flip_known: np.ndarray
     limbs: np.ndarray
     limb_count: np.ndarray
+    sides: np.ndarray
 
     @property
     def capacity(self) -> int:
@@ -205,8 +208,12 @@ class TrackTable:
         self.limb_count[rows] = count
 
     def relabel(self, row: int, permutation: np.ndarray) -> None:
-        """Reorder a track's joints (swap the sides of some parts); votes are the caller's."""
+        """Reorder a track's joints (swap the sides of some parts); votes are the caller's.
+
+        Its held left-right axis is forgotten (the pose's is used until detections give it anew).
+        """
         kernels.relabel(self.hit_fields(), row, permutation)
+        self.sides[row] = 0.0
 
     def _grow_rows(self) -> None:
         for name in _ROW_FIELDS:

@@ -6,6 +6,7 @@ import pytest
 from hiros_core.layouts import AZURE_KINECT
 from hiros_tracker import kernels
 from hiros_tracker.kernel_args import HeldSides, SideLayout
+from hiros_tracker.labels import SIDE_MEMORY
 from hiros_tracker.tracker import _body_frame, _mirror_parts, _side_arrays
 
 
@@ -20,18 +21,23 @@ def _standing() -> np.ndarray:
 
 
 def _canonical(
-    detection: np.ndarray, track: np.ndarray, matched: np.ndarray | None = None
+    detection: np.ndarray,
+    track: np.ndarray,
+    matched: np.ndarray | None = None,
+    axis: np.ndarray | None = None,
 ) -> np.ndarray:
     """The flips ``canonical_poses`` gives a detection whose parts matched ``matched``.
 
-    ``matched`` ``(K,)``: the parts the association took mirrored (default: none).
+    ``matched`` ``(K,)``: the parts the association took mirrored (default: none); ``axis``
+    ``(3,)`` the track's held left-right axis (default: none yet, the pose's).
     """
     parts = _mirror_parts(AZURE_KINECT)
     shoulders, pairs, pair_parts = _side_arrays(AZURE_KINECT, parts)
     frame = _body_frame(AZURE_KINECT)
     if matched is None:
         matched = np.zeros(parts.count, dtype=bool)
-    held = HeldSides(track[None], np.array([0]), frame.left, frame.right)
+    axes = np.zeros((1, 3)) if axis is None else axis[None].astype(float)
+    held = HeldSides(track[None], axes, np.array([0]), frame.left, frame.right)
     _, flips = kernels.canonical_poses(
         detection[None],
         np.array([0]),
@@ -86,3 +92,33 @@ def test_the_arms_follow_a_clearly_reversed_torso_whatever_the_part_match() -> N
     matched[legs] = True
     flips = _canonical(detection, track, matched)
     assert flips[arms]
+
+
+def test_detections_are_held_to_the_tracks_held_axis_not_to_its_dragged_pose() -> None:
+    # Noisy detections taken with their labels dragged the track's pose 100 deg round; its
+    # held axis still says left is +y. A detection facing the other way (170 deg) is held
+    # to that: relabelled whole, though it lies only 70 deg from the dragged pose.
+    track = _standing()
+    dragged = _turned(track, 100.0)
+    detection = _turned(track, 170.0)
+    assert not _canonical(detection, dragged).any()  # held to the pose: kept as labelled
+    flips = _canonical(detection, dragged, axis=np.array([0.0, 1.0, 0.0]))
+    assert flips.all()
+
+
+def test_the_held_axis_follows_detections_over_its_memory() -> None:
+    frame = _body_frame(AZURE_KINECT)
+
+    def axis(pose: np.ndarray) -> np.ndarray:
+        return pose[frame.left].sum(axis=0) - pose[frame.right].sum(axis=0)
+
+    track = _standing()
+    axes = np.zeros((1, 3))
+    held = HeldSides(track[None], axes, np.array([0]), frame.left, frame.right)
+    first = np.zeros(1, dtype=np.int64)
+    kernels.hold_axes(held, track[None], first, 0)  # a first detection: taken whole
+    assert axes[0] == pytest.approx(axis(track))
+    turned = _turned(track, 90.0)
+    kernels.hold_axes(held, turned[None], first, round(SIDE_MEMORY * 1e9))  # 1/e kept
+    keep = np.exp(-1.0)
+    assert axes[0] == pytest.approx(keep * axis(track) + (1 - keep) * axis(turned))
