@@ -185,7 +185,12 @@ def test_case5_a_run_stopped_by_a_signal_leaves_nothing_under_its_name(
         assert time.monotonic() < deadline
         time.sleep(0.05)
     os.kill(process.pid, signum)
-    _, err = process.communicate(timeout=30)
+    try:
+        _, err = process.communicate(timeout=30)
+    except subprocess.TimeoutExpired:  # say where it hung (once seen on a loaded machine)
+        process.kill()
+        _, err = process.communicate()
+        pytest.fail(f"the run did not stop within 30 s of signal {signum}; its stderr: {err}")
     assert process.returncode == 128 + signum
     assert "terminated" in err or "interrupted" in err
     assert list(out.parent.iterdir()) == []
