@@ -86,6 +86,8 @@ REMOVED_PARAMETERS: dict[str, str] = {
         ("agreement_scale", "agreement_smoothing"),
         "the merger has no camera agreement weight (it fed back on itself)",
     ),
+    "extrapolate": "the merger always extrapolates; max_extrapolation 0 turns it off",
+    "limb_residuals": "the merger always weighs a camera's limb whole",
     "rate_tolerance": "hiros_filter fixes it as the constant RATE_TOLERANCE",
     "sweeps": "hiros_optimizer fixes it as the constant SWEEPS",
     "refinements": "hiros_optimizer fixes it as the constant REFINEMENTS",

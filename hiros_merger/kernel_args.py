@@ -83,7 +83,6 @@ class BodyLayout(NamedTuple):
 class WeightSettings(NamedTuple):
     """The reliability weights' parameters (``MergerParams``' fields of the same names)."""
 
-    extrapolate: bool
     max_extrapolation: float
     confidence_floor: float
     confidence_power: float
@@ -101,8 +100,7 @@ class RobustSettings(NamedTuple):
     iterations: int
     outlier_scale: float
     outlier_cutoff: float
-    own_cutoff: float  # ``limb_cutoff`` with ``limb_residuals``, else ``outlier_cutoff``
-    limb_residuals: bool
+    limb_cutoff: float
 
 
 class FuseSettings(NamedTuple):

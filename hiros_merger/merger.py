@@ -26,7 +26,7 @@ weight each camera by confidence, distance and view; the product form is ours)::
 then the robust mean multiplies by a Cauchy weight ``1 / (1 + (r / outlier_scale)²)`` of each
 joint's distance ``r`` to the current estimate (0 beyond ``outlier_cutoff``), starting from the
 weighted median, so that one camera's flipped limb or swapped leg does not pull the result.
-``r`` is the mean over the joint's limb in that detection (``limb_residuals``): a camera's limb
+``r`` is the mean over the joint's limb in that detection: a camera's limb
 is weighed whole, so the fused limb is one weighted mean of the cameras' limbs rather than
 joints stitched from different cameras (which bent limbs: 1-2 frame joint-angle spikes).
 
@@ -80,8 +80,8 @@ class MergerParams:
     Attributes:
         window: seconds; a camera's detection older than this at the output time is not fused.
         output_rate: Hz; 0 outputs on each input at its newest stamp.
-        extrapolate: bring each detection to the output time with its joint velocities.
-        max_extrapolation: seconds of extrapolation at most.
+        max_extrapolation: seconds; each detection is brought to the output time with its
+            joint velocities, over this much time at most (0 turns extrapolation off).
         confidence_power: exponent of the SDK confidence in the weight.
         confidence_floor: smallest confidence used (a NONE joint still counts a little).
         depth_gain: per metre; the depth weight is ``(1 + depth_gain · depth)^-2``.
@@ -100,13 +100,12 @@ class MergerParams:
         outlier_cutoff: metres; a joint farther than this from the estimate gets no weight (as
             long as another camera's joint is within it): a flipped limb is out, not just less.
         iterations: reweighting iterations of the robust mean.
-        limb_residuals: the robust mean weighs each camera's limb (torso, head, each arm, each
-            leg) by its mean joint distance to the estimate instead of each joint by its own:
-            an SDK's errors are coherent along a limb, and joints taken from different
-            cameras' versions of one limb bend it (angle spikes) even when each camera has the
-            angle right.
-        limb_cutoff: metres; with ``limb_residuals``, a camera's limb one of whose joints is
-            this far from the estimate gets no weight (a single joint's blunder).
+        limb_cutoff: metres; a camera's limb (torso, head, each arm, each leg) one of whose
+            joints is this far from the estimate gets no weight (a single joint's blunder).
+            The robust mean weighs each camera's limb whole, by its mean joint distance to
+            the estimate: an SDK's errors are coherent along a limb, and joints taken from
+            different cameras' versions of one limb bend it (angle spikes) even when each
+            camera has the angle right.
         track_timeout: seconds; a track unseen this long is forgotten.
         max_jump: seconds; input stamped this much before the newest input so far restarts
             the merger (its detections and output clock, counted ``stamps went back``): the
@@ -118,7 +117,6 @@ class MergerParams:
 
     window: float = 0.1
     output_rate: float = 0.0
-    extrapolate: bool = True
     max_extrapolation: float = 0.1
     confidence_power: float = 2.0
     confidence_floor: float = 0.05
@@ -133,7 +131,6 @@ class MergerParams:
     iterations: int = 3
     track_timeout: float = 1.0
     max_jump: float = 1.0
-    limb_residuals: bool = True
     limb_cutoff: float = 0.8
 
 
@@ -222,11 +219,7 @@ def _read(bundle: type[T], params: MergerParams, **given: object) -> T:
 
 def _fuse_settings(params: MergerParams) -> FuseSettings:
     """The fusion's parameters as the kernels read them."""
-    cutoff = params.limb_cutoff if params.limb_residuals else params.outlier_cutoff
-    return FuseSettings(
-        _read(WeightSettings, params),
-        _read(RobustSettings, params, own_cutoff=float(cutoff)),
-    )
+    return FuseSettings(_read(WeightSettings, params), _read(RobustSettings, params))
 
 
 def _quaternion_mean(quaternions: np.ndarray, weights: np.ndarray) -> np.ndarray:

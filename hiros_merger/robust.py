@@ -5,11 +5,11 @@ Each joint starts at the weighted median of its cameras' positions (per coordina
 camera multiplied by a Cauchy weight of its distance ``r`` to the current estimate::
 
     w' = w / (1 + (r / outlier_scale)²)        0 where r is not finite
-    w' = 0  if r > outlier_cutoff or r_own > own_cutoff, unless no camera is left
+    w' = 0  if r > outlier_cutoff or r_own > limb_cutoff, unless no camera is left
 
-With ``limb_residuals``, ``r`` is the mean distance over the joint's limb in that detection
-and ``r_own`` the limb's farthest joint (``own_cutoff`` = ``limb_cutoff``), so a camera's
-limb is kept or dropped whole; otherwise both are the joint's own distance. The final
+``r`` is the mean distance over the joint's limb in that detection and ``r_own`` the limb's
+farthest joint, so a camera's limb is kept or dropped whole (a joint that is not finite keeps
+its own distance in both). The final
 weights are the same rule around the final estimate; they weigh the confidences and the
 velocities too.
 """
@@ -125,28 +125,22 @@ def judged_residuals(  # noqa: PLR0917
     fused: np.ndarray,
     finite: np.ndarray,
     groups: np.ndarray,
-    limb_residuals: bool,
     residual: np.ndarray,
     limb: np.ndarray,
     peak: np.ndarray,
 ) -> None:
     """Each detection's joint distances to ``fused``, and what the weights judge them by.
 
-    ``limb``/``peak``: the mean/max over each joint's limb with ``limb_residuals``, else the
-    joint's own distance in both.
+    ``limb``/``peak``: the mean/max over each joint's limb (``limb_means``).
     """
     residuals(positions, fused, residual)
-    if limb_residuals:
-        limb_means(residual, finite, groups, limb, peak)
-    else:
-        limb[:] = residual
-        peak[:] = residual
+    limb_means(residual, finite, groups, limb, peak)
 
 
 @njit(cache=True, error_model="numpy", inline="always")
 def within_cutoffs(residual: float, own: float, settings: RobustSettings) -> bool:
-    """Whether a joint is within ``outlier_cutoff`` and its own within ``own_cutoff``."""
-    return residual <= settings.outlier_cutoff and own <= settings.own_cutoff
+    """Whether a joint is within ``outlier_cutoff`` and its own within ``limb_cutoff``."""
+    return residual <= settings.outlier_cutoff and own <= settings.limb_cutoff
 
 
 @njit(cache=True, error_model="numpy")
@@ -160,7 +154,7 @@ def cauchy_weights(
     """The module docstring's ``w'`` of every joint of every detection into ``out``.
 
     All ``(M, C, J)``: ``residual`` is what the Cauchy weight and ``outlier_cutoff`` judge,
-    ``own`` what ``own_cutoff`` judges (``judged_residuals``' ``limb`` and ``peak``).
+    ``own`` what ``limb_cutoff`` judges (``judged_residuals``' ``limb`` and ``peak``).
     """
     n_tracks, n_slots, n_joints = weight.shape
     for m in range(n_tracks):
@@ -221,16 +215,12 @@ def robust_mean(
     peak = np.empty((n_tracks, n_slots, n_joints))
     robust = np.empty((n_tracks, n_slots, n_joints))
     for _ in range(settings.iterations):
-        judged_residuals(
-            positions, fused, finite, groups, settings.limb_residuals, residual, limb, peak
-        )
+        judged_residuals(positions, fused, finite, groups, residual, limb, peak)
         cauchy_weights(weight, limb, peak, settings, robust)
         for m in range(n_tracks):
             for j in range(n_joints):
                 weighted_mean3(positions, robust, m, j, fused)
-    judged_residuals(
-        positions, fused, finite, groups, settings.limb_residuals, residual, limb, peak
-    )
+    judged_residuals(positions, fused, finite, groups, residual, limb, peak)
     return residual, limb, peak
 
 

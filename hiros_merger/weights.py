@@ -46,8 +46,8 @@ def detections_at(
 ) -> Observations:
     """Each detection's joints at the output time, and the weights known before fusing.
 
-    A joint's position is ``p + v · clip(age, ±max_extrapolation)`` with ``extrapolate``
-    (a non-finite velocity counts 0); an absent joint or a padding slot reads as NaN. Its
+    A joint's position is ``p + v · clip(age, ±max_extrapolation)`` (a non-finite velocity
+    counts 0); an absent joint or a padding slot reads as NaN. Its
     confidence is the SDK's (1 where it is not finite). The weight is the module docstring's
     product of confidence, staleness and depth.
 
@@ -73,8 +73,7 @@ def detections_at(
                     p = rows[s, j, 1 + a] if valid else np.nan
                     v = rows[s, j, 8 + a] if valid else np.nan
                     velocities[m, c, j, a] = v
-                    if settings.extrapolate:
-                        p = p + (v if math.isfinite(v) else 0.0) * dt
+                    p = p + (v if math.isfinite(v) else 0.0) * dt
                     positions[m, c, j, a] = p
                     is_finite = is_finite and math.isfinite(p)
                 finite[m, c, j] = is_finite

@@ -69,13 +69,13 @@ def test_an_old_calib_file_loads_without_the_parameters_that_became_constants(
 
 
 def test_an_old_pipeline_file_loads_without_the_stages_removed_parameters(tmp_path: Path) -> None:
-    """The merger's direction fusion, back-view and agreement weights went; the filter's,
-    optimizer's and bridges' numerical settings became constants."""
+    """The merger's direction fusion, back-view and agreement weights and its limb switch went;
+    the filter's, optimizer's and bridges' numerical settings became constants."""
     path = tmp_path / "pipeline.yaml"
     path.write_text(
         "pipeline:\n  ros__parameters:\n"
         "    merger: {fuse_directions: false, view_weight_min: 1.0, agreement_scale: 0.0,"
-        " window: 0.2}\n"
+        " limb_residuals: true, window: 0.2}\n"
         "    optimizer: {sweeps: 1, refinements: 2}\n    filter: {rate_tolerance: 0.15}\n"
     )
     with pytest.warns(RemovedParameterWarning) as caught:
@@ -86,6 +86,7 @@ def test_an_old_pipeline_file_loads_without_the_stages_removed_parameters(tmp_pa
         "filter.rate_tolerance",
         "merger.agreement_scale",
         "merger.fuse_directions",
+        "merger.limb_residuals",
         "merger.view_weight_min",
         "optimizer.refinements",
         "optimizer.sweeps",

@@ -3,7 +3,7 @@
 Hypothesis draws the seeds of random frames and the settings: a few people near each other
 (occluding), seen by a few cameras (some unknown), each detection noisy with absent joints,
 NaN confidences and velocities, some flipped front to back, some with a limb far off, and
-padding slots; the fusion's switches (limb residuals, extrapolation, side views) both ways.
+padding slots; extrapolation and side views both on and off.
 """
 
 from __future__ import annotations
@@ -80,8 +80,7 @@ def _frame(rng: np.random.Generator) -> TrackDetections:
 
 PARAMS = st.builds(
     MergerParams,
-    extrapolate=st.booleans(),
-    limb_residuals=st.booleans(),
+    max_extrapolation=st.sampled_from([0.0, 0.1]),
     iterations=st.integers(0, 4),
     confidence_power=st.sampled_from([1.0, 1.5, 2.0]),
     oblique_gain=st.sampled_from([0.0, 1.0]),

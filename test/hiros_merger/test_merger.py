@@ -95,7 +95,7 @@ def test_detections_at_different_stamps_are_brought_to_the_output_time():
     assert out.stamp_ns == late
     np.testing.assert_allclose(out.skeletons[0].positions, pose + velocity * 0.03, atol=1e-9)
 
-    still = Merger(MergerParams(extrapolate=False))
+    still = Merger(MergerParams(max_extrapolation=0.0))
     still.update(_group([older], T0))
     stale = still.update(_group([newer], late)).skeletons[0]
     assert np.abs(stale.positions[:, 0] - (pose[:, 0] + 0.03)).max() > 0.005
@@ -269,9 +269,6 @@ def test_a_camera_limb_is_kept_or_dropped_whole():
     group = _group([_detection(pose, "k01"), _detection(pose, "k02"), _detection(bent, "k03")])
     whole = Merger(MergerParams()).update(group).skeletons[0]
     np.testing.assert_allclose(whole.positions, pose, atol=1e-9)
-    per_joint = Merger(MergerParams(limb_residuals=False)).update(group).skeletons[0]
-    elbow = AZURE_KINECT.index("ElbowLeft")
-    assert abs(per_joint.positions[elbow, 2] - pose[elbow, 2]) > 0.01
 
 
 def test_a_frame_s_later_detection_of_a_track_and_camera_replaces_the_earlier_one():

@@ -49,11 +49,8 @@ def detections_at(
     positions = np.where(valid[..., None], rows[..., 1:4], np.nan)
     velocities = np.where(valid[..., None], rows[..., 8:11], np.nan)
     ages = detections.ages
-    if settings.extrapolate:
-        dt = np.clip(ages, -settings.max_extrapolation, settings.max_extrapolation)
-        positions = (
-            positions + np.where(np.isfinite(velocities), velocities, 0.0) * dt[..., None, None]
-        )
+    dt = np.clip(ages, -settings.max_extrapolation, settings.max_extrapolation)
+    positions = positions + np.where(np.isfinite(velocities), velocities, 0.0) * dt[..., None, None]
     confidences = np.where(valid, rows[..., 0], np.nan)
     confidences = np.where(np.isfinite(confidences), confidences, 1.0)
     weight = np.maximum(confidences, settings.confidence_floor) ** settings.confidence_power
@@ -148,16 +145,14 @@ def occluded(  # noqa: PLR0917 - the kernel's arguments
 
 
 def judged_residuals(
-    positions: np.ndarray, fused: np.ndarray, groups: np.ndarray, limb_residuals: bool
+    positions: np.ndarray, fused: np.ndarray, groups: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """``(M, C, J)`` distances to ``fused``, and their limb mean and limb maximum.
 
     Over the joints of the limb whose positions and distances are finite; a joint that is
-    not finite (or all of them, without ``limb_residuals``) keeps its own distance.
+    not finite keeps its own distance.
     """
     residual = np.linalg.norm(positions - fused[:, None], axis=-1)
-    if not limb_residuals:
-        return residual, residual, residual
     finite = np.isfinite(positions).all(axis=-1)
     used = finite & np.isfinite(residual)
     in_limb = groups[:, None] == np.arange(groups.max() + 1)  # (J, G)
@@ -182,7 +177,7 @@ def cauchy_weights(
         robust = np.where(
             np.isfinite(residual), weight / (1.0 + (residual / settings.outlier_scale) ** 2), 0.0
         )
-        inside = (residual <= settings.outlier_cutoff) & (own <= settings.own_cutoff)
+        inside = (residual <= settings.outlier_cutoff) & (own <= settings.limb_cutoff)
     any_inside = np.where(inside, robust, 0.0).sum(axis=1, keepdims=True) > 0
     return np.where(any_inside & ~inside, 0.0, robust)
 
@@ -219,9 +214,9 @@ def reference_fuse(detections: TrackDetections, settings: FuseSettings, body: Bo
             weighting.occlusion_weight,
         )
     for _ in range(robust.iterations):
-        _, limb, peak = judged_residuals(positions, fused, body.groups, robust.limb_residuals)
+        _, limb, peak = judged_residuals(positions, fused, body.groups)
         fused = weighted_mean(positions, cauchy_weights(weight, limb, peak, robust))
-    _, limb, peak = judged_residuals(positions, fused, body.groups, robust.limb_residuals)
+    _, limb, peak = judged_residuals(positions, fused, body.groups)
     final = cauchy_weights(weight, limb, peak, robust)
     positive = np.where(final > 0, final, 0.0)
     confidence = _mean_or_nan((confidences * positive).sum(axis=1), positive.sum(axis=1))
