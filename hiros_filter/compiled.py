@@ -32,12 +32,25 @@ _SAME_LENGTH = 1e-9
 
 
 @njit(cache=True)
-def kalman_step(x, P, scale, rows, dt, dt_rounded, mask, positions, q, r, max_scale, rate):
+def kalman_step(state, model, frame):
     """``KalmanBank.predict(rows, dt)`` then ``KalmanBank.correct(rows, mask, positions)``.
 
-    ``x``, ``P`` ``(S, 3, 3, J)`` and ``scale`` ``(S, J)`` are updated in place; ``dt_rounded``
-    is ``dt`` rounded to the µs the process noise is tabulated at.
+    For each row's slot and joint: ``x ← F x``, ``P ← F P Fᵀ + scale · Q(dt_rounded)`` with
+    ``F = [[1, dt, dt²/2], [0, 1, dt], [0, 0, 1]]`` and ``Q`` the continuous white-jerk noise of
+    density ``q``; then where ``mask``, with ``H = [1, 0, 0]``: gain ``K = P[:, 0] / (P[0, 0] +
+    r)``, ``x += K ν`` for the innovation ``ν = position - x[0]``, ``P -= K P[0, :]``, and (when
+    ``max_scale > 1``) ``scale`` smoothed at ``rate`` towards ``|ν|² / (3 (P[0, 0] + r))``
+    within ``[1, max_scale]``.
+
+    Args:
+        state: ``kernel_args.KalmanState`` ``(x, P, scale)``, updated in place.
+        model: ``kernel_args.KalmanModel`` ``(q, r, max_scale, rate, initial)``.
+        frame: ``kernel_args.KalmanFrame`` ``(rows, dt, dt_rounded, mask, positions)``.
+
     """
+    x, P, scale = state
+    q, r, max_scale, rate, _ = model
+    rows, dt, dt_rounded, mask, positions = frame
     n_joints = x.shape[3]
     q_matrix = np.empty((3, 3))
     for i in range(len(rows)):
@@ -281,7 +294,7 @@ def filter_step(kalman, model, tracks, frame, lengths, orientations, link_ends):
 
     """
     x, P, scale = kalman
-    q, r, max_scale, rate, initial = model
+    initial = model[4]
     rows, time_ns, joint_time_ns, max_gap_ns = tracks
     markers, present, stamps = frame
     n, n_joints = present.shape
@@ -293,10 +306,7 @@ def filter_step(kalman, model, tracks, frame, lengths, orientations, link_ends):
     for i in range(n):
         for j in range(n_joints):
             restart[i, j] = present[i, j] and stamps[i] - joint_time_ns[rows[i], j] > max_gap_ns
-    kalman_step(
-        x, P, scale, rows, dt, np.round(dt, 6), present & ~restart, measured, q, r, max_scale,
-        rate,
-    )  # fmt: skip
+    kalman_step(kalman, model, (rows, dt, np.round(dt, 6), present & ~restart, measured))
     states = np.empty((3, n, n_joints, 3))  # positions, velocities, accelerations
     for i in range(n):
         s = rows[i]

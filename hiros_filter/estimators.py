@@ -137,14 +137,15 @@ class KalmanBank:
         smoothed towards ``|ν|² / (3 (P[0, 0] + r))`` within ``[1, max_noise_scale]``.
         """
         from hiros_filter.compiled import kalman_step
+        from hiros_filter.kernel_args import KalmanFrame, KalmanModel, KalmanState
 
         dt = np.asarray(dt, dtype=float)
-        kalman_step(
-            self.x, self.P, self.scale, np.asarray(slots, dtype=np.int64), dt, np.round(dt, 6),
-            np.asarray(mask, dtype=bool), np.ascontiguousarray(positions, dtype=float),
-            float(self.q), float(self.r), float(self.max_noise_scale),
-            float(self.adaptation_rate),
-        )  # fmt: skip
+        positions = np.ascontiguousarray(positions, dtype=float)
+        rows = np.asarray(slots, dtype=np.int64)
+        frame = KalmanFrame(rows, dt, np.round(dt, 6), np.asarray(mask, dtype=bool), positions)
+        constants = (self.q, self.r, self.max_noise_scale, self.adaptation_rate)
+        model = KalmanModel(*(float(value) for value in constants), initial=self.initial)
+        kalman_step(KalmanState(self.x, self.P, self.scale), model, frame)
 
 
 def _block(slots: np.ndarray) -> slice | np.ndarray:
