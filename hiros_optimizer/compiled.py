@@ -34,6 +34,7 @@ import numpy as np
 from numba import njit
 
 from hiros_core.compiled import _link_rows, refresh_stale_caches
+from hiros_optimizer.kernel_args import FitTree
 
 __all__ = ["fit_frame", "fit_frame_links", "fit_people", "learn_frame", "unusable_rows"]
 
@@ -328,14 +329,18 @@ def _gauss_newton(parents, order, targets, total, lengths, vectors, positions, r
 
 
 @njit(cache=True, error_model="numpy")
-def _fit_person(
-    parents, order, level_starts, measured, weights, lengths, prior, prior_weight, fallback,
-    sweeps, refinements, vectors, positions,
-):  # fmt: skip
+def _fit_person(tree, fit, measured, weights, lengths, prior, fallback, vectors, positions):
     """The fit of one person: ``(J, 3)`` measured, prior, fallback; ``(J,)`` weights, lengths.
 
-    Writes the link vectors and positions into ``vectors`` and ``positions``.
+    Each joint's target is the weighted mean of its measurement (weight ``w``, 0 when not
+    finite) and its prior (weight ``prior_weight`` where finite); the link vectors of fixed
+    ``lengths`` then minimise ``Σ_j total_j |x_j - target_j|²`` (``x`` the forward kinematics):
+    an initial guess, ``sweeps`` of coordinate descent, ``refinements`` Gauss-Newton steps.
+    ``tree`` is ``(parents, order, level_starts)``, ``fit`` ``(prior_weight, sweeps,
+    refinements)``. Writes the link vectors and positions into ``vectors`` and ``positions``.
     """
+    parents, order, level_starts = tree
+    prior_weight, sweeps, refinements = fit
     n = len(parents)
     targets = np.zeros((n, 3))
     total = np.zeros(n)
@@ -363,28 +368,23 @@ def _fit_person(
 
 
 @njit(cache=True, error_model="numpy")
-def _fit(
-    parents,
-    order,
-    level_starts,
-    measured,
-    weights,
-    lengths,
-    prior,
-    prior_weight,
-    fallback,
-    sweeps,
-    refinements,
-):
+def _fit(tree, fit, measured, weights, lengths, prior, fallback):
+    """:func:`_fit_person` for each person of ``(P, J, ...)`` arrays; ``(positions, vectors)``."""
     n_people, n = weights.shape
     positions = np.zeros((n_people, n, 3))
     vectors = np.zeros((n_people, n, 3))
     for person in range(n_people):
         _fit_person(
-            parents, order, level_starts, measured[person], weights[person], lengths[person],
-            prior[person], prior_weight, fallback[person], sweeps, refinements,
-            vectors[person], positions[person],
-        )  # fmt: skip
+            tree,
+            fit,
+            measured[person],
+            weights[person],
+            lengths[person],
+            prior[person],
+            fallback[person],
+            vectors[person],
+            positions[person],
+        )
     return positions, vectors
 
 
@@ -445,16 +445,30 @@ def _weight(confidence, present, floor):
 
 
 @njit(cache=True, error_model="numpy")
-def fit_frame(
-    parents, order, level_starts, markers, present, lengths, rows, stamps, time_ns, timed,
-    positions, velocities, vectors, floor, threshold, distance, prior_weight, timeout,
-    sweeps, refinements,
-):  # fmt: skip
+def fit_frame(tree, frame, lengths, memory, settings):
     """``Memory.fit``: prior, outlier weights, fit, output positions, memory, in place.
 
-    ``markers`` ``(P, J, 20)`` are the output rows (fitted positions written where present),
-    ``lengths`` ``(P, J)`` the people's calibrations, ``rows`` their memory rows.
+    For each person: the prior of joint ``j`` is ``position + velocity · dt`` of its memory row;
+    a link whose relative length error ``|‖m_j - m_parent‖ - l_j| / l_j`` exceeds ``threshold``
+    makes both its ends suspect; a joint's weight is its confidence (NaN: 1, at least
+    ``floor``), times ``min(1, (distance / ‖m_j - prior_j‖)²)`` when suspect; then
+    :func:`_fit_person`, and the fitted positions go into the present joints' rows and the
+    memory.
+
+    Args:
+        tree: ``kernel_args.FitTree``.
+        frame: ``kernel_args.FrameRows``; ``markers`` ``(P, J, 20)`` are the output rows
+            (fitted positions written where present).
+        lengths: ``(P, J)`` the people's calibrations.
+        memory: ``kernel_args.MemoryState`` (updated in place).
+        settings: ``kernel_args.FitSettings``.
+
     """
+    parents = tree[0]
+    markers, present, rows, stamps = frame
+    time_ns, timed, positions, velocities, vectors = memory
+    floor, threshold, distance, prior_weight, timeout, sweeps, refinements = settings
+    fit = (prior_weight, sweeps, refinements)
     n_people, n = present.shape
     measured = np.empty((n, 3))
     prior = np.empty((n, 3))
@@ -491,10 +505,7 @@ def fit_frame(
                 if np.isfinite(factor):
                     weight *= factor
             weights[j] = weight
-        _fit_person(
-            parents, order, level_starts, measured, weights, lengths[i], prior, prior_weight,
-            vectors[s], sweeps, refinements, fitted, moved,
-        )  # fmt: skip
+        _fit_person(tree, fit, measured, weights, lengths[i], prior, vectors[s], fitted, moved)
         for j in range(n):
             for k in range(3):
                 if present[i, j]:
@@ -504,26 +515,27 @@ def fit_frame(
 
 
 @njit(cache=True, error_model="numpy")
-def fit_frame_links(
-    parents, order, level_starts, markers, present, lengths, rows, stamps, time_ns, timed,
-    positions, velocities, vectors, floor, threshold, distance, prior_weight, timeout,
-    sweeps, refinements, link_parents, link_children,
-):  # fmt: skip
-    """:func:`fit_frame`, then the fitted rows' links (``model.link_rows``): one call a frame."""
-    fit_frame(
-        parents, order, level_starts, markers, present, lengths, rows, stamps, time_ns, timed,
-        positions, velocities, vectors, floor, threshold, distance, prior_weight, timeout,
-        sweeps, refinements,
-    )  # fmt: skip
-    return _link_rows(markers, present, link_parents, link_children)
+def fit_frame_links(tree, frame, lengths, memory, settings, link_ends):
+    """:func:`fit_frame`, then the fitted rows' links (``model.link_rows``): one call a frame.
+
+    ``link_ends`` is ``(parents, children)`` of the layout's links.
+    """
+    fit_frame(tree, frame, lengths, memory, settings)
+    return _link_rows(frame[0], frame[1], link_ends[0], link_ends[1])
 
 
 @njit(cache=True, error_model="numpy")
-def learn_frame(
-    parents, markers, present, rows, stamps, time_ns, timed, positions, velocities, vectors,
-    window, filled, timeout,
-):  # fmt: skip
-    """``Memory.learn``: push each person's link lengths into their window, remember them."""
+def learn_frame(parents, frame, memory, window, filled, timeout):
+    """``Memory.learn``: push each person's link lengths into their window, remember them.
+
+    Each person's link lengths ``‖m_j - m_parent‖`` over the joints of confidence above 0 (NaN
+    counts as 1) go into column ``filled % N`` of their ``window`` ``(S, J, N)`` row
+    (``filled`` ``(S,)`` counts up); the present joints become the memory row's positions.
+    ``frame`` is a ``kernel_args.FrameRows``, ``memory`` a ``kernel_args.MemoryState``
+    (updated in place), ``timeout`` in seconds.
+    """
+    markers, present, rows, stamps = frame
+    time_ns, timed, positions, velocities, vectors = memory
     n_people, n = present.shape
     size = window.shape[2]
     counted = np.empty((n, 3))
@@ -587,11 +599,14 @@ def fit_people(
         else np.ascontiguousarray(fallback_vectors, float)
     )
     return _fit(
-        parents, order, level_starts,
-        np.ascontiguousarray(measured, float), np.ascontiguousarray(weights, float),
-        np.ascontiguousarray(lengths, float), prior, float(prior_weight), fallback,
-        int(sweeps), int(refinements),
-    )  # fmt: skip
+        FitTree(parents, order, level_starts),
+        (float(prior_weight), int(sweeps), int(refinements)),
+        np.ascontiguousarray(measured, float),
+        np.ascontiguousarray(weights, float),
+        np.ascontiguousarray(lengths, float),
+        prior,
+        fallback,
+    )
 
 
 refresh_stale_caches(globals())  # the kernels above call hiros_core.compiled's _link_rows

@@ -20,6 +20,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from hiros_core.layouts import Layout
+from hiros_optimizer import kernel_args
 from hiros_optimizer.kinematics import KinematicTree, link_lengths
 
 __all__ = ["FitSettings", "Memory"]
@@ -38,13 +39,17 @@ class FitSettings:
     refinements: int
 
     @property
-    def kernel_values(self) -> tuple[float, float, float, float, float, int, int]:
-        """The trailing arguments of ``compiled.fit_frame``, typed as the kernel expects."""
-        return (
-            float(self.confidence_floor), float(self.outlier_threshold),
-            float(self.outlier_distance), float(self.prior_weight), float(self.track_timeout),
-            int(self.sweeps), int(self.refinements),
-        )  # fmt: skip
+    def kernel_values(self) -> kernel_args.FitSettings:
+        """The settings bundle of ``compiled.fit_frame``, typed as the kernel expects."""
+        return kernel_args.FitSettings(
+            float(self.confidence_floor),
+            float(self.outlier_threshold),
+            float(self.outlier_distance),
+            float(self.prior_weight),
+            float(self.track_timeout),
+            int(self.sweeps),
+            int(self.refinements),
+        )
 
 
 class Memory:
@@ -136,11 +141,9 @@ class Memory:
         """
         from hiros_optimizer.compiled import learn_frame
 
-        learn_frame(
-            self.tree.parents, markers, present, rows, stamps, self.time_ns, self.timed,
-            self.positions, self.velocities, self.vectors, self.window, self.filled,
-            float(settings.track_timeout),
-        )  # fmt: skip
+        frame = kernel_args.FrameRows(markers, present, rows, stamps)
+        timeout = float(settings.track_timeout)
+        learn_frame(self.tree.parents, frame, self._state, self.window, self.filled, timeout)
 
     def record(self, rows: np.ndarray, markers: np.ndarray, present: np.ndarray) -> None:
         """Push the people's measured link lengths into their windows (no motion).
@@ -175,12 +178,18 @@ class Memory:
         """
         from hiros_optimizer.compiled import fit_frame_links
 
-        tree = self.tree
+        tree = kernel_args.FitTree(self.tree.parents, self.tree.order, self.tree.level_starts)
+        frame = kernel_args.FrameRows(markers, present, rows, stamps)
         return fit_frame_links(
-            tree.parents, tree.order, tree.level_starts, markers, present, lengths, rows,
-            stamps, self.time_ns, self.timed, self.positions, self.velocities, self.vectors,
-            *settings.kernel_values, *self._link_ends,
-        )  # fmt: skip
+            tree, frame, lengths, self._state, settings.kernel_values, self._link_ends
+        )
+
+    @property
+    def _state(self) -> kernel_args.MemoryState:
+        """The memory arrays as the kernels' bundle (the same arrays, changed in place)."""
+        return kernel_args.MemoryState(
+            self.time_ns, self.timed, self.positions, self.velocities, self.vectors
+        )
 
 
 def _weights(markers: np.ndarray, present: np.ndarray, floor: float) -> np.ndarray:
