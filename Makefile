@@ -27,8 +27,10 @@ $(STAMP): $(SETUP_INPUTS)
 	@touch $(STAMP)
 	@echo "hiros is set up in $(VENV)"
 
+# ruff, then the packages' layer contracts (.importlinter; docs/architecture.md)
 lint: setup
 	$(VENV)/bin/ruff check .
+	$(VENV)/bin/lint-imports --no-cache
 
 # The whole suite runs in a private network namespace holding only loopback, so that DDS
 # traffic of the ROS tests never leaves the machine (fallback: localhost-only discovery).

@@ -1,81 +1,100 @@
-"""The packages' layers (docs/architecture.md): no package imports one of a higher layer.
+"""The packages' layer contracts (``.importlinter``, checked by ``lint-imports`` in ``make test``).
 
-core <- ros <- stages <- tools over the stages <- benchmarks <- command line. Every import
-counts, at module level or inside a function (a lazy import is still a dependency), and
-``TYPE_CHECKING`` ones too.
+``make test`` runs the contracts on the tree; these tests hold the contracts themselves to
+what docs/architecture.md says: every package is in a layer, and an upward import, a lazy
+one included, an import between two stages, or a ROS import in ``hiros_core`` breaks them.
 """
 
 from __future__ import annotations
 
-import ast
+import configparser
+import re
+import subprocess
+import sys
 from pathlib import Path
 
 REPO = Path(__file__).resolve().parent.parent
-
-LAYERS = (
-    ("hiros_core", "hiros_data"),
-    ("hiros_ros",),
-    (
-        "hiros_tracker", "hiros_merger", "hiros_optimizer", "hiros_filter", "hiros_calib",
-        "hiros_azure_bridge",
-    ),
-    ("hiros_pipeline", "hiros_sim", "hiros_eval", "hiros_convert", "hiros_visualizer"),
-    ("hiros_bench",),
-    ("hiros_cli",),  # ``hiros bench`` runs the benchmarks
-)  # fmt: skip
-"""From the bottom up; a package may import its own layer's and the ones below."""
-
-LAYER = {package: level for level, packages in enumerate(LAYERS) for package in packages}
-ROS = ("rclpy", "rosidl_runtime_py", "launch", "launch_ros", "ament_index_python")
-"""What only ``hiros_ros`` and the layers above may import: ``hiros_core`` is ROS-free."""
+CONFIG = REPO / ".importlinter"
+LINT_IMPORTS = Path(sys.executable).with_name("lint-imports")
 
 
-def imported(path: Path) -> set[str]:
-    """Top-level names of every module ``path`` imports (absolute imports only)."""
-    names = set()
-    for node in ast.walk(ast.parse(path.read_text(), str(path))):
-        if isinstance(node, ast.Import):
-            names.update(alias.name.split(".")[0] for alias in node.names)
-        elif isinstance(node, ast.ImportFrom) and node.level == 0 and node.module:
-            names.add(node.module.split(".")[0])
-    return names
+def contracts() -> configparser.ConfigParser:
+    """The repository's import-linter configuration."""
+    config = configparser.ConfigParser()
+    config.read(CONFIG)
+    return config
 
 
-def upward_imports(root: Path) -> list[str]:
-    """``file: package`` for each import of a package of a higher layer under ``root``."""
-    found = []
-    for package, level in LAYER.items():
-        for path in sorted((root / package).rglob("*.py")):
-            above = {n for n in imported(path) if LAYER.get(n, -1) > level}
-            if package == "hiros_core":
-                above |= imported(path) & set(ROS)
-            found += [f"{path.relative_to(root)}: {name}" for name in sorted(above)]
-    return found
+def layer_packages(config: configparser.ConfigParser) -> list[str]:
+    """Every package named in the layers contract, from the top layer down."""
+    layers = config["importlinter:contract:layers"]["layers"].split()
+    return [name for name in layers if name not in (":", "|")]
 
 
 def test_every_package_is_in_a_layer() -> None:
     packages = {p.parent.name for p in REPO.glob("hiros_*/__init__.py")}
-    assert packages == set(LAYER)
+    config = contracts()
+    assert set(config["importlinter"]["root_packages"].split()) == packages
+    assert sorted(layer_packages(config)) == sorted(packages)
 
 
-def test_no_package_imports_a_higher_layer() -> None:
-    assert upward_imports(REPO) == []
-
-
-def test_an_upward_import_is_found(tmp_path: Path) -> None:
-    files = {
-        "hiros_core/a.py": "from hiros_cli.commands import run",
-        "hiros_core/b.py": "import rclpy.node",
-        "hiros_ros/c.py": "import rclpy",
-        "hiros_cli/d.py": "from hiros_bench import calib",
-        "hiros_bench/e.py": "from hiros_cli import main",
-    }
+def lint(root: Path, files: dict[str, str]) -> subprocess.CompletedProcess[str]:
+    """``lint-imports`` with the repository's contracts over empty packages plus ``files``."""
+    for package in layer_packages(contracts()):
+        (root / package).mkdir()
+        (root / package / "__init__.py").write_text("")
     for name, text in files.items():
-        (tmp_path / name).parent.mkdir(exist_ok=True)
-        (tmp_path / name).write_text(f"def f():\n    {text}\n")
-    assert upward_imports(tmp_path) == [
-        "hiros_core/a.py: hiros_cli",
-        "hiros_core/b.py: rclpy",
-        "hiros_bench/e.py: hiros_cli",
-    ]
+        (root / name).write_text(f"def f() -> None:\n    {text}\n")
+    config = root / ".importlinter"
+    config.write_text(CONFIG.read_text())
+    return subprocess.run(
+        [str(LINT_IMPORTS), "--no-cache", "--config", str(config)],
+        cwd=root,
+        capture_output=True,
+        text=True,
+        check=False,
+    )
 
+
+def broken_imports(report: str) -> set[str]:
+    """``module -> imported`` for each import a ``lint-imports`` report names as breaking."""
+    plain = re.sub(r"\x1b\[[0-9;]*m", "", report)
+    return set(re.findall(r"^-\s+(\S+ -> \S+) \(l\.\d+\)$", plain, flags=re.MULTILINE))
+
+
+def test_imports_down_and_within_a_layer_keep_the_contracts(tmp_path: Path) -> None:
+    done = lint(
+        tmp_path,
+        {
+            "hiros_cli/a.py": "from hiros_bench import b",
+            "hiros_filter/c.py": "from hiros_optimizer import d",  # the one exception
+            "hiros_optimizer/d.py": "import numpy",
+            "hiros_pipeline/g.py": "from hiros_visualizer import h",
+            "hiros_ros/e.py": "import rclpy.node",
+            "hiros_core/f.py": "import numpy",
+        },
+    )
+    assert done.returncode == 0, done.stdout
+
+
+def test_an_upward_or_ros_import_breaks_the_contracts(tmp_path: Path) -> None:
+    done = lint(
+        tmp_path,
+        {
+            "hiros_core/a.py": "from hiros_cli import main",
+            "hiros_core/b.py": "import rclpy.node",
+            "hiros_data/c.py": "from std_msgs.msg import Header",
+            "hiros_bench/d.py": "from hiros_cli import main",
+            "hiros_tracker/e.py": "import hiros_pipeline",
+            "hiros_merger/f.py": "from hiros_tracker import e",
+        },
+    )
+    assert done.returncode == 1, done.stdout
+    assert broken_imports(done.stdout) == {
+        "hiros_core.a -> hiros_cli",
+        "hiros_core.b -> rclpy",
+        "hiros_data.c -> std_msgs",
+        "hiros_bench.d -> hiros_cli",
+        "hiros_tracker.e -> hiros_pipeline",
+        "hiros_merger.f -> hiros_tracker.e",
+    }
