@@ -39,9 +39,7 @@ from typing import TYPE_CHECKING
 if TYPE_CHECKING:
     from rich.console import Console
 
-    from hiros_calib.calibrator import CalibrationResult, CalibratorParams
-    from hiros_core.calibration import Calibration
-    from hiros_core.model import SkeletonGroup
+    from hiros_calib.calibrator import CalibrationResult
 
 FLAGGED_EXIT = 3
 """Exit status of a calibration written with a camera flagged as doubtful."""
@@ -95,6 +93,7 @@ def run(args: argparse.Namespace) -> int:
     from rich.console import Console
 
     from hiros_calib.calibrator import CalibratorParams
+    from hiros_cli.progress import calibrate_with_progress
     from hiros_core.calibration import save_calibration
     from hiros_core.outputs import (
         check_output,
@@ -103,14 +102,12 @@ def run(args: argparse.Namespace) -> int:
         staged_files,
         staged_output,
     )
-    from hiros_core.recording import require_camera_topics
 
     console = Console()
     check_output(args.out, inputs=[args.recording], force=True, ours=is_calibration_file,
                  what="calibration file")  # fmt: skip
     if args.plots:
         refuse_inputs(args.plots, [args.recording, args.out], "--plots")
-    require_camera_topics(args.recording)
     params = CalibratorParams(reference=args.reference or "")
     if args.prior_window is not None:
         params.prior_window = args.prior_window
@@ -119,13 +116,10 @@ def run(args: argparse.Namespace) -> int:
     if args.no_drift:
         params.estimate_drift = False
     params.world = args.world
-    calibration, result = calibrate_recording(
-        args.recording,
-        console=console,
-        params=params,
-        use_arrival=not args.no_arrival_times,
-        details=True,
+    result = calibrate_with_progress(
+        args.recording, console, params, use_arrival=not args.no_arrival_times
     )
+    calibration = result.calibration
     with staged_output(args.out, replace=True) as staged:
         save_calibration(calibration, staged)
     print_summary(console, result)
@@ -140,75 +134,6 @@ def run(args: argparse.Namespace) -> int:
             written = write_plots(result, staging)
         console.print(f"wrote {len(written)} plots to {args.plots}")
     return 0
-
-
-def _log_times_are_stamps(
-    groups: dict[str, list[SkeletonGroup]], arrivals: dict[str, list[int]]
-) -> bool:
-    """True when every frame was logged at exactly its own stamp: no arrival information."""
-    return all(
-        all(log == group.stamp_ns for group, log in zip(groups[c], arrivals[c], strict=True))
-        for c in groups
-    )
-
-
-def calibrate_recording(
-    recording: Path,
-    *,
-    console: Console | None = None,
-    params: CalibratorParams | None = None,
-    use_arrival: bool = True,
-    details: bool = False,
-) -> Calibration | tuple[Calibration, CalibrationResult]:
-    """Calibrate a recording with a progress display; with ``details`` also the full result.
-
-    Raises:
-        CalibrationError: the data cannot determine some camera's clock or pose (the message
-            says which and why).
-        RecordingError: the recording cannot be read or holds fewer than two cameras.
-
-    """
-    from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
-
-    from hiros_calib.calibrator import Calibrator
-    from hiros_cli.progress import print_warnings
-    from hiros_core.errors import RecordingError
-    from hiros_core.recording import read_camera_groups
-
-    with Progress(
-        TextColumn("{task.description:<24}"),
-        BarColumn(),
-        TimeElapsedColumn(),
-        console=console,
-        transient=True,
-    ) as bar:
-        task = bar.add_task("reading the recording", total=100)
-        problems: list[str] = []
-        groups, arrivals = read_camera_groups(recording, problems=problems)
-        print_warnings(bar.console, problems)  # a damaged recording: said before its result
-        if len(groups) < 2:
-            msg = (
-                f"{recording}: calibration needs skeletons of two or more cameras, "
-                f"found {sorted(groups)}"
-            )
-            raise RecordingError(msg)
-
-        def progress(stage: str, done: float) -> None:
-            bar.update(task, description=stage, completed=10 + 90 * done)
-
-        if use_arrival and _log_times_are_stamps(groups, arrivals):
-            bar.console.print(
-                "the recording's log times are the frames' own stamps (no receiver clock): "
-                "every lag is searched"
-            )
-            use_arrival = False
-        progress("body tracks", 0.0)
-        calibrator = Calibrator(params)
-        calibration = calibrator.calibrate(
-            groups, progress=progress, arrival_ns=arrivals if use_arrival else None
-        )
-    assert calibrator.result is not None
-    return (calibration, calibrator.result) if details else calibration
 
 
 def print_summary(console: Console, result: CalibrationResult) -> None:

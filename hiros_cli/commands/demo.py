@@ -64,8 +64,7 @@ DEMO_FILES = ("sample", "calib.yaml", "out.mcap", "report")
 
 def _demo(args: argparse.Namespace, out: Path, console: Console) -> tuple:
     """Simulate, calibrate, run and evaluate into ``out``; the figures and the report path."""
-    from hiros_cli.commands.calibrate import calibrate_recording
-    from hiros_cli.progress import progress_bar
+    from hiros_cli.progress import calibrate_with_progress, progress_bar
     from hiros_core.calibration import save_calibration
     from hiros_eval.report import write_report
     from hiros_eval.run import evaluate_run
@@ -86,7 +85,7 @@ def _demo(args: argparse.Namespace, out: Path, console: Console) -> tuple:
     timings["simulate"] = time.perf_counter() - start
 
     start = time.perf_counter()
-    calibration = calibrate_recording(recording, console=console)
+    calibration = calibrate_with_progress(recording, console).calibration
     save_calibration(calibration, out / "calib.yaml")
     timings["calibrate"] = time.perf_counter() - start
 

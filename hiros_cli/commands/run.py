@@ -20,7 +20,7 @@ from typing import TYPE_CHECKING
 from rich.console import Console
 from rich.table import Table
 
-from hiros_cli.progress import print_warnings, progress_bar
+from hiros_cli.progress import calibrate_with_progress, print_warnings, progress_bar
 from hiros_core.calibration import Calibration, load_calibration, save_calibration
 from hiros_core.errors import CalibrationError, ConfigError
 
@@ -140,14 +140,13 @@ def resolve_calibration(
     """
     if spec != "auto":
         return refuse_flagged(load_calibration(spec), spec, console, accept=accept_flagged)
-    from hiros_cli.commands.calibrate import calibrate_recording
     from hiros_core.outputs import check_output, is_calibration_file, staged_output
 
     path = out.with_suffix(".calib.yaml")
     check_output(path, inputs=[recording], force=True, ours=is_calibration_file,
                  what="calibration file", option="--calibration auto: its file")  # fmt: skip
     console.print(f"calibrating {recording} first (--calibration auto)")
-    calibration = calibrate_recording(recording, console=console)
+    calibration = calibrate_with_progress(recording, console).calibration
     with staged_output(path, replace=True) as staged:
         save_calibration(calibration, staged)
     console.print(f"calibration written to {path}")
