@@ -15,7 +15,7 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["CameraClock", "PairOffset", "Settle", "fisher_significance", "refused_pair"]
+__all__ = ["CameraClock", "PairOffset", "Settle", "fisher_significance", "fisher_z", "refused_pair"]
 
 
 @dataclass
@@ -86,6 +86,15 @@ Settle = Callable[[PairOffset, Callable[[float], PairOffset]], PairOffset]
 """A check of one pair's lag before the global solve: ``settle(pair, repin) -> pair``."""
 
 
+def fisher_z(correlation: Any, limit: float = 0.999) -> Any:
+    """Fisher's z (``arctanh``) of a correlation clipped to ``±limit``, per element.
+
+    The clip keeps a perfect correlation finite; a lower ``limit`` caps how much any one
+    near-perfect measurement can count.
+    """
+    return np.arctanh(np.clip(correlation, -limit, limit))
+
+
 def fisher_significance(correlation: Any, overlap: Any) -> Any:
     """Fisher z of a correlation times the square root of its overlap (s), per element.
 
@@ -93,7 +102,7 @@ def fisher_significance(correlation: Any, overlap: Any) -> Any:
     lower one over the whole recording; this weighs the two alike.
     """
     with np.errstate(invalid="ignore", divide="ignore"):
-        return np.arctanh(np.clip(correlation, -0.999, 0.999)) * np.sqrt(overlap)
+        return fisher_z(correlation) * np.sqrt(overlap)
 
 
 def refused_pair(a: str, b: str, reason: str, **quality: Any) -> PairOffset:

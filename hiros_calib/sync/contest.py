@@ -2,14 +2,13 @@
 
 from __future__ import annotations
 
-import itertools
 import math
 
 import numpy as np
 
-from hiros_calib.sync.clock import PairOffset
+from hiros_calib.sync.clock import PairOffset, fisher_z
 from hiros_calib.sync.params import SyncParams
-from hiros_calib.sync.refine import RefinePair, refine
+from hiros_calib.sync.refine import RefinePair, refine, window_edges
 from hiros_calib.sync.work import TrackWork
 from hiros_calib.tracks import BodyTrack
 
@@ -17,6 +16,7 @@ __all__ = [
     "CONTEST_DECISIVE_T",
     "CONTEST_MIN_WINDOWS",
     "CONTEST_WINDOW",
+    "WINDOW_CORRELATION_LIMIT",
     "WINDOW_REACH",
     "contest_candidates",
 ]
@@ -35,6 +35,11 @@ CONTEST_DECISIVE_T = 4.0
 
 WINDOW_REACH = 0.03
 """How far (s) a window's lag may lie from the lag found over the whole overlap."""
+
+
+WINDOW_CORRELATION_LIMIT = 0.99
+"""A window's correlation counts at most this much (its Fisher z at most 2.65), so one
+near-perfect window cannot decide a contest alone."""
 
 
 def contest_candidates(
@@ -70,8 +75,7 @@ def contest_candidates(
     ]
     start = min(p.a.start for p in pairs)
     end = max(p.a.end for p in pairs)
-    count = max(1, round((end - start) / CONTEST_WINDOW))
-    bounds = list(itertools.pairwise(np.linspace(start, end, count + 1)))
+    bounds = window_edges(start, end, CONTEST_WINDOW)
     lags = [
         pair.offset if abs(lag - pair.offset) < 0.1 else refine(float(lag), 0.1, pairs)[0]
         for lag in pair.candidates[:, 0]
@@ -89,7 +93,7 @@ def _window_scores(
     for k, (lo, hi) in enumerate(bounds):
         if sum(p.overlap(tau, (lo, hi)) for p in pairs) >= 0.5 * (hi - lo):
             correlation = refine(tau, WINDOW_REACH, pairs, (lo, hi))[1]
-            scores[k] = np.arctanh(np.clip(correlation, -0.99, 0.99))
+            scores[k] = fisher_z(correlation, WINDOW_CORRELATION_LIMIT)
     return scores
 
 

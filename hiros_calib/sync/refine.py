@@ -21,7 +21,7 @@ from hiros_calib.signature import PoseSignature
 from hiros_calib.sync.correlation import resample
 from hiros_calib.sync.params import GRID_STEP, SyncParams
 
-__all__ = ["RefinePair", "Spline", "lag_windows", "refine"]
+__all__ = ["RefinePair", "Spline", "lag_windows", "refine", "window_edges"]
 
 
 @dataclass
@@ -143,14 +143,18 @@ def refine(
     return float(result.x), float(-result.fun)
 
 
+def window_edges(start: float, end: float, width: float) -> list[tuple[float, float]]:
+    """``[start, end]`` cut into equal windows of about ``width`` s (at least one)."""
+    count = max(1, round((end - start) / width))
+    return list(itertools.pairwise(np.linspace(start, end, count + 1).tolist()))
+
+
 def lag_windows(tau: float, pairs: list[RefinePair], params: SyncParams) -> np.ndarray:
     """Lag measured in sliding windows of a's clock: rows (t_b centre, tau, weight, corr)."""
     start = min(max(p.a.start, p.b.start + tau) for p in pairs)
     end = max(min(p.a.end, p.b.end + tau) for p in pairs)
     span = end - start
-    count = max(1, round(span / params.window))
-    bounds = np.linspace(start, end, count + 1)
-    edges = list(itertools.pairwise(bounds))
+    edges = window_edges(start, end, params.window)
     half_width = 2 * GRID_STEP + params.max_drift * span
     rows = []
     for lo, hi in edges:
