@@ -37,12 +37,21 @@ from hiros_calib.tracks import BodyTrack
 from hiros_core.calibration import Calibration
 from hiros_core.geometry import RigidTransform
 
-__all__ = ["FOOT_JOINT_HEIGHT", "FloorFit", "align_to_floor", "fit_floor", "place_in_world"]
+__all__ = [
+    "FOOT_JOINT_HEIGHT",
+    "FloorFit",
+    "align_to_floor",
+    "fit_floor",
+    "place_in_world",
+    "resting_feet",
+]
 
-FOOT_JOINT_HEIGHT = {"Foot": 0.06, "Ankle": 0.09}
-"""Height (m) of a resting foot's joint above the floor, by joint: the body-tracking SDKs'
-foot joint sits in the forefoot, the ankle joint above the heel (both include the heel rising
-during a step's stance)."""
+FOOT_JOINT_HEIGHT = {"Foot": 0.11, "Ankle": 0.18}
+"""Height (m) of a resting foot's joint above the floor, by joint, as the Azure Kinect SDK
+reports it: on the UNIPD-BPE take (against an Xsens suit whose floor is known) its foot joint
+rests 11 cm and its ankle 18 cm above the floor, bent over or upright, well above the
+anatomical joints (docs/world-frame.md, session 15). The only real reference: Kinect v2
+skeletons use the same."""
 
 RESTING_SPEED = 0.15
 """A foot joint slower than this (m/s) is taken to rest on the floor."""
@@ -137,8 +146,12 @@ def _joint(track: BodyTrack, names: tuple[str, ...]) -> list[int]:
     return [track.layout.joint_names.index(n) for n in names if n in track.layout.joint_names]
 
 
-def _resting_feet(track: BodyTrack) -> tuple[np.ndarray, float] | None:
-    """``(N, 3)`` resting foot positions (camera frame) and their joint's height, or None."""
+def resting_feet(track: BodyTrack) -> tuple[np.ndarray, float] | None:
+    """``(N, 3)`` resting foot positions (camera frame) and their joint's height, or None.
+
+    The foot joint where the layout has one, else the ankle; a joint rests where it moves
+    slower than :data:`RESTING_SPEED` over :data:`SPEED_BASELINE`.
+    """
     for kind, height in FOOT_JOINT_HEIGHT.items():
         joints = _joint(track, (f"{kind}Left", f"{kind}Right"))
         if len(joints) == 2 and len(track.times) >= 3:
@@ -242,7 +255,7 @@ def _gather(
     for camera, pose in poses.items():
         feet, torsos = [], []
         for track in tracks.get(camera, []):
-            rest = _resting_feet(track)
+            rest = resting_feet(track)
             if rest is not None and len(rest[0]):
                 points = pose.apply(rest[0])
                 feet.append(points[np.isfinite(points).all(axis=1)])

@@ -1,13 +1,15 @@
 """People in the simulated room: mocap clips placed on walking paths, with the truth they make.
 
 Each clip is mapped to the Azure Kinect joints (``hiros_sim.mapping``), put on the floor
-(``z = 0``), started at the origin and turned so that it travels along +x. A person plays one
-clip over and over along a straight path of the clip's length: forward, a smooth 180° turn in
-place during the first ``turn_time`` seconds of the next repetition (the clips start and end
-standing), back, and so on. Paths of different people have different centres and directions so
-that they cross. A person whose clip travels less than 0.5 m (bending, waving) stays on the
-spot and faces the opposite way on each repetition. Extra people beyond the number of clips
-replay a clip mirrored (left and right swapped), with a different phase.
+(``z = 0``), its foot and ankle joints moved to where the SDK rests them
+(``SDK_FOOT_HEIGHTS``), started at the origin and turned so that it travels along +x. A
+person plays one clip over and over along a straight path of the clip's length: forward, a
+smooth 180° turn in place during the first ``turn_time`` seconds of the next repetition (the
+clips start and end standing), back, and so on. Paths of different people have different
+centres and directions so that they cross. A person whose clip travels less than 0.5 m
+(bending, waving) stays on the spot and faces the opposite way on each repetition. Extra
+people beyond the number of clips replay a clip mirrored (left and right swapped), with a
+different phase.
 
 Looped with variation (``Repetitions``): a person doing the same thing again and again never
 repeats it exactly. Each repetition then plays at its own speed and with its own amplitude about
@@ -31,7 +33,21 @@ from hiros_sim.noise import fit_body_model
 __all__ = ["Clip", "PersonPath", "Repetitions", "body_forward", "prepare_clip"]
 
 _FOOT_ABOVE_FLOOR = 0.04
-"""Height of the Kinect foot and ankle joints above the floor at rest, metres."""
+"""Height of the mocap's lowest foot or ankle joint above the floor (5th percentile), metres:
+where a clip is put on the floor."""
+SDK_FOOT_HEIGHTS = {"Foot": 0.110, "Ankle": 0.158}
+"""Height (m) above the floor at which the simulated SDK's foot and ankle joints rest, by joint.
+
+Fitted so that the simulated SDK, on the UNIPD take's own motion and view (``hiros_sim.fit``'s
+scene: one camera 3.3 m away), reports them resting where the real Azure Kinect did on that
+take: 11.0 cm and 17.6 cm above the suit's floor (docs/world-frame.md, session 15). The
+mocap's own foot joints sit elsewhere (the CMU toe 6-7 cm, the Xsens toe 1.7 cm, the
+Bandai-Namco toe 4-4.5 cm), and the SDK's body model raises a noisy foot by a few millimetres
+to centimetres more."""
+_RESTING_SPEED, _SPEED_BASELINE = 0.15, 0.4
+"""A joint slower than this (m/s, over this many seconds) rests: the floor fit's rule."""
+_ROUNDS = 4
+"""Rounds in which a moved foot joint's resting frames and height settle."""
 _STILL = 0.5
 """A clip whose pelvis travels less than this (m) is played on the spot."""
 
@@ -119,7 +135,43 @@ def prepare_clip(motion: BvhMotion) -> Clip:
     feet = [AZURE_KINECT.index(n) for n in ("FootLeft", "FootRight", "AnkleLeft", "AnkleRight")]
     lowest = positions[:, feet, 2].min(axis=1)
     positions[..., 2] -= np.percentile(lowest, 5) - _FOOT_ABOVE_FLOOR
-    return Clip(motion.name, motion.rate, positions, travel)
+    return Clip(motion.name, motion.rate, _as_the_sdk_defines(positions, motion.rate), travel)
+
+
+def _as_the_sdk_defines(positions: np.ndarray, rate: float) -> np.ndarray:
+    """The foot and ankle joints moved along the shank to rest at ``SDK_FOOT_HEIGHTS``.
+
+    The Azure Kinect SDK's foot joint rests well above a mocap toe marker, and its ankle above
+    the mocap's ankle (docs/world-frame.md); the truth uses the SDK's definitions, as for the
+    other joints (``hiros_sim.mapping``). Each joint keeps its motion and moves by one
+    constant distance along its shank (knee - ankle), chosen so that its median height where
+    it rests becomes the SDK's.
+    """
+    idx = AZURE_KINECT.index
+    moved = positions.copy()
+    for side in ("Left", "Right"):
+        ankle, knee = positions[:, idx(f"Ankle{side}")], positions[:, idx(f"Knee{side}")]
+        shank = (knee - ankle) / np.linalg.norm(knee - ankle, axis=-1, keepdims=True)
+        for kind, height in SDK_FOOT_HEIGHTS.items():
+            joint = idx(f"{kind}{side}")
+            # moved along a turning shank, a joint rests on other frames: settle in a few rounds
+            for _ in range(_ROUNDS):
+                rest = _resting(moved[:, joint], rate)
+                rise = float(np.median(shank[rest, 2]))  # the shank's vertical share at rest
+                moved[:, joint] += (height - float(np.median(moved[rest, joint, 2]))) / rise * shank
+    return moved
+
+
+def _resting(joint: np.ndarray, rate: float) -> np.ndarray:
+    """``(T,)`` where a ``(T, 3)`` joint rests; its lowest 10 % of frames if it never does."""
+    half = max(1, round(0.5 * _SPEED_BASELINE * rate))
+    resting = np.zeros(len(joint), dtype=bool)
+    if len(joint) > 2 * half:
+        speed = np.linalg.norm(joint[2 * half :] - joint[: -2 * half], axis=1) * rate / (2 * half)
+        resting[half:-half] = speed < _RESTING_SPEED
+    if not resting.any():
+        resting = joint[:, 2] <= np.percentile(joint[:, 2], 10)
+    return resting
 
 
 def _smoothstep(x: np.ndarray) -> np.ndarray:
