@@ -1,9 +1,12 @@
-"""CDR bytes -> SkeletonGroup: a known message by one gather, a new one skeleton by skeleton.
+"""CDR bytes -> SkeletonGroup: every message our plans reproduce is read by one gather.
 
-A message shaped like one decoded before is recognised by its constant bytes and read with one
-gather; a skeleton of a known shape by its block plan; anything else by the field reader, which
-refuses what breaks DESIGN.md's conventions (duplicate or negative ids, a link whose id is not
-its child's) with ``CodecError``.
+A message shaped like one decoded before is recognised by its constant bytes and its values
+are read with one gather. A new shape is learnt first: the message is walked skeleton by
+skeleton, a skeleton of a known shape recognised by its block plan and any other read by the
+field reader, which refuses what breaks DESIGN.md's conventions (duplicate or negative ids, a
+link whose id is not its child's) with ``CodecError``; then it is read like a known one. A
+message no plan reproduces (markers in another order than their ids, as other tools may
+write them; a string cut at an embedded NUL) is what the field reader read.
 """
 
 from __future__ import annotations
@@ -12,20 +15,17 @@ import hashlib
 
 import numpy as np
 
-from hiros_core.cdr import HEADER_SIZE, CdrReader, Plan
-from hiros_core.codec.fields import NS, join_ns
+from hiros_core.cdr import HEADER_SIZE, CdrReader
+from hiros_core.codec.fields import NS
 from hiros_core.codec.group_plans import (
     BOX_FLOATS,
-    CONFIDENCE_STRUCT,
     GROUP_PLAN_CAPACITY,
     GROUP_READINGS,
-    HEAD_STRUCT,
     LEAD,
-    MAXES_STRUCT,
     SKELETON_PLANS,
-    STAMP_STRUCT,
     GroupReading,
     SkeletonShape,
+    StackReading,
     build_skeleton_plan,
     group_reading,
     skeleton_key,
@@ -36,8 +36,6 @@ from hiros_core.limits import check_skeleton_group
 from hiros_core.model import BOX_WIDTH, STATE_WIDTH, Skeleton, SkeletonGroup, SkeletonRows
 
 _MAX_DENSE_ID = 4096  # dense rows by id: larger ids would allocate absurd arrays
-_HEAD = np.dtype([("id", "<i4"), ("sec", "<i4"), ("nanosec", "<u4")])
-_MAXES = np.dtype([("max_markers", "<u4"), ("max_links", "<u4")])
 _MIN_SKELETON_BYTES = 4 + 8 + 5 + 8 + 8 * BOX_FLOATS + 8  # id, time, "", maxes, box, 2 counts
 _GROUP_READING_CANDIDATES = 8
 
@@ -47,133 +45,132 @@ def decode_group(data: bytes | bytearray | memoryview) -> SkeletonGroup:
 
     A message shaped like one decoded before (same frames, people's layouts and present
     markers and links) is recognised by comparing its constant bytes as 8-byte words, and
-    read with one gather of all its floats (absent rows read a NaN scratch row); the
-    skeletons' rows are views into that one array. Other messages are read skeleton by
-    skeleton and teach the shape.
+    read with one gather of all its floats (absent rows read a NaN scratch row): the
+    skeletons of each layout are the rows of one ``SkeletonRows``, views of that gather.
+    A new shape is learnt from the message first, then read so.
     """
     check_skeleton_group(data)  # past hiros_core.limits: refused before anything is made
-    size = len(data) if isinstance(data, bytes) else memoryview(data).nbytes
-    readings = GROUP_READINGS.get(size)
-    if readings:
-        raw = np.frombuffer(data, dtype=np.uint8)
-        buffer = np.empty(readings[0].words.size * 8, dtype=np.uint8)
-        buffer[LEAD : LEAD + size] = raw
-        words = buffer.view("<u8")
-        for reading in readings:
-            differ = np.bitwise_xor(words, reading.words)
-            differ &= reading.mask
-            if not differ.any():
-                return _group_from_reading(reading, buffer)
-    group = _decode_group_by_skeleton(data)
-    reading = group_reading(group, size)
+    raw = np.frombuffer(data, dtype=np.uint8)
+    known = GROUP_READINGS.get(raw.size)
+    if known:
+        buffer = _aligned(raw, known[0])
+        for reading in known:
+            if _matches(reading, buffer):
+                return _read(reading, buffer)
+    group, complete = _walk(data, raw, recognise=True)
+    reading = group_reading(group, raw.size)
     if reading is not None:
-        found = GROUP_READINGS.setdefault(size, [])
-        found.insert(0, reading)
-        del found[_GROUP_READING_CANDIDATES:]
-        if len(GROUP_READINGS) > GROUP_PLAN_CAPACITY:
-            GROUP_READINGS.clear()
-    return group
+        buffer = _aligned(raw, reading)
+        if _matches(reading, buffer):
+            _remember(reading, raw.size)
+            return _read(reading, buffer)
+    # no plan reproduces these bytes: the field reader's values are the message's
+    return group if complete else _walk(data, raw, recognise=False)[0]
 
 
-def _group_from_reading(reading: GroupReading, buffer: np.ndarray) -> SkeletonGroup:
+def _aligned(raw: np.ndarray, reading: GroupReading) -> np.ndarray:
+    """The message's bytes after ``LEAD`` spare bytes, its payload 8-byte aligned in memory.
+
+    As long as the reading's template: its scratch row lies past the message end.
+    """
+    buffer = np.empty(reading.words.size * 8, dtype=np.uint8)
+    buffer[LEAD : LEAD + raw.size] = raw
+    return buffer
+
+
+def _matches(reading: GroupReading, buffer: np.ndarray) -> bool:
+    """Whether the message in ``buffer`` has the reading's constant bytes."""
+    differ = np.bitwise_xor(buffer.view("<u8"), reading.words)
+    differ &= reading.mask
+    return not differ.any()
+
+
+def _remember(reading: GroupReading, size: int) -> None:
+    """Keep the reading among the most recent few of its message size."""
+    found = GROUP_READINGS.setdefault(size, [])
+    found.insert(0, reading)
+    del found[_GROUP_READING_CANDIDATES:]
+    if len(GROUP_READINGS) > GROUP_PLAN_CAPACITY:
+        GROUP_READINGS.clear()
+
+
+def _read(reading: GroupReading, buffer: np.ndarray) -> SkeletonGroup:
+    """The group in ``buffer`` by the reading: one gather, one ``SkeletonRows`` per layout."""
     plan = reading.plan
     floats = buffer[LEAD + HEADER_SIZE :].view("<f8")
     floats[reading.scratch : reading.scratch + STATE_WIDTH] = np.nan
-    if reading.stack is not None:
-        return _stacked_group(reading, buffer, floats)
-    values = floats[plan.floats]
-    sec, nanosec = STAMP_STRUCT.unpack_from(buffer, plan.stamp_at)
-    skeletons = []
-    for (head_at, maxes_at, box_at), (layout, frame, present, link_present, start) in zip(
-        plan.fields, reading.skeletons, strict=True
-    ):
-        skeleton_id, src_sec, src_nanosec = HEAD_STRUCT.unpack_from(buffer, head_at)
-        max_markers, max_links = MAXES_STRUCT.unpack_from(buffer, maxes_at)
-        (confidence,) = CONFIDENCE_STRUCT.unpack_from(buffer, box_at)
-        markers_at = start + BOX_WIDTH
-        links_at = markers_at + layout.n_joints * STATE_WIDTH
-        skeletons.append(
-            Skeleton(
-                skeleton_id, src_sec * NS + src_nanosec, frame, layout,
-                values[markers_at:links_at].reshape(-1, STATE_WIDTH),
-                values[links_at : links_at + layout.n_links * STATE_WIDTH].reshape(
-                    -1, STATE_WIDTH
-                ),
-                present.copy(), link_present.copy(), confidence,
-                values[start:markers_at], max_markers, max_links,
-            )
-        )  # fmt: skip
-    return SkeletonGroup(sec * NS + nanosec, reading.frame_id, skeletons)
-
-
-def _stacked_group(reading: GroupReading, buffer: np.ndarray, floats: np.ndarray) -> SkeletonGroup:
-    """A group of one layout, its skeletons the rows of one ``SkeletonRows`` (one gather)."""
-    plan, stack = reading.plan, reading.stack
-    assert stack is not None
     values = plan.packer.unpack(buffer[plan.field_index].tobytes())
-    n_people = len(stack.frames)
+    # the stamp, then per skeleton: id, source sec and nanosec, max_markers, max_links, conf.
+    fields = [values[at : at + 6] for at in range(2, len(values), 6)]
+    skeletons: list[Skeleton] = [None] * len(fields)  # type: ignore[list-item]
+    for stack in reading.stacks:
+        for person, skeleton in zip(
+            stack.people, _stack_skeletons(stack, floats, fields), strict=True
+        ):
+            skeletons[person] = skeleton
+    return SkeletonGroup(values[0] * NS + values[1], reading.frame_id, skeletons)
+
+
+def _stack_skeletons(
+    stack: StackReading, floats: np.ndarray, fields: list[tuple]
+) -> list[Skeleton]:
+    """The skeletons of one layout: rows of one ``SkeletonRows`` gathered from ``floats``."""
+    n_people = len(stack.people)
     rows = floats[stack.floats]
     boxes_end = n_people * BOX_WIDTH
     markers_end = boxes_end + stack.marker_present.size * STATE_WIDTH
-    skeletons = SkeletonRows(
+    people = [fields[p] for p in stack.people]
+    return SkeletonRows(
         rows[boxes_end:markers_end].reshape(n_people, -1, STATE_WIDTH),
         stack.marker_present.copy(),
         rows[markers_end:].reshape(n_people, -1, STATE_WIDTH),
         stack.link_present.copy(),
         rows[:boxes_end].reshape(n_people, BOX_WIDTH),
     ).skeletons(
-        values[2::6],
-        [sec * NS + nanosec for sec, nanosec in zip(values[3::6], values[4::6], strict=True)],
+        [f[0] for f in people],
+        [f[1] * NS + f[2] for f in people],
         stack.frames,
         stack.layout,
-        values[7::6],
-        max_sizes=list(zip(values[5::6], values[6::6], strict=True)),
+        [f[5] for f in people],
+        max_sizes=[(f[3], f[4]) for f in people],
     )
-    return SkeletonGroup(values[0] * NS + values[1], reading.frame_id, skeletons)
 
 
-def _decode_group_by_skeleton(data: bytes | bytearray | memoryview) -> SkeletonGroup:
-    """``decode_group`` through per-skeleton block plans (or the field reader)."""
+def _walk(
+    data: bytes | bytearray | memoryview, raw: np.ndarray, *, recognise: bool
+) -> tuple[SkeletonGroup, bool]:
+    """The group skeleton by skeleton, and whether every skeleton carries its values.
+
+    With ``recognise``, a skeleton whose block a cached plan recognises is only its shape
+    (frame, layout, present ids: what a reading needs, which gathers the values); any other
+    is read by the field reader, which checks it, and its block plan is cached.
+    """
     reader = CdrReader(data, "hiros_skeleton_msgs/SkeletonGroup")
-    raw = np.frombuffer(data, dtype=np.uint8)
     stamp_sec, stamp_nanosec = reader.i32(), reader.u32()
     frame_id = reader.string()
     count = reader.count(_MIN_SKELETON_BYTES)
-    skeletons = []
+    skeletons, complete = [], True
     for _ in range(count):
         reader.align(4)
         phase = (reader.pos - HEADER_SIZE) % 8
-        plan = SKELETON_PLANS.find_at(raw, reader.pos, phase)
+        plan = SKELETON_PLANS.find_at(raw, reader.pos, phase) if recognise else None
         if plan is None:
             skeleton = _parse_skeleton(reader)
             SKELETON_PLANS.put(
                 skeleton_key(skeleton, phase), build_skeleton_plan(skeleton, phase), phase
             )
         else:
-            skeleton = _skeleton_from_block(plan, raw, reader.pos)
+            skeleton = _shape(plan.meta)  # type: ignore[arg-type]
+            complete = False
             reader.pos += plan.size
         skeletons.append(skeleton)
     reader.done()
-    return SkeletonGroup(stamp_sec * NS + stamp_nanosec, frame_id, skeletons)
+    return SkeletonGroup(stamp_sec * NS + stamp_nanosec, frame_id, skeletons), complete
 
 
-def _skeleton_from_block(plan: Plan, raw: np.ndarray, start: int) -> Skeleton:
-    shape: SkeletonShape = plan.meta  # type: ignore[assignment]
-    values = plan.gather_all(raw, start)
-    head = values["head"].view(_HEAD).ravel()
-    maxes = values["maxes"].view(_MAXES).ravel()
-    box = values["box"].view("<f8").ravel()
-    skeleton = Skeleton.empty(shape.layout, skeleton_id=int(head["id"][0]))
-    skeleton.src_time_ns = int(join_ns(head)[0])
-    skeleton.src_frame = shape.src_frame
-    skeleton.max_markers = int(maxes["max_markers"][0])
-    skeleton.max_links = int(maxes["max_links"][0])
-    skeleton.confidence = float(box[0])
-    skeleton.bounding_box = box[1:].copy()
-    if "markers" in values:
-        skeleton.markers[shape.marker_ids] = values["markers"].view("<f8")
-    if "links" in values:
-        skeleton.links[shape.link_ids] = values["links"].view("<f8")
+def _shape(shape: SkeletonShape) -> Skeleton:
+    """A skeleton of the block plan's shape, with no values."""
+    skeleton = Skeleton.empty(shape.layout, src_frame=shape.src_frame)
     skeleton.marker_present[shape.marker_ids] = True
     skeleton.link_present[shape.link_ids] = True
     return skeleton

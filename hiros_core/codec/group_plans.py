@@ -150,12 +150,11 @@ class GroupPlan:
 
 @dataclass(frozen=True)
 class GroupReading:
-    """What decoding needs beyond a ``GroupPlan``: how to recognise the message and rebuild it.
+    """What decoding needs beyond a ``GroupPlan``: how to recognise the message and read it.
 
     ``words``/``mask``: the template and its constant bytes as 8-byte words (``cdr.Plan``'s
-    ``matches_aligned`` idea over the whole group); ``skeletons``: per skeleton its layout,
-    source frame, presence masks and where its box, marker and link rows start in the
-    gathered floats.
+    ``matches_aligned`` idea over the whole group); ``stacks``: the skeletons of each layout,
+    read as the rows of one ``SkeletonRows``.
     """
 
     plan: GroupPlan
@@ -163,20 +162,21 @@ class GroupReading:
     words: np.ndarray
     mask: np.ndarray
     scratch: int  # float64 position of the scratch row (filled with NaN when decoding)
-    skeletons: tuple[tuple[Layout, str, np.ndarray, np.ndarray, int], ...]
-    stack: _StackReading | None = None  # when every skeleton has one layout
+    stacks: tuple[StackReading, ...]  # one per layout, in order of first appearance
 
 
-class _StackReading(NamedTuple):
-    """How a group of one layout is decoded as one ``SkeletonRows``.
+class StackReading(NamedTuple):
+    """How the skeletons of one layout in a group are decoded as one ``SkeletonRows``.
 
-    ``floats``: the plan's float indices reordered field by field (every box, then every
-    skeleton's marker rows, then every link rows), so one gather gives the three fields as
-    contiguous blocks; the presence masks and source frames of the skeletons.
+    ``floats``: their float indices in the plan reordered field by field (every box, then
+    every skeleton's marker rows, then every link rows), so one gather gives the three fields
+    as contiguous blocks; ``people``: where they stand in the group; their presence masks and
+    source frames.
     """
 
     layout: Layout
     floats: np.ndarray
+    people: list[int]
     marker_present: np.ndarray  # (P, J)
     link_present: np.ndarray  # (P, L)
     frames: list[str]
@@ -211,46 +211,39 @@ def group_reading(group: SkeletonGroup, size: int) -> GroupReading | None:
     mask[np.concatenate(constant) + LEAD] = 0xFF
     words = np.zeros_like(mask)
     words[: plan.template.size] = plan.template
-    skeletons, start = [], 0
-    for skeleton in group.skeletons:
-        n_markers, n_links = skeleton.layout.n_joints, skeleton.layout.n_links
-        skeletons.append(
-            (
-                skeleton.layout,
-                skeleton.src_frame,
-                skeleton.marker_present.copy(),
-                skeleton.link_present.copy(),
-                start,
-            )
-        )
-        start += BOX_WIDTH + (n_markers + n_links) * STATE_WIDTH
     return GroupReading(
         plan,
         group.frame_id,
         words.view("<u8"),
         mask.view("<u8"),
         (offset + (-offset) % 8) // 8,  # as _build_group_plan places it
-        tuple(skeletons),
-        _stack_reading(group, plan),
+        _stack_readings(group, plan),
     )
 
 
-def _stack_reading(group: SkeletonGroup, plan: GroupPlan) -> _StackReading | None:
-    """The stack decoding of messages shaped like ``group`` (None: mixed layouts, or none)."""
+def _stack_readings(group: SkeletonGroup, plan: GroupPlan) -> tuple[StackReading, ...]:
+    """The stack decoding of messages shaped like ``group``: one per layout."""
     skeletons = group.skeletons
-    if not skeletons or any(s.layout is not skeletons[0].layout for s in skeletons):
-        return None
-    layout = skeletons[0].layout
-    marker_floats = layout.n_joints * STATE_WIDTH
-    per_person = plan.floats.reshape(len(skeletons), -1)
-    fields = np.split(per_person, [BOX_WIDTH, BOX_WIDTH + marker_floats], axis=1)
-    return _StackReading(
-        layout,
-        np.concatenate([field.ravel() for field in fields]),
-        np.array([s.marker_present for s in skeletons]),
-        np.array([s.link_present for s in skeletons]),
-        [s.src_frame for s in skeletons],
-    )
+    sizes = [BOX_WIDTH + (s.layout.n_joints + s.layout.n_links) * STATE_WIDTH for s in skeletons]
+    starts = np.cumsum([0, *sizes])
+    layouts = list({id(s.layout): s.layout for s in skeletons}.values())
+    stacks = []
+    for layout in layouts:
+        people = [p for p, s in enumerate(skeletons) if s.layout is layout]
+        per_person = np.array([plan.floats[starts[p] : starts[p + 1]] for p in people])
+        marker_floats = layout.n_joints * STATE_WIDTH
+        fields = np.split(per_person, [BOX_WIDTH, BOX_WIDTH + marker_floats], axis=1)
+        stacks.append(
+            StackReading(
+                layout,
+                np.concatenate([field.ravel() for field in fields]),
+                people,
+                np.array([skeletons[p].marker_present for p in people]),
+                np.array([skeletons[p].link_present for p in people]),
+                [skeletons[p].src_frame for p in people],
+            )
+        )
+    return tuple(stacks)
 
 
 GROUP_PLANS: dict[tuple, GroupPlan] = {}

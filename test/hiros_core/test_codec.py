@@ -126,12 +126,12 @@ def test_group_bytes_match_rclpy_and_round_trip(group: SkeletonGroup) -> None:
             s.markers.shape == (s.layout.n_joints, 20) and s.links.shape == s.markers.shape
             for s in decoded.skeletons
         )
-    _, separate = restacked(group)
-    if len(separate.skeletons) == len(group.skeletons) and group.skeletons:
-        # one layout, a known shape: the skeletons are the rows of one stack (no copy)
-        skeletons = decode_group(ours).skeletons
-        assert np.shares_memory(stack_rows(skeletons).markers, skeletons[0].markers)
-        assert np.shares_memory(stack_rows(skeletons).links, skeletons[-1].links)
+    decoded = decode_group(ours).skeletons
+    for layout in {s.layout for s in decoded}:
+        # a known shape: the skeletons of each layout are the rows of one stack (no copy)
+        alike = [s for s in decoded if s.layout is layout]
+        assert np.shares_memory(stack_rows(alike).markers, alike[0].markers)
+        assert np.shares_memory(stack_rows(alike).links, alike[-1].links)
 
 
 @settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.too_slow])
@@ -280,16 +280,23 @@ def test_unsorted_markers_from_other_tools_decode() -> None:
     from hiros_skeleton_msgs.msg import Skeleton as SkeletonMsg
     from hiros_skeleton_msgs.msg import SkeletonGroup as GroupMsg
 
+    from hiros_core.codec import clear_plan_caches
+    from hiros_core.codec.group_plans import GROUP_READINGS
+
     message = GroupMsg(skeletons=[SkeletonMsg(id=1, max_markers=32)])
     for joint in (5, 0, 31):
         marker = Marker(id=joint, name=AZURE_KINECT.joint_names[joint], confidence=0.5)
         marker.center.pose.position.x = float(joint)
         message.skeletons[0].markers.append(marker)
-    group = decode_group(serialization.serialize_message(message))
-    skeleton = group.skeletons[0]
-    assert skeleton.layout is AZURE_KINECT
-    assert np.flatnonzero(skeleton.marker_present).tolist() == [0, 5, 31]
-    assert skeleton.positions[31, 0] == 31.0
+    data = serialization.serialize_message(message)
+    clear_plan_caches()
+    for _ in range(2):  # no plan writes markers out of order: the field reader, each time
+        group = decode_group(data)
+        skeleton = group.skeletons[0]
+        assert skeleton.layout is AZURE_KINECT
+        assert np.flatnonzero(skeleton.marker_present).tolist() == [0, 5, 31]
+        assert skeleton.positions[31, 0] == 31.0
+    assert len(data) not in GROUP_READINGS  # and no reading that cannot read it is kept
 
 
 def test_unknown_names_make_a_decoded_layout_that_re_encodes() -> None:
