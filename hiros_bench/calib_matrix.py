@@ -220,9 +220,7 @@ def run(
             lines.append(f"{name:<16s} skipped: {exc}")
             continue
         lines.append(_row_line(name, row))
-        notes.extend(
-            f"  {name}: {count}x {reason}" for reason, count in row.reasons.most_common(3)
-        )
+        notes.extend(f"  {name}: {count}x {reason}" for reason, count in row.reasons.most_common(3))
     lines.append(
         "undec. = refused because neither the motion nor the skeletons single out one lag "
         "(motion repeated over the whole recording, no usable log times): the data cannot "
@@ -235,4 +233,3 @@ def run(
     for line in lines:
         console.print(line, highlight=False)
     return lines
-

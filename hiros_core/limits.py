@@ -75,9 +75,7 @@ def check_marker_array(data: bytes | bytearray | memoryview) -> None:
         raise OverLimitError(msg, "too_many_markers")
 
 
-def marker_counts(
-    buffer: bytes | memoryview, starts: np.ndarray, ends: np.ndarray
-) -> np.ndarray:
+def marker_counts(buffer: bytes | memoryview, starts: np.ndarray, ends: np.ndarray) -> np.ndarray:
     """``(n,)`` markers of each MarkerArray ``buffer[starts[i]:ends[i]]`` (0 when too short)."""
     raw = np.frombuffer(buffer, dtype=np.uint8)
     counts = np.zeros(len(starts), dtype=np.int64)

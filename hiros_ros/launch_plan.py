@@ -153,9 +153,7 @@ def node_plan(
         names = [n for n in NODES if n != "azure_bridge" or camera_input == "driver"]
     specs = [NodeSpec(name, name, {**per_node[name], **common}, remaps) for name in names]
     if rviz_config:
-        specs.append(
-            NodeSpec("rviz2", "rviz2", dict(common), remaps, "rviz2", ["-d", rviz_config])
-        )
+        specs.append(NodeSpec("rviz2", "rviz2", dict(common), remaps, "rviz2", ["-d", rviz_config]))
     return specs
 
 

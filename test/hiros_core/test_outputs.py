@@ -13,6 +13,7 @@ from hiros_core.outputs import STAGING_PREFIX, check_output, staged_output
 def test_a_failed_write_leaves_the_earlier_output_and_no_staging(tmp_path: Path) -> None:
     final = tmp_path / "out.txt"
     final.write_text("earlier")
+
     def half_written() -> None:
         with staged_output(final, replace=True) as staged:
             staged.write_text("half")
@@ -39,6 +40,7 @@ def test_a_folder_output_replaces_a_folder_and_an_unexpected_one_is_kept(tmp_pat
         (staged / "new").write_text("new")
     assert sorted(p.name for p in final.iterdir()) == ["new"]
     other = tmp_path / "other"
+
     def raced() -> None:
         with staged_output(other) as staged:
             staged.write_text("mine")

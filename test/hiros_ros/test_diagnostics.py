@@ -112,9 +112,7 @@ def test_the_stages_downstream_learn_that_nobody_is_there(ros_context) -> None:
     )
     sent: dict[str, list] = {"tracker": [], "merger": []}
     for name, node in (("tracker", tracker), ("merger", merger)):
-        node.publish_raw = lambda _publisher, data, name=name: sent[name].append(
-            decode_group(data)
-        )
+        node.publish_raw = lambda _publisher, data, name=name: sent[name].append(decode_group(data))
     try:
         for k in range(10):  # a third of a second of an empty room at 30 Hz
             tracker.on_group(encode_group(SkeletonGroup(1_000_000_000 + k * 33_000_000, frame, [])))

@@ -48,9 +48,7 @@ def test_the_parameter_file_holds_every_name_and_default(node: str) -> None:
     specs = node_specs(node)
     values = load_config_defaults(node, CONFIG / f"{node}.yaml")
     assert set(values) <= set(specs), f"{node}.yaml has names the node lacks"
-    assert {name: values[name] for name in values} == {
-        name: specs[name].default for name in values
-    }
+    assert {name: values[name] for name in values} == {name: specs[name].default for name in values}
     # Nested stage parameters (pipeline's tracker.*) may be left to the stages' own files.
     top_level = {name for name in specs if "." not in name}
     assert top_level <= set(values), f"{node}.yaml lacks {sorted(top_level - set(values))}"
