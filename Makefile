@@ -27,9 +27,11 @@ $(STAMP): $(SETUP_INPUTS)
 	@touch $(STAMP)
 	@echo "hiros is set up in $(VENV)"
 
-# ruff, then the packages' layer contracts (.importlinter; docs/architecture.md)
+# ruff's lint and layout (`ruff format FILE` fixes the second; the kernels' hand-laid calls
+# keep `# fmt: skip`), then the packages' layer contracts (.importlinter; docs/architecture.md)
 lint: setup
 	$(VENV)/bin/ruff check .
+	$(VENV)/bin/ruff format --check .
 	$(VENV)/bin/lint-imports --no-cache
 
 # The whole suite runs in a private network namespace holding only loopback, so that DDS
