@@ -30,7 +30,7 @@ from pathlib import Path
 import numpy as np
 
 from hiros_calib.calibrator import Calibrator, CalibratorParams
-from hiros_core.errors import CalibrationError, ConfigError
+from hiros_core.errors import CalibrationError, ConfigError, RecordingError
 from hiros_eval.calibration import compare_calibration
 from hiros_sim import simulate
 from hiros_sim.presets import PRESETS, preset_params
@@ -161,8 +161,8 @@ def _kinect_multitrack_lines(console) -> list[str]:  # noqa: ANN001 - rich Conso
     """The real sessions' offsets, beside main's before this matrix existed."""
     import tempfile
 
+    from hiros_calib.offline import calibrate_recording
     from hiros_convert import convert
-    from hiros_core.recording import read_camera_groups
 
     folder = Path(__file__).resolve().parents[2] / "shared" / "data" / "kinect_multitrack"
     if not folder.exists():
@@ -174,10 +174,9 @@ def _kinect_multitrack_lines(console) -> list[str]:  # noqa: ANN001 - rich Conso
             with console.status(f"bench calib matrix: {name}"):
                 recording = Path(tmp) / f"{Path(name).stem}.mcap"
                 convert(folder / name, recording, skeleton_groups=True)
-                groups, arrivals = read_camera_groups(recording)
-                try:
-                    estimate = Calibrator().calibrate(groups, arrival_ns=arrivals)
-                except CalibrationError as exc:
+                try:  # as hiros calibrate does
+                    estimate = calibrate_recording(recording).calibration
+                except (CalibrationError, RecordingError) as exc:
                     lines.append(f"  {name}: refused: {exc}")
                     continue
             other = next(c for c in estimate.cameras if c != estimate.reference)
