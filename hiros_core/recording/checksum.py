@@ -1,8 +1,8 @@
 """CRC-32 as MCAP stores it (chunks, summary): zlib-ng's where installed, else zlib's.
 
-``hiros run`` checksums every chunk it writes (207 MB for the 20 s benchmark recording):
-zlib's crc32 runs at ~1.8 GB/s here, zlib-ng's (carry-less multiply) at ~8 GB/s, the same
-values. A system install without the ``zlib-ng`` wheel falls back to zlib.
+``hiros run`` checksums every chunk it writes; zlib-ng's crc32 (carry-less multiply) gives
+zlib's values several times faster (figures: docs/architecture.md, "Figures out of the
+docstrings"). A system install without the ``zlib-ng`` wheel falls back to zlib.
 """
 
 from __future__ import annotations

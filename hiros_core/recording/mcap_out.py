@@ -2,14 +2,14 @@
 
 The ``mcap`` library's ``Writer`` compresses every chunk with zstd level 3 in the calling
 thread and builds each message record through several small writes; on ``hiros run``'s output
-(~10 MB of CDR per recording second) that was most of the writing time. Here:
+(megabytes of CDR per recording second) that was most of the writing time. Here:
 
 * the open chunk is one preallocated buffer: a message record is its ``struct`` header packed
   in place and its payload copied after it, or written there directly by an encoder
   (``reserve`` then ``commit``: ``RecordingWriter.write_group`` encodes SkeletonGroups
   straight into the chunk), so no per-message ``bytes`` object is made, kept or joined;
 * a full chunk goes to one background thread that compresses it (zstd at a fast level by
-  default: ~4.4x smaller, ~4x less CPU than level 3; or lz4), computes its CRC and writes
+  default, ``ZSTD_LEVEL``; or lz4), computes its CRC and writes
   it with its message indexes, then hands the buffer back for a later chunk (reused buffers
   are already mapped: no page faults per chunk). zstd, lz4, crc32 and file writes release
   the GIL, so this runs beside the caller's work on another core;
@@ -54,8 +54,8 @@ __all__ = ["COMPRESSIONS", "McapWriter"]
 MAGIC = b"\x89MCAP0\r\n"
 COMPRESSIONS = ("zstd", "lz4", "none")
 ZSTD_LEVEL = -3
-"""zstd level of the chunks. On ``hiros run``'s output (207 MB of CDR for 20 s): level 3 (the
-``mcap`` library's) 0.58 s of CPU, ratio 4.47; level 1 0.30 s, 4.58; level -3 0.15 s, 4.44."""
+"""zstd level of the chunks: files about as small as at the ``mcap`` library's level 3, for a
+fraction of its CPU (figures: docs/architecture.md, "Figures out of the docstrings")."""
 
 _MESSAGE = struct.Struct("<BQHIQQ")  # opcode, record length, channel, sequence, log, publish
 _MESSAGE_FIXED = _MESSAGE.size - 9  # record content before the payload
