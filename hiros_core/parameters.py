@@ -56,6 +56,12 @@ _CALIB_CONSTANTS = (
     "joint_offset_rounds",
     "offset_shrinkage",
     "association_frames",
+    "min_drift_span",
+    "max_drift",
+    "max_interpolation_gap",
+    "max_correspondences",
+    "min_correspondences",
+    "seed",
     "agree_time",
     "agree_rotation",
     "agree_translation",
@@ -72,6 +78,9 @@ REMOVED_PARAMETERS: dict[str, str] = {
     "compiled": "the optimizer and the filter always run their compiled kernels",
     **{name: f"hiros_calib fixes it as the constant {name.upper()}" for name in _CALIB_CONSTANTS},
     "loss_scale": "the calibration's robust loss flattens at the data's own robust scale",
+    "loss": "hiros_calib fixes its robust loss as the constant LOSS (soft_l1)",
+    "mirror_invariant": "the calibration's signature is always immune to left/right swaps",
+    "frame_weights": "the calibration always weighs each frame by its residual spread",
     **dict.fromkeys(
         ("fuse_directions", "direction_iterations", "direction_eps", "direction_torso"),
         "the merger no longer rebuilds limbs along the cameras' link directions (it raised the "

@@ -86,7 +86,6 @@ RANGES: dict[str, tuple[float, float]] = {
             "butterworth_order",
             "confidence_levels",
             "id_stride",
-            "max_correspondences",
             "max_frames",
             "min_cameras",
             "min_hits",
@@ -107,7 +106,6 @@ CHOICES: dict[str, tuple[str, ...]] = {
     "camera_qos": _QOS,
     "input": ("driver", "skeletons"),
     "id_scheme": ("body_major", "joint_major"),
-    "loss": ("soft_l1", "huber", "cauchy", "linear"),
     "world": ("floor", "camera"),
 }
 """The values a string parameter may take, by (leaf) name."""

@@ -14,7 +14,11 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from hiros_calib.extrinsics.params import ASSOCIATION_FRAMES, ExtrinsicsParams
+from hiros_calib.extrinsics.params import (
+    ASSOCIATION_FRAMES,
+    MAX_INTERPOLATION_GAP,
+    ExtrinsicsParams,
+)
 from hiros_calib.signature import pose_signature, select_joints
 from hiros_calib.sync import CameraClock
 from hiros_calib.tracks import BodyTrack
@@ -112,7 +116,7 @@ def pair_correspondences(
     """Same-instant joint pairs of two tracks of the same person, None when they never meet."""
     joints, mirror, groups = _joint_tables(track_a.layout, params.pose_joints)
     t_b = clock_b.from_reference(clock_a.to_reference(track_a.times))
-    positions_b, weights_b = track_b.at(np.asarray(t_b), params.max_interpolation_gap)
+    positions_b, weights_b = track_b.at(np.asarray(t_b), MAX_INTERPOLATION_GAP)
     weights = np.minimum(track_a.weights[:, joints], weights_b[:, joints]) ** 2
     frames = weights.sum(axis=1) > 0
     if frames.sum() < 3:
@@ -187,7 +191,7 @@ def associate(
 
 
 def _at(track: BodyTrack, times: np.ndarray, params: ExtrinsicsParams) -> tuple[np.ndarray, ...]:
-    positions, weights = track.at(times, params.max_interpolation_gap)
+    positions, weights = track.at(times, MAX_INTERPOLATION_GAP)
     return times, positions, weights
 
 

@@ -13,6 +13,9 @@ from hiros_calib.extrinsics.pair_pose import PairPose
 from hiros_calib.extrinsics.params import (
     INLIER_SIGMAS,
     JOINT_OFFSET_ROUNDS,
+    LOSS,
+    MAX_CORRESPONDENCES,
+    MIN_CORRESPONDENCES,
     OFFSET_SHRINKAGE,
     ExtrinsicsParams,
 )
@@ -156,9 +159,9 @@ def solve_poses(
         for round_index in range(JOINT_OFFSET_ROUNDS + 1):
             if round_index:
                 for block in blocks:
-                    block.update_offsets(poses, scale, OFFSET_SHRINKAGE, params.loss)
+                    block.update_offsets(poses, scale, OFFSET_SHRINKAGE, LOSS)
             poses = robust_solve(
-                poses, unknown, [b.terms() for b in blocks], loss=params.loss, scale=scale
+                poses, unknown, [b.terms() for b in blocks], loss=LOSS, scale=scale
             )
     spreads = _split_half_spreads(poses, unknown, blocks, scale, params)
     for camera, transform in poses.items():
@@ -196,12 +199,12 @@ def _split_half_spreads(
             if sum(
                 int(r.sum()) for b, r in zip(blocks, rows, strict=True)
                 if camera in (b.pair.camera_a, b.pair.camera_b)
-            ) >= params.min_correspondences
+            ) >= MIN_CORRESPONDENCES
         }  # fmt: skip
         if not enough:
             return {}
         terms = [b.terms(r) for b, r in zip(blocks, rows, strict=True) if r.any()]
-        solved = robust_solve(poses, sorted(enough), terms, loss=params.loss, scale=scale)
+        solved = robust_solve(poses, sorted(enough), terms, loss=LOSS, scale=scale)
         halves.append({c: solved[c] for c in enough})
     return {
         camera: relative_error(halves[0][camera], halves[1][camera])
@@ -213,7 +216,7 @@ def _block(pair: PairPose, params: ExtrinsicsParams) -> _Block:
     c = pair.correspondences
     assert c is not None
     points_a, points_b, w, joint, frame = flatten_pairs(c.points_a, c.points_b, c.weights)
-    keep = subsample(len(points_a), params.max_correspondences)
+    keep = subsample(len(points_a), MAX_CORRESPONDENCES)
     n_joints = len(c.mirror)
     label = c.bodies[frame[keep]] * n_joints + joint[keep]
     n_labels = (int(c.bodies.max()) + 1) * n_joints if c.n_frames else 1

@@ -21,7 +21,11 @@ from hiros_calib.extrinsics.correspondences import Correspondences, subsample
 from hiros_calib.extrinsics.params import (
     FRAME_OUTLIER_RATIO,
     INLIER_SIGMAS,
+    LOSS,
+    MAX_CORRESPONDENCES,
+    MIN_CORRESPONDENCES,
     RANSAC_CHECKS,
+    SEED,
     ExtrinsicsParams,
 )
 from hiros_calib.extrinsics.robust import (
@@ -140,11 +144,11 @@ def baseline_pair_pose(
     params = params or ExtrinsicsParams()
     c = correspondences
     points_a, points_b, weights, joint, _ = flatten_pairs(c.points_a, c.points_b, c.weights)
-    if len(points_a) < params.min_correspondences:
+    if len(points_a) < MIN_CORRESPONDENCES:
         return None
-    rng = np.random.default_rng(params.seed)
+    rng = np.random.default_rng(SEED)
     pose, inliers = _ransac(points_a, points_b, weights, c.groups[joint], params=params, rng=rng)
-    return pose if inliers.sum() >= params.min_correspondences else None
+    return pose if inliers.sum() >= MIN_CORRESPONDENCES else None
 
 
 def _choose_view(
@@ -195,7 +199,7 @@ def _refine_pair(
     """Robust least-squares refinement of one b -> a pose (loss flattening at ``scale`` m)."""
     terms = [Terms("a", "b", points_a, points_b, weights, np.zeros_like(points_a))]
     start = {"a": RigidTransform.identity(), "b": pose}
-    return robust_solve(start, ["b"], terms, loss=params.loss, scale=scale)["b"]
+    return robust_solve(start, ["b"], terms, loss=LOSS, scale=scale)["b"]
 
 
 def estimate_pair_pose(
@@ -206,7 +210,7 @@ def estimate_pair_pose(
     camera_b: str = "b",
 ) -> PairPose:
     """Camera b's pose in camera a's frame from same-instant joint pairs."""
-    if correspondences is None or (correspondences.weights > 0).sum() < params.min_correspondences:
+    if correspondences is None or (correspondences.weights > 0).sum() < MIN_CORRESPONDENCES:
         return PairPose(
             camera_a,
             camera_b,
@@ -215,12 +219,12 @@ def estimate_pair_pose(
     c = correspondences.take(
         subsample(correspondences.n_frames, _frame_budget(correspondences, params))
     )
-    rng = np.random.default_rng(params.seed)
+    rng = np.random.default_rng(SEED)
     inv_a, inv_b, inv_w, inv_groups, _ = _invariant_points(c)
-    if len(inv_a) < params.min_correspondences:
+    if len(inv_a) < MIN_CORRESPONDENCES:
         return PairPose(camera_a, camera_b, reason="too few reliable joints seen by both cameras")
     pose, inliers = _ransac(inv_a, inv_b, inv_w, inv_groups, params=params, rng=rng)
-    if inliers.sum() < params.min_correspondences:
+    if inliers.sum() < MIN_CORRESPONDENCES:
         return PairPose(
             camera_a,
             camera_b,
@@ -234,7 +238,7 @@ def estimate_pair_pose(
             pose, points_a, points_b, joint=joint, frame=frame, n_frames=c.n_frames, params=params
         )
         pose = kabsch(points_a[keep], points_b[keep], w[keep])
-    sub = subsample(len(points_a), params.max_correspondences)
+    sub = subsample(len(points_a), MAX_CORRESPONDENCES)
     sub = sub[keep[sub]]
     pose = _refine_pair(
         points_a[sub],
@@ -263,8 +267,6 @@ def estimate_pair_pose(
         _inverse_variance(median_rows(values, mask) / 1.54, scale)
         for values, mask in ((table, valid), (table.T, valid.T))
     )
-    if not params.frame_weights:
-        frame_factor = np.ones(c.n_frames)
     chosen = Correspondences(
         chosen_a,
         chosen_b,

@@ -15,8 +15,13 @@ __all__ = [
     "FRAME_OUTLIER_RATIO",
     "INLIER_SIGMAS",
     "JOINT_OFFSET_ROUNDS",
+    "LOSS",
+    "MAX_CORRESPONDENCES",
+    "MAX_INTERPOLATION_GAP",
+    "MIN_CORRESPONDENCES",
     "OFFSET_SHRINKAGE",
     "RANSAC_CHECKS",
+    "SEED",
     "ExtrinsicsParams",
 ]
 
@@ -41,6 +46,24 @@ cameras' SDKs alternately with the poses (0: assume the SDKs agree on average)."
 OFFSET_SHRINKAGE: float = 30.0
 """Samples' worth of pull towards 0 on each joint offset, so short tracks stay sane."""
 
+LOSS: str = "soft_l1"
+"""Robust loss of the refinements, on the length of each joint's 3D residual (one of
+:func:`~hiros_calib.extrinsics.robust.loss_weights`' losses)."""
+
+MAX_INTERPOLATION_GAP: float = 0.1
+"""Camera b's frames around an instant must be closer than this (s) to interpolate."""
+
+MAX_CORRESPONDENCES: int = 200000
+"""Joint correspondences per camera pair kept for the refinements (evenly subsampled): every
+joint of the frames kept; on the simulator, keeping a fifth of them gave about 6 % more
+rotation error."""
+
+MIN_CORRESPONDENCES: int = 30
+"""Fewer usable correspondences than this and the pair gives no pose."""
+
+SEED: int = 0
+"""Random seed of RANSAC, so that a recording always gives the same calibration."""
+
 
 @dataclass
 class ExtrinsicsParams:
@@ -55,23 +78,11 @@ class ExtrinsicsParams:
     pose_joints: list[str] = field(default_factory=list)
     """Joints used as correspondences; empty = every joint of the layout (more joints
     average out more of the SDK's fixed per-joint errors)."""
-    max_interpolation_gap: float = 0.1
-    """Camera b's frames around an instant must be closer than this (s) to interpolate."""
     inlier_threshold: float = 0.25
     """Largest distance (m) for a joint correspondence to count as an inlier; the working
     threshold adapts to the data's spread (``INLIER_SIGMAS`` times the robust scale)."""
     ransac_iterations: int = 400
     """Minimal samples tried per camera pair."""
-    loss: str = "soft_l1"
-    """Robust loss of the refinements (``soft_l1``, ``huber``, ``cauchy`` or ``linear``), on
-    the length of each joint's 3D residual."""
-    max_correspondences: int = 200000
-    """Joint correspondences per camera pair kept for the refinements (evenly subsampled);
-    the default keeps every joint of the frames kept: on the simulator, keeping a fifth of
-    them gave about 6 % more rotation error."""
-    frame_weights: bool = True
-    """Weight each frame by the inverse of its residual variance (the SDKs' error changes
-    with the view; on the simulator about 4 % less rotation error than equal weights)."""
     frames_per_minute: float = 1000.0
     """Frames (body pairs at one instant) per camera pair and minute of recording kept for
     the pose, evenly subsampled. The SDK's errors are correlated over about 0.2 s, so at 30 Hz
@@ -80,7 +91,3 @@ class ExtrinsicsParams:
     all, 0.28-0.30 deg with 1000 a minute; 1 minute: no better with 3000)."""
     max_frames: int = 10000
     """At most this many frames per camera pair, whatever the length (bounds the cost)."""
-    min_correspondences: int = 30
-    """Fewer usable correspondences than this and the pair gives no pose."""
-    seed: int = 0
-    """Random seed of RANSAC, for repeatable results."""

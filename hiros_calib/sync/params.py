@@ -18,6 +18,8 @@ __all__ = [
     "GRID_STEP",
     "LOOP_OVERRULE_STRENGTH",
     "MAX_CANDIDATES",
+    "MAX_DRIFT",
+    "MIN_DRIFT_SPAN",
     "MIN_LAG_MARGIN",
     "MIN_MOTION",
     "MIN_PRIOR_SIGNIFICANCE",
@@ -34,6 +36,12 @@ GRID_STEP: float = 0.01
 
 REFINE_STEP: float = 0.01
 """Grid (s) on which the continuous refinement compares interpolated signatures."""
+
+MIN_DRIFT_SPAN: float = 30.0
+"""Shortest span (s) of window measurements for a drift estimate."""
+
+MAX_DRIFT: float = 1e-3
+"""Largest drift (s/s) the window search allows for (real clocks drift within 1e-4)."""
 
 MIN_PRIOR_SIGNIFICANCE: float = 0.8
 """Within the arrival-time prior's window, a body pair whose peak's significance (Fisher
@@ -89,8 +97,6 @@ class SyncParams:
 
     joints: list[str] = field(default_factory=lambda: list(DEFAULT_JOINTS))
     """Joints whose distances form the signature; names missing from a layout are skipped."""
-    mirror_invariant: bool = True
-    """Make the signature immune to SDKs swapping left and right (see signature.py)."""
     max_offset: float = 0.0
     """Largest |offset| searched (s) without arrival times; 0 searches every lag."""
     prior_window: float = 1.0
@@ -114,11 +120,7 @@ class SyncParams:
     window: float = 10.0
     """Window length (s) of the offset-over-time measurements that give the drift."""
     estimate_drift: bool = True
-    """Fit a clock drift per camera (needs ``min_drift_span`` of common motion)."""
-    min_drift_span: float = 30.0
-    """Shortest span (s) of window measurements for a drift estimate."""
-    max_drift: float = 1e-3
-    """Largest drift (s/s) the window search allows for."""
+    """Fit a clock drift per camera (needs ``MIN_DRIFT_SPAN`` of common motion)."""
     drift_prior: float = 1e-4
     """Typical clock drift (s/s, a standard deviation): short recordings whose windows
     cannot tell a drift apart from noise get a drift shrunk towards 0 (ridge prior)."""

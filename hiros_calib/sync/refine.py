@@ -19,7 +19,7 @@ from scipy.optimize import minimize_scalar
 
 from hiros_calib.signature import PoseSignature
 from hiros_calib.sync.correlation import resample
-from hiros_calib.sync.params import GRID_STEP, SyncParams
+from hiros_calib.sync.params import GRID_STEP, MAX_DRIFT, SyncParams
 
 __all__ = ["RefinePair", "Spline", "lag_windows", "refine", "window_edges"]
 
@@ -155,7 +155,7 @@ def lag_windows(tau: float, pairs: list[RefinePair], params: SyncParams) -> np.n
     end = max(min(p.a.end, p.b.end + tau) for p in pairs)
     span = end - start
     edges = window_edges(start, end, params.window)
-    half_width = 2 * GRID_STEP + params.max_drift * span
+    half_width = 2 * GRID_STEP + MAX_DRIFT * span
     rows = []
     for lo, hi in edges:
         overlap = sum(p.overlap(tau, (lo, hi)) for p in pairs)

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from hiros_calib.sync.clock import CameraClock, PairOffset
-from hiros_calib.sync.params import SyncParams
+from hiros_calib.sync.params import MIN_DRIFT_SPAN, SyncParams
 from hiros_calib.tracks import BodyTrack
 
 __all__ = ["clock_epochs", "solve_clocks"]
@@ -47,7 +47,7 @@ def solve_clocks(
     usable = [p for p in usable if p.camera_a in linked and p.camera_b in linked]
     spans = _drift_spans(usable)
     with_drift = [
-        c for c in unknown if params.estimate_drift and spans.get(c, 0.0) >= params.min_drift_span
+        c for c in unknown if params.estimate_drift and spans.get(c, 0.0) >= MIN_DRIFT_SPAN
     ]
     column = {("o", c): k for k, c in enumerate(unknown)}
     column.update({("d", c): len(unknown) + k for k, c in enumerate(with_drift)})

@@ -38,9 +38,7 @@ class TrackWork:
         for track in tracks:
             if id(track) not in self._signature:
                 joints = select_joints(track.layout, self.params.joints)
-                signature = pose_signature(
-                    track, joints, mirror_invariant=self.params.mirror_invariant
-                )
+                signature = pose_signature(track, joints)
                 self._signature[id(track)] = (track, signature)
             out.append(self._signature[id(track)][1])
         return out

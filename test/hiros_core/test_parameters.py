@@ -53,19 +53,22 @@ def test_an_old_file_setting_a_removed_parameter_loads_with_a_warning(tmp_path: 
 def test_an_old_calib_file_loads_without_the_parameters_that_became_constants(
     tmp_path: Path,
 ) -> None:
-    """The calib node's statistical settings (grid_step ...) became constants, loss_scale went."""
+    """The calib node's statistical settings (grid_step ... loss) became constants, loss_scale
+    went, and a setting that stays (prior_window) still loads."""
     path = tmp_path / "calib.yaml"
     path.write_text(
         "calib:\n  ros__parameters:\n    max_offset: 2.0\n    grid_step: 0.01\n"
         "    min_lag_margin: 1.15\n    step_period: 0.2\n    loss_scale: 0.0\n    loss: soft_l1\n"
+        "    prior_window: 0.5\n"
     )
     with pytest.warns(RemovedParameterWarning) as caught:
         values = load_config_defaults("calib", path)
-    assert values == {"max_offset": 2.0, "loss": "soft_l1"}
+    assert values == {"max_offset": 2.0, "prior_window": 0.5}
     messages = sorted(str(w.message) for w in caught)
-    assert len(messages) == 4
-    assert "constant GRID_STEP" in messages[0]
-    assert "parameter loss_scale is ignored" in messages[1]
+    assert len(messages) == 5
+    assert any("constant GRID_STEP" in m for m in messages)
+    assert any("parameter loss_scale is ignored" in m for m in messages)
+    assert any("constant LOSS" in m for m in messages)
 
 
 def test_an_old_pipeline_file_loads_without_the_stages_removed_parameters(tmp_path: Path) -> None:
