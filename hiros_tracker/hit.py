@@ -53,12 +53,19 @@ def hit_frame(  # noqa: PLR0917 - the tracks, the frame, its pairs, view, layout
 
     """
     rows, dets, flips = pairs
-    held = HeldSides(tracks.positions, tracks.sides, rows, layout.body.left, layout.body.right)
+    held = HeldSides(
+        tracks.positions,
+        tracks.sides,
+        tracks.velocity,
+        rows,
+        layout.body.left,
+        layout.body.right,
+    )
     canonical, flips = canonical_poses(
         frame.positions, dets, flips, layout.mirror, settings.align, layout.sides, held
     )
     if settings.align and len(layout.body.left):
-        hold_axes(held, canonical, tracks.last_hit_ns, view.stamp_ns)
+        hold_axes(held, canonical, tracks.last_hit_ns, view)
     hits = Hits(rows, canonical, frame.det_ids[dets], view.camera, view.stamp_ns)
     full = fold_hits(tracks, hits, settings.update)
     if settings.orient:

@@ -99,6 +99,7 @@ class HeldSides(NamedTuple):
 
     tracks: np.ndarray  # (T, J, 3) the tracks' poses
     axes: np.ndarray  # (T, 3) the tracks' held left-right axes (0: none yet, the pose's)
+    velocity: np.ndarray  # (T, 3) the tracks' body velocities, m/s
     track_rows: np.ndarray  # (U,) each detection's track row
     left: np.ndarray  # (2,) left shoulder and hip; empty: sides not held
     right: np.ndarray  # (2,) right shoulder and hip

@@ -5,8 +5,8 @@ import pytest
 
 from hiros_core.layouts import AZURE_KINECT
 from hiros_tracker import kernels
-from hiros_tracker.kernel_args import HeldSides, SideLayout
-from hiros_tracker.labels import SIDE_MEMORY
+from hiros_tracker.kernel_args import FacingView, HeldSides, SideLayout
+from hiros_tracker.labels import SIDE_MEMORY, WALK_MEMORY, WALK_SPEED
 from hiros_tracker.tracker import _body_frame, _mirror_parts, _side_arrays
 
 
@@ -37,7 +37,7 @@ def _canonical(
     if matched is None:
         matched = np.zeros(parts.count, dtype=bool)
     axes = np.zeros((1, 3)) if axis is None else axis[None].astype(float)
-    held = HeldSides(track[None], axes, np.array([0]), frame.left, frame.right)
+    held = HeldSides(track[None], axes, np.zeros((1, 3)), np.array([0]), frame.left, frame.right)
     _, flips = kernels.canonical_poses(
         detection[None],
         np.array([0]),
@@ -106,19 +106,61 @@ def test_detections_are_held_to_the_tracks_held_axis_not_to_its_dragged_pose() -
     assert flips.all()
 
 
-def test_the_held_axis_follows_detections_over_its_memory() -> None:
+def _held(track: np.ndarray, velocity: tuple[float, float, float] = (0.0, 0.0, 0.0)) -> HeldSides:
+    """One track at ``track`` with no held axis yet, moving at ``velocity`` (m/s)."""
     frame = _body_frame(AZURE_KINECT)
+    velocities = np.array([velocity], dtype=float)
+    return HeldSides(
+        track[None], np.zeros((1, 3)), velocities, np.array([0]), frame.left, frame.right
+    )
 
-    def axis(pose: np.ndarray) -> np.ndarray:
-        return pose[frame.left].sum(axis=0) - pose[frame.right].sum(axis=0)
 
+def _view(stamp_ns: int) -> FacingView:
+    """A camera's view at ``stamp_ns`` in a z-up world (its position does not matter here)."""
+    return FacingView(np.array([0.0, 0.0, 1.0, 1.0]), np.zeros(3), True, 0, stamp_ns)
+
+
+def _axis(pose: np.ndarray) -> np.ndarray:
+    frame = _body_frame(AZURE_KINECT)
+    return pose[frame.left].sum(axis=0) - pose[frame.right].sum(axis=0)
+
+
+def test_the_held_axis_follows_detections_over_its_memory() -> None:
     track = _standing()
-    axes = np.zeros((1, 3))
-    held = HeldSides(track[None], axes, np.array([0]), frame.left, frame.right)
+    held = _held(track)
     first = np.zeros(1, dtype=np.int64)
-    kernels.hold_axes(held, track[None], first, 0)  # a first detection: taken whole
-    assert axes[0] == pytest.approx(axis(track))
+    kernels.hold_axes(held, track[None], first, _view(0))  # a first detection: taken whole
+    assert held.axes[0] == pytest.approx(_axis(track))
     turned = _turned(track, 90.0)
-    kernels.hold_axes(held, turned[None], first, round(SIDE_MEMORY * 1e9))  # 1/e kept
+    kernels.hold_axes(held, turned[None], first, _view(round(SIDE_MEMORY * 1e9)))  # 1/e kept
     keep = np.exp(-1.0)
-    assert axes[0] == pytest.approx(keep * axis(track) + (1 - keep) * axis(turned))
+    assert held.axes[0] == pytest.approx(keep * _axis(track) + (1 - keep) * _axis(turned))
+
+
+@pytest.mark.parametrize("speed", [0.0, 0.5 * WALK_SPEED])
+def test_a_standing_or_stepping_track_keeps_the_axis_its_detections_give(speed: float) -> None:
+    track = _standing()  # left is +y, facing +x
+    held = _held(track, (-speed, 0.0, 0.0))  # stepping back
+    first = np.zeros(1, dtype=np.int64)
+    kernels.hold_axes(held, track[None], first, _view(0))
+    kernels.hold_axes(held, track[None], first, _view(round(WALK_MEMORY * 1e9)))
+    assert held.axes[0] == pytest.approx(_axis(track))
+
+
+def test_a_walking_tracks_axis_turns_to_face_where_it_walks() -> None:
+    # The held axis says left is -y (the track's sides mirrored, its detections held to
+    # that), but the body walks along +x: a body facing +x has its left at +y. Over
+    # WALK_MEMORY the walk pulls the axis 1 - 1/e of the way there, keeping its length,
+    # before the detection folds in.
+    track = _standing()
+    mirrored = _turned(track, 180.0)
+    held = _held(track, (1.5 * WALK_SPEED, 0.0, 0.0))
+    first = np.zeros(1, dtype=np.int64)
+    kernels.hold_axes(held, mirrored[None], first, _view(0))
+    length = np.linalg.norm(_axis(mirrored))
+    stamp = round(WALK_MEMORY * 1e9)
+    kernels.hold_axes(held, mirrored[None], first, _view(stamp))
+    walked = np.exp(-1.0) * _axis(mirrored) + (1 - np.exp(-1.0)) * np.array([0.0, length, 0.0])
+    keep = np.exp(-WALK_MEMORY / SIDE_MEMORY)
+    expected = keep * walked + (1 - keep) * _axis(mirrored)
+    assert held.axes[0] == pytest.approx(expected)
