@@ -39,15 +39,18 @@ __all__ = ["fuse", "merge"]
 
 
 @njit(cache=True, error_model="numpy")
-def fuse(detections: TrackDetections, settings: FuseSettings, body: BodyLayout) -> Fusion:
+def fuse(
+    detections: TrackDetections, settings: FuseSettings, body: BodyLayout, up: np.ndarray
+) -> Fusion:
     """Fuse the detections of every track (the maths in ``merger.py``'s docstring).
 
     1. each detection's joints at the output time and their reliability weights
        (``detections_at``);
     2. the weighted median of the cameras' joints (``weighted_median``);
-    3. against its front, each detection's flipped and view factors (``facing_weights``,
-       where the layout names the joints of a front) and, with two tracks or more, the
-       occlusion factor (``occluded``, where a camera is known);
+    3. against its front (across the scene's ``up`` ``(3,)``, ``Merger.up``), each flipped
+       detection reflected back and the flipped and view factors (``facing_weights``, where
+       the layout names the joints of a front) and, with two tracks or more, the occlusion
+       factor (``occluded``, where a camera is known);
     4. the robust mean from the median (``robust_mean``), its final weights
        (``final_weights``) and the weighted mean confidences and velocities
        (``weighted_means``).
@@ -58,7 +61,7 @@ def fuse(detections: TrackDetections, settings: FuseSettings, body: BodyLayout) 
     seen = detections_at(detections, weighting, len(body.groups), known)
     fused = weighted_median(seen.positions, seen.weight)
     if body.has_front:
-        facing_weights(fused, seen, detections.cameras, known, body, weighting)
+        facing_weights(fused, seen, detections.cameras, known, body, weighting, up)
     if weighting.occlusion_radius > 0 and n_tracks > 1 and known.any():
         occluded(
             fused,
@@ -173,6 +176,7 @@ def merge(  # noqa: PLR0917 - one output's inputs
     cameras: CameraTable,
     settings: FuseSettings,
     body: BodyLayout,
+    up: np.ndarray,
 ) -> MergedFrame:
     """One output: ``fuse`` the ``selected`` stored slots at ``out_ns``, as output rows.
 
@@ -180,7 +184,7 @@ def merge(  # noqa: PLR0917 - one output's inputs
     links.
     """
     track_ids, table = arrange(stored.tracks, selected)
-    fusion = fuse(by_track(stored, table, out_ns, cameras), settings, body)
+    fusion = fuse(by_track(stored, table, out_ns, cameras), settings, body, up)
     rows, present, skeleton = output_rows(fusion)
     links, link_present = _link_rows(rows, present, body.link_parents, body.link_children)
     oriented = any_orientation(stored.rows, stored.present, selected, len(body.groups))

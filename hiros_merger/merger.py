@@ -19,7 +19,8 @@ weight each camera by confidence, distance and view; the product form is ours)::
         × (1 + depth_gain · depth)^-2    depth noise grows ~linearly with distance (variance ²)
         × view(cos θ)                     θ: angle between the body's front and the camera
         × flipped                         ``flipped_weight`` if the detection's feet and nose
-                                          point backwards (a front/back flip)
+                                          point backwards (a front/back flip), which is first
+                                          reflected back through its frontal plane
         × occlusion                       another person's torso on the camera's ray
         × staleness                       1 / (1 + (Δt / staleness_scale)²)
 
@@ -37,6 +38,7 @@ Shapes: ``M`` tracks, ``C`` detections per track (padded), ``J`` joints; metres,
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import TypeVar, get_type_hints
 
@@ -69,6 +71,11 @@ __all__ = ["OTHER_FRAME", "Merger", "MergerParams"]
 
 T = TypeVar("T")
 
+UP_TOLERANCE = math.radians(15.0)
+"""Largest angle between the people's mean vertical and the world's z axis for which the world
+is taken to be gravity-aligned (z up, ``Merger.up``)."""
+_Z_UP = np.array([0.0, 0.0, 1.0])
+
 OTHER_FRAME = "not in the world frame"
 """Drop reason of the detections of an input group in another frame than the world's."""
 
@@ -90,8 +97,10 @@ class MergerParams:
             side has its limbs along the camera's noisy depth axis, while the back view is as
             precise as the front (flips have ``flipped_weight``). 0 turns it off.
         flipped_weight: weight factor of a detection whose feet and nose point backwards
-            against the body's front (a front/back flip the tracker relabelled but whose limbs
-            are still reflected).
+            against the body's front: a front/back flip the tracker relabelled but whose limbs
+            are still reflected through the frontal plane. It is reflected back through the
+            plane through its pelvis (normal: the front of the track's detections, across the
+            scene's up, ``Merger.up``), and weighs this much: the plane is itself an estimate.
         occlusion_radius: metres; a joint whose camera ray passes this close to another
             person's torso, in front of the joint, is occluded (0 turns the check off).
         occlusion_weight: weight factor of an occluded joint.
@@ -122,7 +131,7 @@ class MergerParams:
     confidence_floor: float = 0.05
     depth_gain: float = 0.33
     oblique_gain: float = 1.0
-    flipped_weight: float = 0.1
+    flipped_weight: float = 0.5
     occlusion_radius: float = 0.2
     occlusion_weight: float = 0.5
     staleness_scale: float = 0.05
@@ -267,6 +276,7 @@ class Merger(Accounted):
         self._world_frame = "world"
         self._world_frame_set = False  # by the calibration, or else the first framed input
         self._constants: dict[str, tuple] = {}  # layout name -> ``_fusion_constants``
+        self._verticals = np.zeros(3)  # sum of the fused people's unit root -> neck vectors
         if calibration is not None:
             self.set_calibration(calibration)
 
@@ -282,6 +292,7 @@ class Merger(Accounted):
         Optional: without a calibration, the first input's frame is the world.
         """
         self._world_frame, self._world_frame_set = calibration.world_frame, True
+        self._verticals = np.zeros(3)  # (the world may have turned)
         self._camera_positions[:] = np.nan
         self._frame_names = {}
         self._frame_cameras = {}
@@ -441,8 +452,10 @@ class Merger(Accounted):
         cameras = CameraTable(self._camera_positions)
         settings, body = self._fusion_constants(layout)
         selection = np.array(selected, dtype=np.int64)
-        frame = kernels.merge(stored, selection, out_ns, cameras, settings, body)
+        frame = kernels.merge(stored, selection, out_ns, cameras, settings, body, self.up)
         rows, present = frame.rows, frame.present
+        if body.neck >= 0:
+            self._add_verticals(rows[:, body.root, 1:4], rows[:, body.neck, 1:4])
         links, link_present = frame.links, frame.link_present
         if frame.oriented:
             quaternions = self._stored_orientations(frame.table, layout.n_joints)
@@ -454,6 +467,30 @@ class Merger(Accounted):
         return SkeletonRows(rows, present, links, link_present, boxes).skeletons(
             frame.track_ids.tolist(), out_ns, self._world_frame, layout, frame.confidences.tolist()
         )
+
+    @property
+    def up(self) -> np.ndarray:
+        """``(3,)`` the scene's up: the world's z, or the people's mean vertical (NaN: none yet).
+
+        People stand and walk upright, so the mean of their fused unit root -> neck vectors
+        points up whatever frame the world is. Where it lies within ``UP_TOLERANCE`` of the
+        world's z axis the world is the gravity-aligned one (REP-103, the calibration levels
+        it on the floor and the people) and z is taken: the mean vertical itself leans by the
+        SDK's biases of the pelvis and neck (1-4 degrees), which tilt a flip's reflection plane
+        (``weights.reflect``). Otherwise (the world is a camera's frame) the mean is taken.
+        """
+        norm = np.linalg.norm(self._verticals)
+        if not norm > 0:
+            return np.full(3, np.nan)
+        mean = self._verticals / norm
+        return _Z_UP if mean[2] >= math.cos(UP_TOLERANCE) else mean
+
+    def _add_verticals(self, roots: np.ndarray, necks: np.ndarray) -> None:
+        """Add the fused people's unit root -> neck vectors ``(M, 3)`` to the scene's up."""
+        vertical = necks - roots
+        norm = np.linalg.norm(vertical, axis=1, keepdims=True)
+        finite = np.isfinite(norm[:, 0]) & (norm[:, 0] > 0)
+        self._verticals += (vertical[finite] / norm[finite]).sum(axis=0)
 
     def _fusion_constants(self, layout: Layout) -> tuple[FuseSettings, BodyLayout]:
         """``kernels.merge``'s settings and body bundles for ``layout``, built once per layout.

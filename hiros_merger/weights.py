@@ -10,8 +10,10 @@ velocity (``detections_at``), weighs::
         / (1 + oblique_gain · |sin θ|)²                   θ: the camera's angle to the body front
         × occlusion_weight                                another track's torso on its ray
 
-``facing_weights`` and ``occluded`` judge the last three against the weighted median of the
-detections (see ``merger.py``'s docstring for why each factor is there).
+``facing_weights`` judges the flips and views against the front of the track's detections
+(a flipped detection is first reflected back, ``reflect``), ``occluded`` the occlusions
+against the weighted median of the detections (see ``merger.py``'s docstring for why each
+factor is there).
 """
 
 from __future__ import annotations
@@ -95,36 +97,67 @@ def detections_at(
 
 
 @njit(cache=True, error_model="numpy")
-def body_front(
-    fused: np.ndarray, body: BodyLayout
+def body_axes(
+    detections: np.ndarray, fused: np.ndarray, body: BodyLayout, up: np.ndarray
 ) -> tuple[tuple[float, float, float], tuple[float, float, float]]:
-    """A fused skeleton's ``(J, 3)`` up and front unit vectors.
+    """A track's up and front unit vectors, from its detections ``(C, J, 3)``.
 
-    Up runs from the root to the neck; front is ``side × up``, ``side`` from the mean of the
-    right hip and shoulder to the mean of the left ones.
+    Up is the scene's ``up`` ``(3,)`` (people's mean vertical, ``Merger``), or where that is
+    not known yet the ``fused`` ``(J, 3)`` skeleton's root -> neck. Front is ``side × up``,
+    ``side`` the sum over the detections with all their side joints of the left hip and
+    shoulder less the right ones (the tracker labels every detection of a track alike): the
+    detections' torsos, which a front/back flip leaves in place, rather than the per-coordinate
+    median of them, whose hips and shoulders may each come from another camera.
     """
-    root, neck, left, right = body.root, body.neck, body.left, body.right
-    up = unit3(
-        fused[neck, 0] - fused[root, 0],
-        fused[neck, 1] - fused[root, 1],
-        fused[neck, 2] - fused[root, 2],
-    )
-    ux, uy, uz = up
-    side = np.zeros(3)
-    for a in range(3):
-        total = 0.0
-        for i in range(len(left)):
-            total += fused[left[i], a]
-        other = 0.0
-        for i in range(len(right)):
-            other += fused[right[i], a]
-        side[a] = total / len(left) - other / len(right)
-    front = unit3(
-        side[1] * uz - side[2] * uy,
-        side[2] * ux - side[0] * uz,
-        side[0] * uy - side[1] * ux,
-    )
-    return up, front
+    ux, uy, uz = up[0], up[1], up[2]
+    if not finite3(ux, uy, uz):
+        root, neck = body.root, body.neck
+        ux, uy, uz = unit3(
+            fused[neck, 0] - fused[root, 0],
+            fused[neck, 1] - fused[root, 1],
+            fused[neck, 2] - fused[root, 2],
+        )
+    sx = sy = sz = 0.0
+    for c in range(len(detections)):
+        dx = dy = dz = 0.0
+        for i in range(len(body.left)):
+            left, right = body.left[i], body.right[i]
+            dx += detections[c, left, 0] - detections[c, right, 0]
+            dy += detections[c, left, 1] - detections[c, right, 1]
+            dz += detections[c, left, 2] - detections[c, right, 2]
+        if finite3(dx, dy, dz):
+            sx += dx
+            sy += dy
+            sz += dz
+    front = unit3(sy * uz - sz * uy, sz * ux - sx * uz, sx * uy - sy * ux)
+    return (ux, uy, uz), front
+
+
+@njit(cache=True, error_model="numpy")
+def reflect(
+    positions: np.ndarray, velocities: np.ndarray, root: int, front: tuple[float, float, float]
+) -> None:
+    """Reflect a detection's joints ``(J, 3)`` through its frontal plane, in place.
+
+    The plane passes through the detection's ``root`` with ``front`` as its normal; the
+    velocities' components along the front are reversed alike. A front/back flip is this
+    reflection with left and right relabelled (the SDK fits a body facing its camera to a
+    person seen from behind): the tracker has undone the labels, this undoes the positions.
+    """
+    fx, fy, fz = front
+    rx, ry, rz = positions[root, 0], positions[root, 1], positions[root, 2]
+    if not (finite3(rx, ry, rz) and finite3(fx, fy, fz)):
+        return
+    for j in range(len(positions)):
+        depth = (positions[j, 0] - rx) * fx + (positions[j, 1] - ry) * fy
+        depth += (positions[j, 2] - rz) * fz
+        speed = velocities[j, 0] * fx + velocities[j, 1] * fy + velocities[j, 2] * fz
+        positions[j, 0] -= 2.0 * depth * fx
+        positions[j, 1] -= 2.0 * depth * fy
+        positions[j, 2] -= 2.0 * depth * fz
+        velocities[j, 0] -= 2.0 * speed * fx
+        velocities[j, 1] -= 2.0 * speed * fy
+        velocities[j, 2] -= 2.0 * speed * fz
 
 
 @njit(cache=True, error_model="numpy")
@@ -187,19 +220,26 @@ def facing_weights(  # noqa: PLR0917 - the fusion's arrays
     known: np.ndarray,
     body: BodyLayout,
     settings: WeightSettings,
+    up: np.ndarray,
 ) -> None:
-    """Multiply ``seen.weight`` by each detection's flipped and view factors.
+    """Undo each detection's front/back flip and multiply ``seen.weight`` by its view factor.
 
-    Judged against each track's ``fused`` ``(M, J, 3)`` front (``body_front``): a detection
-    that ``points_backwards`` weighs ``flipped_weight`` times less; one whose camera is
-    known weighs its ``view_weight`` (a NaN view leaves the weight as it is).
+    Judged against each track's front (``body_axes``, with the scene's ``up``): a detection
+    that ``points_backwards`` is reflected back (``reflect``, its positions and velocities in
+    ``seen``) and weighs ``flipped_weight`` times its weight; one whose camera is known weighs
+    its ``view_weight`` (a NaN view leaves the weight as it is), seen from the ``fused``
+    ``(M, J, 3)`` root.
     """
     positions, weight = seen.positions, seen.weight
     n_tracks, n_slots, n_joints = weight.shape
     for m in range(n_tracks):
-        up, front = body_front(fused[m], body)
+        up_m, front = body_axes(positions[m], fused[m], body, up)
         for c in range(n_slots):
-            if len(body.pointers) and points_backwards(positions[m, c], body.pointers, up, front):
+            backwards = len(body.pointers) and points_backwards(
+                positions[m, c], body.pointers, up_m, front
+            )
+            if backwards:
+                reflect(positions[m, c], seen.velocities[m, c], body.root, front)
                 for j in range(n_joints):
                     weight[m, c, j] = weight[m, c, j] * settings.flipped_weight
             if known[m, c]:

@@ -89,12 +89,13 @@ PARAMS = st.builds(
 
 
 @settings(max_examples=60, deadline=None)
-@given(seed=st.integers(0, 2**32 - 1), params=PARAMS)
-def test_fuse_equals_the_numpy_statement(seed: int, params: MergerParams) -> None:
+@given(seed=st.integers(0, 2**32 - 1), params=PARAMS, tilt=st.sampled_from([np.nan, 0.0, 0.2]))
+def test_fuse_equals_the_numpy_statement(seed: int, params: MergerParams, tilt: float) -> None:
     detections = _frame(np.random.default_rng(seed))
     fuse_settings = _fuse_settings(params)
-    got = kernels.fuse(detections, fuse_settings, AXES.body)
-    want = reference_fuse(detections, fuse_settings, AXES.body)
+    up = np.array([tilt, 0.0, 1.0]) / np.hypot(tilt, 1.0)  # NaN: the scene's up not known yet
+    got = kernels.fuse(detections, fuse_settings, AXES.body, up)
+    want = reference_fuse(detections, fuse_settings, AXES.body, up)
     for name in Fusion._fields:
         np.testing.assert_allclose(
             getattr(got, name), getattr(want, name), rtol=1e-9, atol=1e-12, err_msg=name

@@ -226,23 +226,61 @@ def test_parameter_file_matches_the_dataclass():
     assert {k: values[k] for k in asdict(MergerParams())} == asdict(MergerParams())
 
 
-def test_a_front_back_flipped_view_counts_less():
-    pose = _person()  # faces +x; feet and nose point +x
+def _pointing_forward(pose: np.ndarray) -> np.ndarray:
+    """``pose`` upright (its spine above the pelvis), its feet and nose 12 cm in front of the
+    ankles and head (+x)."""
+    pose = pose.copy()
+    spine = [AZURE_KINECT.index(n) for n in ("SpineNaval", "SpineChest", "Neck")]
+    pose[spine, :2] = pose[0, :2]
     feet = [AZURE_KINECT.index(n) for n in ("FootLeft", "FootRight", "Nose")]
     ankles = [AZURE_KINECT.index(n) for n in ("AnkleLeft", "AnkleRight", "Head")]
     pose[feet] = pose[ankles] + np.array([0.12, 0.0, -0.02])
+    return pose
+
+
+def test_a_front_back_flipped_view_is_reflected_back():
+    """A flip (the SDK's body reflected through the frontal plane; the tracker has put its
+    labels back) is reflected back through the plane through its own pelvis, so it adds its
+    view instead of bending the person: the arms and legs it swung backwards come forward."""
+    pose = _pointing_forward(_person())  # faces +x, z up
     flipped = pose.copy()
     flipped[:, 0] = 2 * pose[0, 0] - pose[:, 0]  # reflected through the frontal plane
+    flipped += np.array([0.0, 0.0, 0.05])  # its own error, which it keeps
     params = MergerParams(outlier_scale=10.0, outlier_cutoff=10.0, limb_cutoff=10.0)
-    group = _group([_detection(pose, "k01"), _detection(flipped, "k02")])
-    merged = Merger(params).update(group).skeletons[0]
-    gap = np.abs(merged.positions[feet, 0] - pose[feet, 0]).max()
-    assert gap < 0.25 * np.abs(flipped[feet, 0] - pose[feet, 0]).max()
-    even = Merger(
-        MergerParams(outlier_scale=10.0, outlier_cutoff=10.0, limb_cutoff=10.0, flipped_weight=1.0)
-    )
-    midway = even.update(group).skeletons[0]
-    np.testing.assert_allclose(midway.positions, (pose + flipped) / 2, atol=1e-6)
+    merger = Merger(params)
+    merger.update(_group([_detection(pose, "k01")]))  # the people's vertical: z
+    np.testing.assert_allclose(merger.up, [0.0, 0.0, 1.0])
+    later = T0 + 33_000_000
+    group = _group([_detection(v, c, t_ns=later) for v, c in ((pose, "k01"), (flipped, "k02"))])
+    merged = merger.update(group).skeletons[0]
+    weight = params.flipped_weight  # (of the reflected view, against 1 for k01's)
+    np.testing.assert_allclose(merged.positions[:, :2], pose[:, :2], atol=1e-9)
+    shifted = pose[:, 2] + 0.05 * weight / (1 + weight)
+    np.testing.assert_allclose(merged.positions[:, 2], shifted, atol=1e-6)
+
+
+def test_a_view_pointing_forward_is_not_reflected():
+    """Two views a few centimetres apart, feet and nose forward: fused as they are."""
+    pose = _pointing_forward(_person())
+    other = pose + np.array([0.03, -0.02, 0.01])
+    merger = Merger(MergerParams(outlier_scale=10.0))
+    merged = merger.update(_group([_detection(pose, "k01"), _detection(other, "k02")]))
+    np.testing.assert_allclose(merged.skeletons[0].positions, (pose + other) / 2, atol=1e-9)
+
+
+def test_up_is_the_world_z_or_else_the_people_s_vertical():
+    """In a gravity-aligned world the people's mean vertical confirms z, which is taken; in a
+    camera's frame as the world (y down) their vertical is."""
+    pose = _pointing_forward(_person())  # z up
+    merger = Merger()
+    assert np.isnan(merger.up).all()
+    merger.update(_group([_detection(pose, "k01")]))
+    np.testing.assert_allclose(merger.up, [0.0, 0.0, 1.0])
+    in_camera = pose @ Rotation.from_euler("x", 90, degrees=True).as_matrix().T  # z -> -y
+    merger = Merger()
+    merger.update(_group([_detection(in_camera, "k01")]))
+    vertical = in_camera[AZURE_KINECT.index("Neck")] - in_camera[0]
+    np.testing.assert_allclose(merger.up, vertical / np.linalg.norm(vertical))
 
 
 def test_limbs_are_the_subtrees_off_the_torso():

@@ -82,24 +82,32 @@ def weighted_median(positions: np.ndarray, weight: np.ndarray) -> np.ndarray:
     return np.where(total[:, 0] > 0, median, np.nan)
 
 
-def facing_factors(
+def facing(  # noqa: PLR0917 - the kernel's arguments
     fused: np.ndarray,
     positions: np.ndarray,
+    velocities: np.ndarray,
     cameras: np.ndarray,
     body: BodyLayout,
     settings: WeightSettings,
-) -> np.ndarray:
-    """``(M, C)`` each detection's flipped factor times its camera's view factor.
+    up: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Flips undone: ``(M, C, J, 3)`` positions and velocities, and ``(M, C)`` weight factors.
 
-    Up: root -> neck; front: ``side × up`` with ``side`` from the mean right to the mean left
-    hip and shoulder. A detection whose forward pointers, taken across up and summed as unit
-    vectors, point against the front is flipped. The view factor is
-    ``1 / (1 + oblique_gain · |sin θ|)²``, θ between the front and the direction from the root
-    to the camera (1 where unknown).
+    Up: ``up`` ``(3,)``, or where that is not finite each track's fused root -> neck. Front:
+    ``side × up``, ``side`` the sum over a track's detections with all their side joints of
+    the left hip and shoulder less the right ones. A detection whose forward pointers, taken
+    across up and summed as unit vectors, point against the front is flipped: reflected
+    through the plane through its root normal to the front (velocities alike) and weighed
+    ``flipped_weight``. The view factor is ``1 / (1 + oblique_gain · |sin θ|)²``, θ between
+    the front and the direction from the fused root to the camera (1 where unknown).
     """
-    up = _unit(fused[:, body.neck] - fused[:, body.root])  # (M, 3)
-    side = fused[:, body.left].mean(axis=1) - fused[:, body.right].mean(axis=1)
-    front = _unit(np.cross(side, up))
+    if np.isfinite(up).all():
+        up = np.broadcast_to(up, (len(fused), 3))
+    else:
+        up = _unit(fused[:, body.neck] - fused[:, body.root])  # (M, 3)
+    sides = (positions[:, :, body.left] - positions[:, :, body.right]).sum(axis=2)  # (M, C, 3)
+    sides = np.where(np.isfinite(sides).all(axis=-1, keepdims=True), sides, 0.0)
+    front = _unit(np.cross(sides.sum(axis=1), up))
     factor = np.ones(positions.shape[:2])
     if len(body.pointers):
         pointing = positions[:, :, body.pointers[:, 1]] - positions[:, :, body.pointers[:, 0]]
@@ -109,12 +117,23 @@ def facing_factors(
         with np.errstate(invalid="ignore"):
             backwards = np.einsum("mca,ma->mc", summed, front) < 0
         factor = np.where(backwards, settings.flipped_weight, factor)
+        root = positions[:, :, body.root : body.root + 1]
+        depth = np.einsum("mcja,ma->mcj", positions - root, front)
+        speed = np.einsum("mcja,ma->mcj", velocities, front)
+        turned = (
+            backwards
+            & np.isfinite(root[:, :, 0]).all(axis=-1)
+            & np.isfinite(front).all(axis=-1)[:, None]
+        )[..., None, None]
+        normal = front[:, None, None]
+        positions = np.where(turned, positions - 2 * depth[..., None] * normal, positions)
+        velocities = np.where(turned, velocities - 2 * speed[..., None] * normal, velocities)
     towards = _unit(cameras - fused[:, None, body.root])  # (M, C, 3)
     cosine = np.einsum("mca,ma->mc", towards, front)
     sine = np.sqrt(np.maximum(1.0 - cosine**2, 0.0))
     view = np.where(np.isfinite(cosine), 1.0 / (1.0 + settings.oblique_gain * sine) ** 2, np.nan)
     known = np.isfinite(cameras).all(axis=-1)
-    return factor * np.where(known & np.isfinite(view), view, 1.0)
+    return positions, velocities, factor * np.where(known & np.isfinite(view), view, 1.0)
 
 
 def occluded(  # noqa: PLR0917 - the kernel's arguments
@@ -190,7 +209,9 @@ def weighted_mean(values: np.ndarray, weights: np.ndarray) -> np.ndarray:
     return _mean_or_nan(total, weights.sum(axis=1)[..., None])
 
 
-def reference_fuse(detections: TrackDetections, settings: FuseSettings, body: BodyLayout) -> Fusion:
+def reference_fuse(
+    detections: TrackDetections, settings: FuseSettings, body: BodyLayout, up: np.ndarray
+) -> Fusion:
     """``kernels.fuse`` in numpy: weights, median, facing and occlusion, robust mean, means."""
     weighting, robust = settings.weights, settings.robust
     positions, velocities, confidences, weight = detections_at(
@@ -198,10 +219,10 @@ def reference_fuse(detections: TrackDetections, settings: FuseSettings, body: Bo
     )
     fused = weighted_median(positions, weight)
     if body.has_front:
-        weight = (
-            weight
-            * facing_factors(fused, positions, detections.cameras, body, weighting)[..., None]
+        positions, velocities, factors = facing(
+            fused, positions, velocities, detections.cameras, body, weighting, up
         )
+        weight = weight * factors[..., None]
     known = np.isfinite(detections.cameras).all(axis=-1)
     if weighting.occlusion_radius > 0 and len(fused) > 1 and known.any():
         weight = occluded(
