@@ -19,8 +19,19 @@ from hiros_tracker.kernel_args import FacingBody, FacingPriors, FacingView, Trac
 from hiros_tracker.labels import relabel
 
 __all__ = [
+    "DOUBT_LIMIT",
     "turn_facing",
 ]
+
+DOUBT_LIMIT = 40.0
+"""Log-odds at which a walking track whose cameras keep disagreeing with it is turned at once.
+
+A track's doubt sums its cameras' evidence against its sides (the walking term left out) over
+an unbroken run of its detections in which it walks backwards by those sides, never below 0 (a
+CUSUM, Page 1954): a mirrored walking track reaches it within a fraction of a second whatever
+its facing log-odds had grown to over seconds of agreement (a clean 3-camera walk: turned
+after 0.5 s instead of 1.3 s). A right track at the end of a pass, still moving the old way
+while it faces the new one, walks backwards too, but its cameras agree with it: no run grows."""
 
 
 @njit(cache=True, error_model="numpy")
@@ -73,7 +84,7 @@ def _facing_evidence(  # noqa: PLR0915, PLR0917 - one loop over the frame's pair
     view: FacingView,
     body: FacingBody,
     priors: FacingPriors,
-) -> np.ndarray:
+) -> tuple[np.ndarray, np.ndarray]:
     """``(U,)`` log-odds each detection gives that its track faces the way its sides say.
 
     Tracks ``rows`` ``(U,)`` were hit by ``canonical`` ``(U, J, 3)``; ``up`` ``(3,)`` is the
@@ -94,6 +105,12 @@ def _facing_evidence(  # noqa: PLR0915, PLR0917 - one loop over the frame's pair
       ``walking_evidence`` when it moves along ``f``, subtracts it when against.
 
     Evidence that is not finite counts 0.
+
+    Returns:
+        ``(U,)`` the evidence, and ``(U,)`` each detection's step of its track's doubt (see
+        ``DOUBT_LIMIT``): minus the evidence without the walking term where the track walks
+        against ``f``, else 0 (the run ends).
+
     """
     positions, velocity = tracks.positions, tracks.velocity
     flip_state, flip_ns, flip_known = tracks.flip_state, tracks.flip_ns, tracks.flip_known
@@ -105,6 +122,7 @@ def _facing_evidence(  # noqa: PLR0915, PLR0917 - one loop over the frame's pair
     episode, noise = priors.flip_episode, priors.flip_misread
     n_pairs = len(rows)
     evidence = np.zeros(n_pairs)
+    doubt_step = np.zeros(n_pairs)
     ux, uy, uz = up[0], up[1], up[2]
     for u in range(n_pairs):
         r = rows[u]
@@ -160,18 +178,37 @@ def _facing_evidence(  # noqa: PLR0915, PLR0917 - one loop over the frame's pair
                 value = _independent_evidence(flipped, prior_right, prior_wrong)
         else:  # no camera pose: a flipped-looking detection is simply evidence against
             value = (-1.0 if flipped else 1.0) * math.log((1.0 - flip_prior) / flip_prior)
-        wx, wy, wz = _flat3(velocity[r, 0], velocity[r, 1], velocity[r, 2], ux, uy, uz)
-        speed = math.sqrt(wx * wx + wy * wy + wz * wz)
-        along = (wx * fx + wy * fy + wz * fz) / max(speed, 1e-9)
-        if speed > walking_speed:
-            if along > 0:
-                value += walking_evidence
-            elif along < 0:
-                value -= walking_evidence
-            elif math.isnan(along):
-                value = np.nan
+        walk = _walking(velocity[r], (fx, fy, fz), up, walking_speed, walking_evidence)
+        if walk < 0.0 and math.isfinite(value):  # walking backwards by its sides
+            doubt_step[u] = -value
+        value += walk
         evidence[u] = value if math.isfinite(value) else 0.0
-    return evidence
+    return evidence, doubt_step
+
+
+@njit(cache=True, error_model="numpy")
+def _walking(
+    velocity: np.ndarray,
+    front: tuple[float, float, float],
+    up: np.ndarray,
+    walking_speed: float,
+    walking_evidence: float,
+) -> float:
+    """Log-odds a track's walk gives that it faces ``front`` (unit, across ``up``).
+
+    ``walking_evidence`` when its ``velocity`` ``(3,)`` across the up is faster than
+    ``walking_speed`` and along ``front``, minus it when against, else 0 (NaN: unknown front).
+    """
+    wx, wy, wz = _flat3(velocity[0], velocity[1], velocity[2], up[0], up[1], up[2])
+    speed = math.sqrt(wx * wx + wy * wy + wz * wz)
+    along = (wx * front[0] + wy * front[1] + wz * front[2]) / max(speed, 1e-9)
+    if not speed > walking_speed:
+        return 0.0
+    if along > 0:
+        return walking_evidence
+    if along < 0:
+        return -walking_evidence
+    return along  # 0, or NaN
 
 
 @njit(cache=True, error_model="numpy")
@@ -243,7 +280,8 @@ def turn_facing(  # noqa: PLR0917 - the tracks, the frame's pairs, the view, bod
 
     Track ``r = rows[u]`` (hit by ``canonical[u]``) keeps log-odds ``facing[r]`` that its
     sides are right, set at ``facing_ns[r]``: ``facing[r] = facing[r] * exp(-dt /
-    facing_memory) + evidence[u]`` (``dt`` s since then, at least 0). Below
+    facing_memory) + evidence[u]`` (``dt`` s since then, at least 0); its doubt (``DOUBT_LIMIT``)
+    past the limit sets them below the threshold. Below
     ``-facing_threshold`` the track is relabelled with ``body.mirror`` (all parts,
     ``relabel``), its log-odds and held left-right axis negated and its flip states'
     hypotheses exchanged. ``tracks``
@@ -257,13 +295,17 @@ def turn_facing(  # noqa: PLR0917 - the tracks, the frame's pairs, the view, bod
     memory, threshold = priors.facing_memory, priors.facing_threshold
     stamp_ns = view.stamp_ns
     world_up = _update_up(view.up, tracks.positions, rows, body.root, body.neck)
-    evidence = _facing_evidence(tracks, rows, canonical, world_up, view, body, priors)
+    evidence, doubt_step = _facing_evidence(tracks, rows, canonical, world_up, view, body, priors)
     turned = np.zeros(len(rows), dtype=np.bool_)
     for u in range(len(rows)):
         r = rows[u]
         fade = math.exp(-max(stamp_ns - facing_ns[r], 0) * 1e-9 / memory)
         facing[r] = facing[r] * fade + evidence[u]
         facing_ns[r] = stamp_ns
+        step = doubt_step[u]
+        tracks.doubt[r] = max(tracks.doubt[r] + step, 0.0) if step != 0.0 else 0.0
+        if tracks.doubt[r] > DOUBT_LIMIT:
+            facing[r] = min(facing[r], -threshold - 1.0)
         if facing[r] < -threshold:
             relabel(tracks, r, body.mirror)
             for a in range(3):
@@ -272,6 +314,7 @@ def turn_facing(  # noqa: PLR0917 - the tracks, the frame's pairs, the view, bod
             for c in range(flip_state.shape[1]):  # the hypotheses trade places
                 flip_state[r, c, 0], flip_state[r, c, 1] = flip_state[r, c, 1], flip_state[r, c, 0]
             turned[u] = True
+            tracks.doubt[r] = 0.0
     return turned
 
 

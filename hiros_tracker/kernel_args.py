@@ -127,6 +127,8 @@ class TrackFields(NamedTuple):
     record_count: np.ndarray  # (T,) ring length
     facing: np.ndarray  # (T,) log-odds that the track's sides are right
     facing_ns: np.ndarray  # (T,) when ``facing`` was set
+    doubt: np.ndarray  # (T,) the cameras' evidence against the sides while walking backwards
+    # (``facing.DOUBT_LIMIT``)
     sides: np.ndarray  # (T, 3) held left-right axis, m (``labels.hold_axes``; 0: none yet)
     flip_state: np.ndarray  # (T, C, 2) P(SDK flipped) under each facing hypothesis
     flip_ns: np.ndarray  # (T, C) the camera's previous detection of the track

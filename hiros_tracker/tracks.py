@@ -20,7 +20,8 @@ Per track (``J`` joints, ``C`` cameras, ``R`` record slots):
 - ``n_cameras``: how many camera codes the sums span (1 + the highest code seen, at least 1);
 - ``body_ids`` ``(C,)``/``seen`` ``(C,)``: each camera's last body id for the track;
 - counters and stamps (ns): ``hits``, ``confirmed``, ``born_ns``, ``time_ns``, ``last_hit_ns``,
-  ``epoch_ns``, ``facing`` (log-odds that its sides are right) and ``facing_ns``;
+  ``epoch_ns``, ``facing`` (log-odds that its sides are right) and ``facing_ns``, ``doubt``
+  (its cameras' evidence against its sides while it walks backwards, ``facing.DOUBT_LIMIT``);
 - per camera, whether its SDK is in a front/back flip episode for the track: ``flip_state``
   ``(C, 2)`` P(flipped) if the track's sides are right / reversed, at ``flip_ns`` ``(C,)``,
   ``flip_known`` ``(C,)`` once the camera has seen the track (``facing._episode_evidence``);
@@ -50,7 +51,7 @@ LIMB_MEMORY = 300
 
 _FLOAT_FIELDS = (
     "positions", "orientations", "velocities", "velocity", "facing", "sums", "flip_state",
-    "limbs", "limb_count", "sides",
+    "limbs", "limb_count", "sides", "doubt",
 )  # fmt: skip
 _INT_FIELDS = (
     "ids", "born_ns", "time_ns", "last_hit_ns", "epoch_ns", "facing_ns", "hits", "n_cameras",
@@ -112,6 +113,7 @@ class TrackTable:
     limbs: np.ndarray
     limb_count: np.ndarray
     sides: np.ndarray
+    doubt: np.ndarray
 
     @property
     def capacity(self) -> int:

@@ -9,9 +9,6 @@ from hiros_tracker import Tracker, TrackerParams
 MIRROR = np.asarray(AZURE_KINECT.mirror)
 AT = 2.0
 """s into the scene at which the track is mirrored."""
-WITHIN = 1.5
-"""s after which every output must be right again (measured: 1.1 s standing, 1.3 s walking;
-the issue's aim is 1 s, docs/stages-robustness.md, session 15)."""
 
 
 def _mirrored(skeleton, truth) -> bool:
@@ -21,8 +18,14 @@ def _mirrored(skeleton, truth) -> bool:
     return bool(swapped < as_labelled)
 
 
-@pytest.mark.parametrize("speed", [0.0, 0.8])
-def test_a_track_drifted_into_the_mirror_is_turned_back_by_the_cameras(scenes, speed):
+@pytest.mark.parametrize(
+    ("speed", "within"),
+    [
+        (0.0, 1.5),  # standing: the facing log-odds come down (measured 1.2 s; the aim is 1 s)
+        (0.8, 0.75),  # walking backwards by its sides: the doubt turns it (measured 0.5 s)
+    ],
+)
+def test_a_track_drifted_into_the_mirror_is_turned_back_by_the_cameras(scenes, speed, within):
     # Left in the mirror as a drift of its labels leaves it (noisy-sdk, turns at the end of a
     # walk): pose and held axis mirrored, its facing log-odds still those of 2 s of agreeing
     # detections (about +270). Every camera's detections now disagree with it.
@@ -42,4 +45,4 @@ def test_a_track_drifted_into_the_mirror_is_turned_back_by_the_cameras(scenes, s
     wrong = [t for t, mirrored in outputs if mirrored]
     assert wrong, "the mirrored track reached the output"
     assert min(wrong) > mirrored_at - 0.05  # nothing mirrored before
-    assert max(wrong) < mirrored_at + WITHIN
+    assert max(wrong) < mirrored_at + within
