@@ -27,6 +27,11 @@ Whether the errors are independent per joint or coherent along the skeleton
 - joint-parent correlation: per camera axis, the correlation of a core joint's residual (bias
   removed) with that of its nearest core ancestor (shoulder with spine chest, elbow with
   shoulder, ...).
+- vertical scatter: the robust SD of the error along the vertical (the suit's up; the
+  simulator's z) of the foot joints where the reference foot rests (the floor fit's rule),
+  and of the pelvis. The floor is found from resting feet (``hiros_calib.world``), so how
+  quiet they are is what the floor's accuracy depends on: 1.24 cm on the take (its quietest
+  joint; the pelvis 2.3 cm), 4.4 cm on the simulator (docs/world-frame.md).
 
 Figures (``hiros simulate --fit-noise`` prints them; ``SimParams`` defaults use them):
 
@@ -91,6 +96,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from hiros_calib.world import RESTING_SPEED, SPEED_BASELINE
 from hiros_core.errors import RecordingError
 from hiros_core.geometry import kabsch, kabsch_batch
 from hiros_core.layouts import AZURE_KINECT
@@ -203,6 +209,9 @@ class SkeletonErrors:
         bias_rms: ``(3,)`` per axis, the RMS over joints of each joint's mean error.
         joint_error: mean per-joint position error, metres.
         frames: frames the figures come from (over all streams).
+        vertical_scatter: ``(2,)`` robust SD (1.4826 MAD, metres) of the error along the
+            vertical of the foot joints where the reference foot rests, and of the pelvis;
+            each stream's and joint's median removed. NaN without a vertical.
 
     The error figures are over the 17 core joints (``_CORE``) that the SDK and a mocap
     reference define alike; the limb and scale figures over every link.
@@ -219,6 +228,7 @@ class SkeletonErrors:
     bias_rms: np.ndarray
     joint_error: float
     frames: int
+    vertical_scatter: np.ndarray
 
     @property
     def body_limb_cv(self) -> float:
@@ -251,6 +261,10 @@ class SkeletonErrors:
             ("noise std x, y, z (bias removed)", _mm(self.noise_std)),
             ("per-joint bias RMS x, y, z", _mm(self.bias_rms)),
             ("mean per-joint error", f"{self.joint_error * 1000:.1f} mm"),
+            (
+                "vertical scatter, resting foot / pelvis",
+                f"{self.vertical_scatter[0] * 100:.2f} / {self.vertical_scatter[1] * 100:.2f} cm",
+            ),
         ]
 
 
@@ -291,7 +305,9 @@ def _limb_figures(observed: np.ndarray) -> tuple[np.ndarray, ...]:
 
 
 def skeleton_errors(
-    streams: Sequence[tuple[np.ndarray, np.ndarray, np.ndarray]], interval: float
+    streams: Sequence[tuple[np.ndarray, np.ndarray, np.ndarray]],
+    interval: float,
+    ups: Sequence[np.ndarray] | None = None,
 ) -> SkeletonErrors:
     """The ``SkeletonErrors`` figures pooled over streams (one per camera and person).
 
@@ -300,13 +316,15 @@ def skeleton_errors(
             and true joints in the same frame (NaN where not reported) and ``(F,)`` True where
             a frame follows the previous one by one regular interval.
         interval: the frame interval, seconds.
+        ups: per stream, ``(3,)`` the vertical in its frame (for ``vertical_scatter``).
 
     """
     cv2_sum = np.zeros(AZURE_KINECT.n_joints)
     unscaled2_sum = np.zeros(AZURE_KINECT.n_joints)
     cv_count = np.zeros(AZURE_KINECT.n_joints)
     scales, follows, noises, biases, errors = [], [], [], [], []
-    for observed, reference, consecutive in streams:
+    vertical: list[list[np.ndarray]] = [[], []]
+    for k, (observed, reference, consecutive) in enumerate(streams):
         counts, cv, unscaled, scale = _limb_figures(observed)
         if counts.max(initial=0) < 10:
             continue
@@ -325,6 +343,10 @@ def skeleton_errors(
         noises.append(residual - bias)
         biases.append(bias)
         errors.append(np.linalg.norm(residual, axis=-1).ravel())
+        if ups is not None:
+            feet, pelvis = _vertical_errors(observed, reference, consecutive, interval, ups[k])
+            vertical[0].extend(feet)
+            vertical[1].extend(pelvis)
     if not noises:
         msg = "no stream has ten frames with the joints to measure"
         raise RecordingError(msg)
@@ -352,7 +374,50 @@ def skeleton_errors(
         bias_rms=np.sqrt(np.nanmean(np.concatenate(biases) ** 2, axis=0)),
         joint_error=float(np.nanmean(np.concatenate(errors))),
         frames=int(sum(len(s) for s in scales)),
+        vertical_scatter=np.array([_robust_sd(values) for values in vertical]),
     )
+
+
+def _robust_sd(values: list[np.ndarray]) -> float:
+    """1.4826 times the median absolute value of the pooled (each already centred) values."""
+    pooled = np.concatenate(values) if values else np.zeros(0)
+    return float(1.4826 * np.median(np.abs(pooled))) if len(pooled) else float("nan")
+
+
+def _vertical_errors(
+    observed: np.ndarray,
+    reference: np.ndarray,
+    consecutive: np.ndarray,
+    interval: float,
+    up: np.ndarray,
+) -> tuple[list[np.ndarray], list[np.ndarray]]:
+    """Vertical errors, each joint's median removed: the resting feet's, then the pelvis's.
+
+    A foot rests where its reference joint moves slower than ``RESTING_SPEED`` over
+    ``SPEED_BASELINE`` (the floor fit's rule), over frames that follow each other regularly.
+    """
+    half = max(1, round(0.5 * SPEED_BASELINE / interval))
+    error = (observed - reference) @ up  # (F, 32)
+    broken = np.concatenate([[0], np.cumsum(~np.asarray(consecutive, dtype=bool)[1:])])
+    feet, pelvis = [], []
+    if len(error) > 2 * half:
+        regular = broken[2 * half :] == broken[: -2 * half]
+        for joint in (AZURE_KINECT.index("FootLeft"), AZURE_KINECT.index("FootRight")):
+            moved = np.linalg.norm(
+                reference[2 * half :, joint] - reference[: -2 * half, joint], axis=-1
+            )
+            rests = np.zeros(len(error), dtype=bool)
+            with np.errstate(invalid="ignore"):
+                rests[half:-half] = regular & (moved / (2 * half * interval) < RESTING_SPEED)
+            values = error[rests, joint]
+            values = values[np.isfinite(values)]
+            if len(values) >= 10:
+                feet.append(values - np.median(values))
+    values = error[:, AZURE_KINECT.index("Pelvis")]
+    values = values[np.isfinite(values)]
+    if len(values) >= 10:
+        pelvis.append(values - np.median(values))
+    return feet, pelvis
 
 
 @dataclass
@@ -538,7 +603,8 @@ def fit_noise(bvh: str | Path = DEFAULT_BVH, csv: str | Path = DEFAULT_CSV) -> N
     per_joint = np.sqrt(np.mean(np.sum(residual**2, axis=2), axis=0))
     follows = np.zeros(len(index), dtype=bool)
     follows[consecutive + 1] = True
-    skeleton = skeleton_errors([(observed[ok], moved[ok], follows)], interval)
+    up = alignment.rotation[:, 2]  # the suit's vertical in the camera frame
+    skeleton = skeleton_errors([(observed[ok], moved[ok], follows)], interval, [up])
     return NoiseFit(
         alignment=alignment,
         bias_rms=np.sqrt(np.mean(bias**2, axis=0)),
@@ -595,7 +661,7 @@ def simulated_errors(
         drop_rate=0.0,
     )
     result = simulate(params)
-    streams = []
+    streams, ups = [], []
     for name, groups in result.camera_groups.items():
         cam = result.calibration.camera(name)
         stamps = np.array([group.stamp_ns for group in groups], dtype=np.int64)
@@ -616,4 +682,5 @@ def simulated_errors(
             observed[~(facing > 0.5 * np.linalg.norm(to_camera, axis=-1))] = np.nan
         follows = np.concatenate([[False], np.diff(stamps) < 1.5e9 / params.rate])
         streams.extend((observed[p], reference[p], follows) for p in range(world.shape[0]))
-    return skeleton_errors(streams, 1.0 / params.rate)
+        ups.extend([cam.extrinsics.inverse().rotate(np.array([0.0, 0.0, 1.0]))] * world.shape[0])
+    return skeleton_errors(streams, 1.0 / params.rate, ups)

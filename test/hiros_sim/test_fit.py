@@ -2,11 +2,13 @@ import numpy as np
 import pytest
 
 from hiros_core.errors import RecordingError
+from hiros_core.layouts import AZURE_KINECT
 from hiros_eval.body import limb_length_cv
 from hiros_sim import SimParams
 from hiros_sim.fit import DEFAULT_CSV, fit_noise, read_kinect_csv, simulated_errors, skeleton_errors
 
 THUMBS = np.array([10, 17])
+FEET = [AZURE_KINECT.index("FootLeft"), AZURE_KINECT.index("FootRight")]
 
 
 @pytest.mark.slow
@@ -33,6 +35,10 @@ def test_noise_fit_is_finite_and_plausible():
     assert np.nanmedian(skeleton.unscaled_limb_cv) < 0.001
     assert np.all((skeleton.parent_correlation > 0.4) & (skeleton.parent_correlation < 0.9))
     assert 0.1 < skeleton.scale_correlation_time < 0.4
+    # the resting foot is the SDK's quietest joint vertically: 1.24 cm against the pelvis's 2.3
+    foot, pelvis = skeleton.vertical_scatter
+    assert 0.008 < foot < 0.016
+    assert foot < 0.7 * pelvis
 
 
 def test_kinect_csv_reader():
@@ -106,3 +112,25 @@ def test_skeleton_errors_of_a_rigid_scaled_stream():
     errors = skeleton_errors([(independent, reference, follows)], 1 / 30)
     assert np.all(np.abs(errors.parent_correlation) < 0.1)
     assert np.nanmedian(errors.unscaled_limb_cv) > 0.05
+
+
+def test_vertical_scatter_of_resting_feet_and_pelvis():
+    """Robust SD along the given vertical: the feet only where the reference foot rests."""
+    rng = np.random.default_rng(5)
+    frames = 600
+    reference = np.tile(rng.normal(0.0, 0.3, (1, 32, 3)), (frames, 1, 1))
+    walking = np.arange(frames) >= 300  # the feet move at 0.6 m/s over the second half
+    for foot in FEET:
+        reference[:, foot, 0] += np.where(walking, 0.02 * np.arange(frames), 0.0)
+    up = np.array([0.0, -1.0, 0.0])  # a camera's y axis points down
+    observed = reference + rng.normal(0.0, 0.001, reference.shape)
+    observed[:, FEET, 1] += np.where(walking, 0.1, 0.01)[:, None] * rng.standard_normal((frames, 2))
+    observed[:, 0, 1] += 0.03 * rng.standard_normal(frames)
+    errors = skeleton_errors([(observed, reference, np.ones(frames, bool))], 1 / 30, [up])
+    foot, pelvis = errors.vertical_scatter
+    assert foot == pytest.approx(0.01, rel=0.15)  # the noisy walking frames are left out
+    assert pelvis == pytest.approx(0.03, rel=0.15)
+    # without a vertical the figure is not measured
+    assert np.isnan(
+        skeleton_errors([(observed, reference, np.ones(frames, bool))], 1 / 30).vertical_scatter
+    ).all()
