@@ -357,6 +357,14 @@ def _matched_by_source(
     }
 
 
+def _mirror_of(groups: Sequence[SkeletonGroup]) -> np.ndarray:
+    """The left/right permutation of the groups' layout, from their first skeleton anywhere.
+
+    Not from the first group's: a camera's first frames may see no one.
+    """
+    return next(s.layout.mirror for group in groups for s in group.skeletons)
+
+
 def _mirrored(estimate: np.ndarray, target: np.ndarray, mirror: np.ndarray) -> np.ndarray:
     """``(N,)`` whether each skeleton with left and right swapped is closer to its truth."""
     with np.errstate(invalid="ignore"):
@@ -383,7 +391,7 @@ def output_mpjpe(
     for source, (labelled, target) in _matched_by_source(groups, truth, threshold).items():
         estimate = labelled
         if oracle_sides:
-            mirror = groups[0].skeletons[0].layout.mirror
+            mirror = _mirror_of(groups)
             swap = _mirrored(labelled, target, mirror)
             estimate = np.where(swap[:, None, None], labelled[:, mirror], labelled)
         out[source] = mpjpe(estimate, target)[0]
@@ -400,7 +408,7 @@ def mirrored_share(
     """
     counts = np.zeros(2)
     for estimate, target in _matched_by_source(groups, truth, threshold).values():
-        mirror = groups[0].skeletons[0].layout.mirror
+        mirror = _mirror_of(groups)
         counts += (_mirrored(estimate, target, mirror).sum(), len(estimate))
     return float(counts[0] / counts[1]) if counts[1] else float("nan")
 
