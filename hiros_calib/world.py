@@ -44,6 +44,7 @@ __all__ = [
     "fit_floor",
     "place_in_world",
     "resting_feet",
+    "speed_over_baseline",
 ]
 
 FOOT_JOINT_HEIGHT = {"Foot": 0.11, "Ankle": 0.18}
@@ -156,14 +157,14 @@ def resting_feet(track: BodyTrack) -> tuple[np.ndarray, float] | None:
         joints = _joint(track, (f"{kind}Left", f"{kind}Right"))
         if len(joints) == 2 and len(track.times) >= 3:
             positions = track.positions[:, joints]  # (T, 2, 3)
-            resting = (_speed(positions, track.times) < RESTING_SPEED) & (
+            resting = (speed_over_baseline(positions, track.times) < RESTING_SPEED) & (
                 track.weights[:, joints] > 0
             )
             return positions[resting], height
     return None
 
 
-def _speed(positions: np.ndarray, times: np.ndarray) -> np.ndarray:
+def speed_over_baseline(positions: np.ndarray, times: np.ndarray) -> np.ndarray:
     """``(T, K)`` speed (m/s) over ``SPEED_BASELINE``, NaN at the ends.
 
     Frame to frame, the SDKs' jitter alone would make a resting foot seem to move at

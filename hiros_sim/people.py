@@ -44,8 +44,6 @@ take: 11.0 cm and 17.6 cm above the suit's floor (docs/world-frame.md, session 1
 mocap's own foot joints sit elsewhere (the CMU toe 6-7 cm, the Xsens toe 1.7 cm, the
 Bandai-Namco toe 4-4.5 cm), and the SDK's body model raises a noisy foot by a few millimetres
 to centimetres more."""
-_RESTING_SPEED, _SPEED_BASELINE = 0.15, 0.4
-"""A joint slower than this (m/s, over this many seconds) rests: the floor fit's rule."""
 _ROUNDS = 4
 """Rounds in which a moved foot joint's resting frames and height settle."""
 _STILL = 0.5
@@ -163,12 +161,17 @@ def _as_the_sdk_defines(positions: np.ndarray, rate: float) -> np.ndarray:
 
 
 def _resting(joint: np.ndarray, rate: float) -> np.ndarray:
-    """``(T,)`` where a ``(T, 3)`` joint rests; its lowest 10 % of frames if it never does."""
-    half = max(1, round(0.5 * _SPEED_BASELINE * rate))
-    resting = np.zeros(len(joint), dtype=bool)
-    if len(joint) > 2 * half:
-        speed = np.linalg.norm(joint[2 * half :] - joint[: -2 * half], axis=1) * rate / (2 * half)
-        resting[half:-half] = speed < _RESTING_SPEED
+    """``(T,)`` where a ``(T, 3)`` joint rests; its lowest 10 % of frames if it never does.
+
+    Rests by the floor fit's rule (``hiros_calib.world``), so the simulated SDK puts its feet
+    at ``SDK_FOOT_HEIGHTS`` where the floor fit will look for them.
+    """
+    # imported here: hiros_calib takes a quarter of a second to import, and every ``hiros``
+    # command imports this package to list the simulator's presets in its help
+    from hiros_calib.world import RESTING_SPEED, speed_over_baseline
+
+    speed = speed_over_baseline(joint[:, None], np.arange(len(joint)) / rate)[:, 0]
+    resting = speed < RESTING_SPEED  # NaN (the ends) never rests
     if not resting.any():
         resting = joint[:, 2] <= np.percentile(joint[:, 2], 10)
     return resting
