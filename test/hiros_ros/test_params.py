@@ -87,15 +87,21 @@ def test_command_line_overrides_and_no_file_is_read(make_node, tmp_path, monkeyp
     assert declare_params(node, DemoParams).params.cameras == ["k01", "k02"]
 
 
-def test_a_removed_parameter_given_is_ignored_with_a_warning(make_node, monkeypatch) -> None:
-    node = make_node("-p", "compiled:=true", "-p", "rate:=20.0")
-    logged = []
+def _keep_warnings(node: rclpy.node.Node, monkeypatch: pytest.MonkeyPatch) -> list[str]:
+    """The list that the node's logger's warnings go to from now on."""
+    logged: list[str] = []
 
     class Logger:  # the node's logger, keeping what it is told
         def warning(self, message: str) -> None:
             logged.append(message)
 
     monkeypatch.setattr(node, "get_logger", Logger)
+    return logged
+
+
+def test_a_removed_parameter_given_is_ignored_with_a_warning(make_node, monkeypatch) -> None:
+    node = make_node("-p", "compiled:=true", "-p", "rate:=20.0")
+    logged = _keep_warnings(node, monkeypatch)
     assert declare_params(node, DemoParams).params.rate == 20.0
     assert not node.has_parameter("compiled")
     assert len(logged) == 1
@@ -106,13 +112,7 @@ def test_a_calib_setting_that_became_a_constant_is_ignored_with_a_warning(
     make_node, monkeypatch
 ) -> None:
     node = make_node("-p", "grid_step:=0.02", "-p", "rate:=20.0")
-    logged = []
-
-    class Logger:  # the node's logger, keeping what it is told
-        def warning(self, message: str) -> None:
-            logged.append(message)
-
-    monkeypatch.setattr(node, "get_logger", Logger)
+    logged = _keep_warnings(node, monkeypatch)
     assert declare_params(node, DemoParams).params.rate == 20.0
     assert not node.has_parameter("grid_step")
     assert logged == [
@@ -125,13 +125,7 @@ def test_a_bridge_setting_that_became_a_constant_is_ignored_with_a_warning(
     make_node, monkeypatch
 ) -> None:
     node = make_node("-p", "reset_after_backwards:=2.0", "-p", "rate:=20.0")
-    logged = []
-
-    class Logger:  # the node's logger, keeping what it is told
-        def warning(self, message: str) -> None:
-            logged.append(message)
-
-    monkeypatch.setattr(node, "get_logger", Logger)
+    logged = _keep_warnings(node, monkeypatch)
     assert declare_params(node, DemoParams).params.rate == 20.0
     assert not node.has_parameter("reset_after_backwards")
     assert len(logged) == 1
