@@ -174,7 +174,7 @@ def _baseline_poses(calibrator: Calibrator, estimate: Calibration) -> Calibratio
     for pair in result.pose_pairs if result is not None else ():
         if pair.camera_a != estimate.reference or pair.reported is None:
             continue
-        pose = baseline_pair_pose(pair.reported, calibrator.params)
+        pose = baseline_pair_pose(pair.reported)
         if pose is None:
             continue
         placed = reference.extrinsics @ pose

@@ -42,6 +42,9 @@ from hiros_core.model import SkeletonGroup
 __all__ = ["CalibrationResult", "Calibrator", "CalibratorParams"]
 
 WORLDS = ("floor", "camera")
+
+MIN_TRACK_FRAMES = 10
+"""Body tracks with fewer frames are left out (a glimpse pins neither a lag nor a pose)."""
 """The world frames a calibration can be given in (``CalibratorParams.world``)."""
 
 Progress = Callable[[str, float], None]
@@ -66,8 +69,6 @@ class CalibratorParams(SyncParams, ExtrinsicsParams):
     reference camera's view); ``camera``: the reference camera's own frame."""
     max_gap: float = 0.25
     """A body id unseen for longer than this (s) starts a new track."""
-    min_track_frames: int = 10
-    """Tracks with fewer frames are ignored."""
     min_confidence: float = 0.5
     """Joints below this fraction of the driver's confidence scale are left out."""
     require_all: bool = True
@@ -177,7 +178,7 @@ class Calibrator:
                 groups[camera],
                 camera,
                 max_gap=params.max_gap,
-                min_frames=params.min_track_frames,
+                min_frames=MIN_TRACK_FRAMES,
                 min_confidence=params.min_confidence,
                 drops=self.drops,
             )
@@ -191,7 +192,7 @@ class Calibrator:
         self._check(refused, "clock")
         report("camera poses", 0.6)
         pose_pairs = self._pose_pairs(cameras, tracks, clocks)
-        poses = solve_poses([c for c in cameras if clocks[c].ok], reference, pose_pairs, params)
+        poses = solve_poses([c for c in cameras if clocks[c].ok], reference, pose_pairs)
         refused.update({c: pose.reason for c, pose in poses.items() if not pose.ok})
         self._check(refused, "pose")
         calibration = _to_calibration(reference, params.world_frame, groups, clocks, poses)
@@ -254,11 +255,11 @@ class Calibrator:
                 ]
                 usable = [c for c in found if c is not None]
                 joined = Correspondences.concatenate(usable) if usable else None
-                pose = estimate_pair_pose(joined, params, camera_a=a, camera_b=b)
+                pose = estimate_pair_pose(joined, camera_a=a, camera_b=b)
                 pose.quality["bodies_associated"] = len(matches)
                 pose.body_pairs = [(i, j) for i, j, _ in matches]
                 pose.reported = joined
-                spread = split_half_spread(joined, params) if pose.ok else None
+                spread = split_half_spread(joined) if pose.ok else None
                 if spread is not None:
                     pose.quality["split_half_deg"] = round(spread[0], 3)
                     pose.quality["split_half_cm"] = round(100 * spread[1], 2)

@@ -31,11 +31,12 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 
 import numpy as np
 
 from hiros_calib.extrinsics import (
+    QUICK_SAMPLING,
     Correspondences,
     ExtrinsicsParams,
     associate,
@@ -67,16 +68,6 @@ class LagFit:
     :func:`compare_fits`); inf when no person could be matched at this lag."""
 
 
-def _light(params: ExtrinsicsParams) -> ExtrinsicsParams:
-    """The pose parameters of a quick check: fewer RANSAC samples and frames."""
-    return replace(
-        params,
-        ransac_iterations=min(params.ransac_iterations, 120),
-        frames_per_minute=min(params.frames_per_minute, 300.0),
-        max_frames=min(params.max_frames, 1500),
-    )
-
-
 def fit_at_lag(
     tracks_a: list[BodyTrack],
     tracks_b: list[BodyTrack],
@@ -105,7 +96,7 @@ def fit_at_lag(
         return fit
     residual = np.full(joined.n_frames, np.nan)
     for held in (fold, ~fold):
-        pose = estimate_pair_pose(joined.take(np.flatnonzero(~held)), _light(params))
+        pose = estimate_pair_pose(joined.take(np.flatnonzero(~held)), sampling=QUICK_SAMPLING)
         if not pose.ok:
             return fit
         residual[held] = _frame_residuals(joined.take(np.flatnonzero(held)), pose.transform)
@@ -119,9 +110,7 @@ def fit_at_lag(
     return fit
 
 
-def split_half_spread(
-    correspondences: Correspondences | None, params: ExtrinsicsParams
-) -> tuple[float, float] | None:
+def split_half_spread(correspondences: Correspondences | None) -> tuple[float, float] | None:
     """How far apart (deg, m) the poses fitted to two halves of a pair's frames lie.
 
     The halves are alternating blocks of time, so each sees the whole recording's variety.
@@ -137,7 +126,9 @@ def split_half_spread(
     for half in (fold, ~fold):
         if not half.any():
             return None
-        pose = estimate_pair_pose(correspondences.take(np.flatnonzero(half)), _light(params))
+        pose = estimate_pair_pose(
+            correspondences.take(np.flatnonzero(half)), sampling=QUICK_SAMPLING
+        )
         if not pose.ok:
             return None
         poses.append(pose.transform)

@@ -19,8 +19,8 @@
 - an estimate that disagrees with the current one is not thrown away for good: it replaces
   the current one when it rests on more of the same frames (a recalibration from a few
   seconds can be wrong, e.g. turned 180° for cameras facing each other), or when
-  ``replace_after`` estimates in a row disagree with the current one and agree with each
-  other and the newest fits its frames clearly better (``replace_margin``): the current one
+  ``REPLACE_AFTER`` estimates in a row disagree with the current one and agree with each
+  other and the newest fits its frames clearly better (``REPLACE_MARGIN``): the current one
   is wrong, or the camera changed in a way the check missed.
 
 All times are nanoseconds on the receiver's clock (``arrival_ns``) except the frames' own
@@ -59,6 +59,8 @@ __all__ = [
     "EVENTS_KEPT",
     "MAX_FRAME_RATE",
     "MOVED_RATIO",
+    "REPLACE_AFTER",
+    "REPLACE_MARGIN",
     "RESTART_AFTER_BACKWARDS",
     "LiveCalibrator",
     "LiveCalibratorParams",
@@ -94,6 +96,15 @@ MOVED_RATIO: float = 2.5
 """A pair residual this many times its usual value flags a change, if it also exceeds
 ``moved_floor``."""
 
+REPLACE_AFTER: int = 2
+"""Estimates in a row that disagree with the current one (and agree with each other) before
+the newest replaces it ..."""
+
+REPLACE_MARGIN: float = 0.1
+"""... if it also fits the frames it came from this much better (relative drop of its
+camera's median joint distance): data that cannot pin a pose down (one person walking on the
+spot) would otherwise let a consistent but wrong estimate replace a right one."""
+
 RESTART_AFTER_BACKWARDS: float = 1.0
 """A frame stamped this many seconds before its camera's newest one starts the camera's
 buffer again (its clock restarted, or the newest frame was a glitch); a smaller step back
@@ -126,13 +137,6 @@ class LiveCalibratorParams(CalibratorParams):
     simulator)."""
     recalibrate_after: float = 5.0
     """Seconds of frames after a change before the camera is recalibrated."""
-    replace_after: int = 2
-    """Estimates in a row that disagree with the current one (and agree with each other)
-    before the newest replaces it ..."""
-    replace_margin: float = 0.1
-    """... if it also fits the frames it came from this much better (relative drop of its
-    camera's median joint distance): data that cannot pin a pose down (one person walking on
-    the spot) would otherwise let a consistent but wrong estimate replace a right one."""
     silent_after: float = 5.0
     """Seconds without a frame from a camera before it is reported silent (an event, and in
     :meth:`LiveCalibrator.snapshot`); its calibration is kept, and its return is reported."""
@@ -430,7 +434,7 @@ class LiveCalibrator(Accounted):
         who = (
             "an estimate on more of the same frames"
             if grown
-            else f"{self.params.replace_after} estimates in a row"
+            else f"{REPLACE_AFTER} estimates in a row"
         )
         clock, angle, distance = _difference(old, new)
         self._event(
@@ -447,7 +451,7 @@ class LiveCalibrator(Accounted):
         """Why ``new`` should replace the camera's pose, or "" if it should not.
 
         It should when its camera's pairs fit ``tracks`` (of the frames it came from) clearly
-        better than with the current pose: ``replace_margin`` lower median joint distance.
+        better than with the current pose: ``REPLACE_MARGIN`` lower median joint distance.
         """
         trial = dataclasses.replace(
             self.calibration, cameras={**self.calibration.cameras, camera: new}
@@ -459,7 +463,7 @@ class LiveCalibrator(Accounted):
             return ""
         old_fit = float(np.median([before[p][0] for p in pairs]))
         new_fit = float(np.median([after[p][0] for p in pairs]))
-        if new_fit >= (1.0 - self.params.replace_margin) * old_fit:
+        if new_fit >= (1.0 - REPLACE_MARGIN) * old_fit:
             return ""
         return (
             f" and fit their frames better (median joint distance {100 * old_fit:.1f} -> "
@@ -467,12 +471,12 @@ class LiveCalibrator(Accounted):
         )
 
     def _outvoted(self, camera: str, new: CameraCalibration) -> bool:
-        """Whether ``new`` makes ``replace_after`` disagreeing estimates that agree in a row."""
+        """Whether ``new`` makes ``REPLACE_AFTER`` disagreeing estimates that agree in a row."""
         rivals = self._rivals.setdefault(camera, [])
         if rivals and not _agrees(rivals[-1], new):
             rivals.clear()
         rivals.append(new)
-        return len(rivals) >= self.params.replace_after
+        return len(rivals) >= REPLACE_AFTER
 
     def check(self, now_ns: int) -> bool:
         """Look for moved cameras or jumped clocks in the newest frames; True if one is found."""

@@ -48,8 +48,6 @@ LIVE = (
     "moved_floor",
     "moved_shift",
     "recalibrate_after",
-    "replace_after",
-    "replace_margin",
     "silent_after",
     "save_file",
     "publish_tf",

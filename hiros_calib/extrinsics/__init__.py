@@ -29,25 +29,29 @@ What limits the accuracy is the data, not a bias of these steps: the SDKs' joint
 larger error on bodies seen from the side. The experiments behind that, and what was tried
 without gain, are in ``docs/pose-accuracy.md``.
 
-The modules: :mod:`.params` (``ExtrinsicsParams``), :mod:`.correspondences` (steps 1-2),
-:mod:`.pair_pose` (3-5 for one camera pair), :mod:`.robust` (the robust solve every
-refinement runs), :mod:`.joint` (all cameras at once) and :mod:`.halves` (the two halves of
-time a pose's check solves on, and the distance between two poses).
+The modules: :mod:`.params` (``ExtrinsicsParams``, the method's constants and ``Sampling``),
+:mod:`.correspondences` (steps 1-2), :mod:`.pair_pose` (3-5 for one camera pair),
+:mod:`.robust` (the robust solve every refinement runs), :mod:`.joint` (all cameras at
+once) and :mod:`.halves` (the two halves of time a pose's check solves on, and the distance
+between two poses).
 """
 
 from hiros_calib.extrinsics.correspondences import Correspondences, associate, pair_correspondences
 from hiros_calib.extrinsics.halves import SPLIT_BLOCK, relative_error, second_half
 from hiros_calib.extrinsics.joint import CameraPose, solve_poses
 from hiros_calib.extrinsics.pair_pose import PairPose, baseline_pair_pose, estimate_pair_pose
-from hiros_calib.extrinsics.params import ExtrinsicsParams
+from hiros_calib.extrinsics.params import FULL_SAMPLING, QUICK_SAMPLING, ExtrinsicsParams, Sampling
 from hiros_core.geometry import kabsch
 
 __all__ = [
+    "FULL_SAMPLING",
+    "QUICK_SAMPLING",
     "SPLIT_BLOCK",
     "CameraPose",
     "Correspondences",
     "ExtrinsicsParams",
     "PairPose",
+    "Sampling",
     "associate",
     "baseline_pair_pose",
     "estimate_pair_pose",

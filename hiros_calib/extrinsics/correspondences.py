@@ -17,6 +17,8 @@ import numpy as np
 from hiros_calib.extrinsics.params import (
     ASSOCIATION_FRAMES,
     MAX_INTERPOLATION_GAP,
+    MAX_SIGNATURE_MISMATCH,
+    MIN_COMMON_TIME,
     ExtrinsicsParams,
 )
 from hiros_calib.signature import pose_signature, select_joints
@@ -155,7 +157,7 @@ def associate(
         for j, tb in enumerate(tracks_b):
             t_b = np.asarray(clock_b.from_reference(clock_a.to_reference(ta.times)))
             common = np.flatnonzero((t_b >= tb.start) & (t_b <= tb.end))
-            if len(common) < 10 or t_b[common[-1]] - t_b[common[0]] < params.min_common_time:
+            if len(common) < 10 or t_b[common[-1]] - t_b[common[0]] < MIN_COMMON_TIME:
                 continue
             start, end = float(t_b[common[0]]), float(t_b[common[-1]])
             # a median over a few hundred instants tells people apart as well as all of them
@@ -170,7 +172,7 @@ def associate(
             if len(per_frame) < 10:
                 continue
             mismatch = float(np.median(per_frame))
-            if mismatch <= params.max_signature_mismatch:
+            if mismatch <= MAX_SIGNATURE_MISMATCH:
                 scored.append((mismatch, i, j, start, end))
     scored.sort()
     taken_a: dict[int, list[tuple[float, float]]] = {}

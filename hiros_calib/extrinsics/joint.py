@@ -12,12 +12,12 @@ from hiros_calib.extrinsics.halves import relative_error, second_half
 from hiros_calib.extrinsics.pair_pose import PairPose
 from hiros_calib.extrinsics.params import (
     INLIER_SIGMAS,
+    INLIER_THRESHOLD,
     JOINT_OFFSET_ROUNDS,
     LOSS,
     MAX_CORRESPONDENCES,
     MIN_CORRESPONDENCES,
     OFFSET_SHRINKAGE,
-    ExtrinsicsParams,
 )
 from hiros_calib.extrinsics.robust import Terms, flatten_pairs, loss_weights, robust_solve
 from hiros_core.geometry import RigidTransform
@@ -123,7 +123,6 @@ def solve_poses(
     cameras: list[str],
     reference: str,
     pairs: list[PairPose],
-    params: ExtrinsicsParams,
 ) -> dict[str, CameraPose]:
     """All camera poses at once from every pair's joint correspondences.
 
@@ -149,7 +148,7 @@ def solve_poses(
             )
     unknown = [c for c in cameras if c in initial and c != reference]
     blocks = [
-        _block(p, params)
+        _block(p)
         for p in pairs
         if p.ok and p.correspondences and p.camera_a in initial and p.camera_b in initial
     ]
@@ -163,11 +162,11 @@ def solve_poses(
             poses = robust_solve(
                 poses, unknown, [b.terms() for b in blocks], loss=LOSS, scale=scale
             )
-    spreads = _split_half_spreads(poses, unknown, blocks, scale, params)
+    spreads = _split_half_spreads(poses, unknown, blocks, scale)
     for camera, transform in poses.items():
         pose = out[camera]
         pose.status, pose.transform = "ok", transform
-        pose.quality = _pose_quality(camera, blocks, poses, params)
+        pose.quality = _pose_quality(camera, blocks, poses)
         if camera in spreads:
             pose.quality["pose_split_deg"] = round(spreads[camera][0], 3)
             pose.quality["pose_split_cm"] = round(100 * spreads[camera][1], 2)
@@ -179,7 +178,6 @@ def _split_half_spreads(
     unknown: list[str],
     blocks: list[_Block],
     scale: float,
-    params: ExtrinsicsParams,
 ) -> dict[str, tuple[float, float]]:
     """How far apart (deg, m) each camera's pose lies when solved on two halves of the data.
 
@@ -212,7 +210,7 @@ def _split_half_spreads(
     }
 
 
-def _block(pair: PairPose, params: ExtrinsicsParams) -> _Block:
+def _block(pair: PairPose) -> _Block:
     c = pair.correspondences
     assert c is not None
     points_a, points_b, w, joint, frame = flatten_pairs(c.points_a, c.points_b, c.weights)
@@ -236,7 +234,6 @@ def _pose_quality(
     camera: str,
     blocks: list[_Block],
     poses: dict[str, RigidTransform],
-    params: ExtrinsicsParams,
 ) -> dict[str, Any]:
     """Residual figures of one camera over the pairs it belongs to, per joint too."""
     mine = [b for b in blocks if camera in (b.pair.camera_a, b.pair.camera_b)]
@@ -247,7 +244,7 @@ def _pose_quality(
     joint = np.concatenate([b.joint for b in mine])
     offsets = np.concatenate([np.linalg.norm(b.offsets, axis=1) for b in mine])
     scale = float(np.median(residual)) / 1.54
-    inliers = residual < min(params.inlier_threshold, INLIER_SIGMAS * scale)
+    inliers = residual < min(INLIER_THRESHOLD, INLIER_SIGMAS * scale)
     rms = np.sqrt(np.bincount(joint[inliers], residual[inliers] ** 2, len(names))
                   / np.maximum(np.bincount(joint[inliers], None, len(names)), 1))  # fmt: skip
     return {

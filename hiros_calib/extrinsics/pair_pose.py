@@ -20,13 +20,15 @@ from scipy.spatial.transform import Rotation
 from hiros_calib.extrinsics.correspondences import Correspondences, subsample
 from hiros_calib.extrinsics.params import (
     FRAME_OUTLIER_RATIO,
+    FULL_SAMPLING,
     INLIER_SIGMAS,
+    INLIER_THRESHOLD,
     LOSS,
     MAX_CORRESPONDENCES,
     MIN_CORRESPONDENCES,
     RANSAC_CHECKS,
     SEED,
-    ExtrinsicsParams,
+    Sampling,
 )
 from hiros_calib.extrinsics.robust import (
     Terms,
@@ -95,12 +97,12 @@ def _ransac(
     weights: np.ndarray,
     groups: np.ndarray,
     *,
-    params: ExtrinsicsParams,
+    iterations: int,
     rng: np.random.Generator,
 ) -> tuple[RigidTransform, np.ndarray]:
     """Kabsch inside RANSAC with minimal samples across body parts; (pose, inlier mask)."""
     n = len(points_a)
-    h = params.ransac_iterations
+    h = iterations
     by_part = [np.flatnonzero(groups == g) for g in range(3)]
     by_part = [idx for idx in by_part if len(idx)]
     if len(by_part) >= 3:
@@ -116,23 +118,21 @@ def _ransac(
     check = rng.choice(n, size=min(n, RANSAC_CHECKS), replace=False)
     moved = np.einsum("hij,nj->hni", rotation, points_b[check]) + translation[:, None]
     residual = np.linalg.norm(moved - points_a[check][None], axis=2)
-    score = ((residual < params.inlier_threshold) * weights[check][None]).sum(axis=1)
+    score = ((residual < INLIER_THRESHOLD) * weights[check][None]).sum(axis=1)
     score[area < 0.01] = -1.0
     best = int(np.argmax(score))
     pose = RigidTransform(Rotation.from_matrix(rotation[best]), translation[best])
     inliers = np.zeros(n, dtype=bool)
     for _ in range(3):
         residual = np.linalg.norm(pose.apply(points_b) - points_a, axis=1)
-        inliers = residual < params.inlier_threshold
+        inliers = residual < INLIER_THRESHOLD
         if inliers.sum() < 3:
             break
         pose = kabsch(points_a[inliers], points_b[inliers], weights[inliers])
     return pose, inliers
 
 
-def baseline_pair_pose(
-    correspondences: Correspondences, params: ExtrinsicsParams | None = None
-) -> RigidTransform | None:
+def baseline_pair_pose(correspondences: Correspondences) -> RigidTransform | None:
     """Camera b's pose in a's frame by Eichler et al. (2022) alone, as a baseline.
 
     Kabsch inside RANSAC, minimal samples across body parts, on every joint pair as the
@@ -141,13 +141,15 @@ def baseline_pair_pose(
     from the residuals, no robust refinement, no joint offsets (and, used pair by pair, no
     joint solve over all cameras). None when too few pairs agree.
     """
-    params = params or ExtrinsicsParams()
     c = correspondences
     points_a, points_b, weights, joint, _ = flatten_pairs(c.points_a, c.points_b, c.weights)
     if len(points_a) < MIN_CORRESPONDENCES:
         return None
     rng = np.random.default_rng(SEED)
-    pose, inliers = _ransac(points_a, points_b, weights, c.groups[joint], params=params, rng=rng)
+    iterations = FULL_SAMPLING.ransac_iterations
+    pose, inliers = _ransac(
+        points_a, points_b, weights, c.groups[joint], iterations=iterations, rng=rng
+    )
     return pose if inliers.sum() >= MIN_CORRESPONDENCES else None
 
 
@@ -179,12 +181,11 @@ def _choose_view(
     return points_a, points_b, weights, choice
 
 
-def _frame_budget(c: Correspondences, params: ExtrinsicsParams) -> int:
+def _frame_budget(c: Correspondences, sampling: Sampling) -> int:
     """Frames kept for a pair: ``frames_per_minute`` over its time span, at most ``max_frames``."""
     minutes = float(np.ptp(c.times)) / 60.0 if c.n_frames else 0.0
-    return int(
-        min(params.max_frames, max(params.frames_per_minute, params.frames_per_minute * minutes))
-    )
+    per_minute = sampling.frames_per_minute
+    return int(min(sampling.max_frames, max(per_minute, per_minute * minutes)))
 
 
 def _refine_pair(
@@ -194,7 +195,6 @@ def _refine_pair(
     pose: RigidTransform,
     *,
     scale: float,
-    params: ExtrinsicsParams,
 ) -> RigidTransform:
     """Robust least-squares refinement of one b -> a pose (loss flattening at ``scale`` m)."""
     terms = [Terms("a", "b", points_a, points_b, weights, np.zeros_like(points_a))]
@@ -204,12 +204,15 @@ def _refine_pair(
 
 def estimate_pair_pose(
     correspondences: Correspondences | None,
-    params: ExtrinsicsParams,
     *,
     camera_a: str = "a",
     camera_b: str = "b",
+    sampling: Sampling = FULL_SAMPLING,
 ) -> PairPose:
-    """Camera b's pose in camera a's frame from same-instant joint pairs."""
+    """Camera b's pose in camera a's frame from same-instant joint pairs.
+
+    ``sampling`` bounds the frames and RANSAC samples drawn on (the quick checks draw fewer).
+    """
     if correspondences is None or (correspondences.weights > 0).sum() < MIN_CORRESPONDENCES:
         return PairPose(
             camera_a,
@@ -217,42 +220,34 @@ def estimate_pair_pose(
             reason="the two cameras never see the same person at the same time",
         )
     c = correspondences.take(
-        subsample(correspondences.n_frames, _frame_budget(correspondences, params))
+        subsample(correspondences.n_frames, _frame_budget(correspondences, sampling))
     )
     rng = np.random.default_rng(SEED)
     inv_a, inv_b, inv_w, inv_groups, _ = _invariant_points(c)
     if len(inv_a) < MIN_CORRESPONDENCES:
         return PairPose(camera_a, camera_b, reason="too few reliable joints seen by both cameras")
-    pose, inliers = _ransac(inv_a, inv_b, inv_w, inv_groups, params=params, rng=rng)
+    iterations = sampling.ransac_iterations
+    pose, inliers = _ransac(inv_a, inv_b, inv_w, inv_groups, iterations=iterations, rng=rng)
     if inliers.sum() < MIN_CORRESPONDENCES:
         return PairPose(
             camera_a,
             camera_b,
             reason=f"no consistent pose: only {int(inliers.sum())} of {len(inv_a)} joint pairs "
-            f"agree within {params.inlier_threshold * 100:.0f} cm",
+            f"agree within {INLIER_THRESHOLD * 100:.0f} cm",
         )
     for _ in range(2):
         chosen_a, chosen_b, weights, _ = _choose_view(c, pose)
         points_a, points_b, w, joint, frame = flatten_pairs(chosen_a, chosen_b, weights)
         keep, scale = _trusted(
-            pose, points_a, points_b, joint=joint, frame=frame, n_frames=c.n_frames, params=params
+            pose, points_a, points_b, joint=joint, frame=frame, n_frames=c.n_frames
         )
         pose = kabsch(points_a[keep], points_b[keep], w[keep])
     sub = subsample(len(points_a), MAX_CORRESPONDENCES)
     sub = sub[keep[sub]]
-    pose = _refine_pair(
-        points_a[sub],
-        points_b[sub],
-        w[sub],
-        pose,
-        scale=scale,
-        params=params,
-    )
+    pose = _refine_pair(points_a[sub], points_b[sub], w[sub], pose, scale=scale)
     chosen_a, chosen_b, weights, choice = _choose_view(c, pose)
     points_a, points_b, w, joint, frame = flatten_pairs(chosen_a, chosen_b, weights)
-    keep, scale = _trusted(
-        pose, points_a, points_b, joint=joint, frame=frame, n_frames=c.n_frames, params=params
-    )
+    keep, scale = _trusted(pose, points_a, points_b, joint=joint, frame=frame, n_frames=c.n_frames)
     good_frames = np.zeros(c.n_frames, dtype=bool)
     good_frames[frame[keep]] = True
     # inverse-variance weights per joint (the SDK places some joints far less well) and per
@@ -302,7 +297,6 @@ def _trusted(
     joint: np.ndarray,
     frame: np.ndarray,
     n_frames: int,
-    params: ExtrinsicsParams,
 ) -> tuple[np.ndarray, float]:
     """Inlier mask of the correspondences and the robust residual scale (m).
 
@@ -321,5 +315,5 @@ def _trusted(
     good_frame = per_frame <= FRAME_OUTLIER_RATIO * typical
     in_good = good_frame[frame]
     scale = float(np.median(residual[in_good])) / 1.54 if in_good.any() else typical
-    threshold = min(params.inlier_threshold, INLIER_SIGMAS * scale)
+    threshold = min(INLIER_THRESHOLD, INLIER_SIGMAS * scale)
     return in_good & (residual < threshold), scale

@@ -7,22 +7,29 @@ the constants below are the method's statistical and numerical choices.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import NamedTuple
 
 from hiros_calib.signature import DEFAULT_JOINTS
 
 __all__ = [
     "ASSOCIATION_FRAMES",
     "FRAME_OUTLIER_RATIO",
+    "FULL_SAMPLING",
     "INLIER_SIGMAS",
+    "INLIER_THRESHOLD",
     "JOINT_OFFSET_ROUNDS",
     "LOSS",
     "MAX_CORRESPONDENCES",
     "MAX_INTERPOLATION_GAP",
+    "MAX_SIGNATURE_MISMATCH",
+    "MIN_COMMON_TIME",
     "MIN_CORRESPONDENCES",
     "OFFSET_SHRINKAGE",
+    "QUICK_SAMPLING",
     "RANSAC_CHECKS",
     "SEED",
     "ExtrinsicsParams",
+    "Sampling",
 ]
 
 
@@ -65,29 +72,43 @@ SEED: int = 0
 """Random seed of RANSAC, so that a recording always gives the same calibration."""
 
 
+MAX_SIGNATURE_MISMATCH: float = 0.1
+"""Largest median signature difference (m) for two tracks to be the same person."""
+
+MIN_COMMON_TIME: float = 2.0
+"""Two tracks must be seen together this long (s) to be paired (short ghosts are not)."""
+
+INLIER_THRESHOLD: float = 0.25
+"""Largest distance (m) for a joint correspondence to count as an inlier; the working
+threshold adapts to the data's spread (``INLIER_SIGMAS`` times the robust scale)."""
+
+
+class Sampling(NamedTuple):
+    """How much of a camera pair's data one pose estimate draws on."""
+
+    ransac_iterations: int
+    """Minimal samples tried."""
+    frames_per_minute: float
+    """Frames (body pairs at one instant) kept per minute of recording, evenly subsampled.
+    The SDKs' errors are correlated over about 0.2 s, so at 30 Hz neighbouring frames add
+    little; a count that grows with the recording still uses a long one."""
+    max_frames: int
+    """At most this many frames, whatever the length (bounds the cost)."""
+
+
+FULL_SAMPLING = Sampling(ransac_iterations=400, frames_per_minute=1000.0, max_frames=10000)
+"""A calibration's pose estimates (figures behind the frame budget: docs/pose-accuracy.md)."""
+
+QUICK_SAMPLING = Sampling(ransac_iterations=120, frames_per_minute=300.0, max_frames=1500)
+"""The quick checks' fits: each candidate lag's, and each split half's."""
+
+
 @dataclass
 class ExtrinsicsParams:
     """Parameters of the pose estimation (same names as the ``calib`` node's)."""
 
     joints: list[str] = field(default_factory=lambda: list(DEFAULT_JOINTS))
     """Joints whose distances identify a person across cameras (see signature.py)."""
-    max_signature_mismatch: float = 0.1
-    """Largest median signature difference (m) for two tracks to be the same person."""
-    min_common_time: float = 2.0
-    """Two tracks must be seen together this long (s) to be paired (short ghosts are not)."""
     pose_joints: list[str] = field(default_factory=list)
     """Joints used as correspondences; empty = every joint of the layout (more joints
     average out more of the SDK's fixed per-joint errors)."""
-    inlier_threshold: float = 0.25
-    """Largest distance (m) for a joint correspondence to count as an inlier; the working
-    threshold adapts to the data's spread (``INLIER_SIGMAS`` times the robust scale)."""
-    ransac_iterations: int = 400
-    """Minimal samples tried per camera pair."""
-    frames_per_minute: float = 1000.0
-    """Frames (body pairs at one instant) per camera pair and minute of recording kept for
-    the pose, evenly subsampled. The SDK's errors are correlated over about 0.2 s, so at 30 Hz
-    neighbouring frames add little information; but a count that does not grow with the
-    recording wastes a long one (on the simulator, 3 minutes: 0.34 deg with 1000 frames in
-    all, 0.28-0.30 deg with 1000 a minute; 1 minute: no better with 3000)."""
-    max_frames: int = 10000
-    """At most this many frames per camera pair, whatever the length (bounds the cost)."""

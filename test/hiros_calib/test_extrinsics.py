@@ -35,7 +35,7 @@ def test_known_pose_recovered_for_cameras_facing_each_other(facing_cameras):
     correspondences = pair_correspondences(
         tracks["cam0"][0], tracks["cam1"][0], clock_a, clock_b, params
     )
-    pose = estimate_pair_pose(correspondences, params)
+    pose = estimate_pair_pose(correspondences)
     assert pose.ok, pose.reason
     truth = (
         scene.truth.cameras["cam0"].extrinsics.inverse() @ scene.truth.cameras["cam1"].extrinsics
@@ -55,7 +55,7 @@ def test_swap_choice_matters(facing_cameras):
     clock_a, clock_b = _clocks(scene, "cam0", "cam1")
     params = ExtrinsicsParams()
     c = pair_correspondences(tracks["cam0"][0], tracks["cam1"][0], clock_a, clock_b, params)
-    pose = estimate_pair_pose(c, params)
+    pose = estimate_pair_pose(c)
     straight = np.linalg.norm(pose.transform.apply(c.points_b) - c.points_a, axis=2)
     chosen = np.linalg.norm(
         pose.transform.apply(pose.correspondences.points_b) - c.points_a, axis=2
@@ -75,10 +75,10 @@ def test_baseline_recovers_a_pose_the_skeletons_agree_on(make_scene):
     c = pair_correspondences(
         tracks["cam0"][0], tracks["cam1"][0], *_clocks(scene, "cam0", "cam1"), params
     )
-    angle, distance = relative_error(baseline_pair_pose(c, params), _truth(scene, "cam0", "cam1"))
+    angle, distance = relative_error(baseline_pair_pose(c), _truth(scene, "cam0", "cam1"))
     assert angle < 0.2
     assert distance < 0.01
-    assert baseline_pair_pose(c.take(np.arange(1)), params) is None  # too few joint pairs
+    assert baseline_pair_pose(c.take(np.arange(1))) is None  # too few joint pairs
 
 
 def test_baseline_is_misled_by_mirrored_skeletons(facing_cameras):
@@ -91,8 +91,8 @@ def test_baseline_is_misled_by_mirrored_skeletons(facing_cameras):
         tracks["cam0"][0], tracks["cam1"][0], *_clocks(scene, "cam0", "cam1"), params
     )
     truth = _truth(scene, "cam0", "cam1")
-    ours, _ = relative_error(estimate_pair_pose(c, params).transform, truth)
-    baseline = baseline_pair_pose(c, params)
+    ours, _ = relative_error(estimate_pair_pose(c).transform, truth)
+    baseline = baseline_pair_pose(c)
     assert baseline is not None
     assert relative_error(baseline, truth)[0] > 5 * max(ours, 0.05)
 
@@ -107,14 +107,14 @@ def test_two_people_are_associated_by_signature(make_scene):
 
 
 def test_no_common_view_refuses():
-    pose = estimate_pair_pose(None, ExtrinsicsParams())
+    pose = estimate_pair_pose(None)
     assert not pose.ok
     assert "never see the same person" in pose.reason
 
 
 def test_frames_kept_grow_with_the_recording():
     """A long recording keeps frames in proportion to its length, up to ``max_frames``."""
-    from hiros_calib.extrinsics import Correspondences
+    from hiros_calib.extrinsics import Correspondences, Sampling
     from hiros_calib.extrinsics.pair_pose import _frame_budget
 
     def pairs(seconds, rate=30.0):
@@ -123,7 +123,7 @@ def test_frames_kept_grow_with_the_recording():
         return Correspondences(zeros, zeros, np.ones((len(times), 2)), np.array([1, 0]),
                                ("a", "b"), np.zeros(2, dtype=np.int64), times)  # fmt: skip
 
-    params = ExtrinsicsParams(frames_per_minute=1000.0, max_frames=5000)
-    assert _frame_budget(pairs(30.0), params) == 1000  # short: no fewer than a minute's worth
-    assert _frame_budget(pairs(180.0), params) == pytest.approx(3000, abs=1)
-    assert _frame_budget(pairs(600.0), params) == 5000
+    sampling = Sampling(ransac_iterations=400, frames_per_minute=1000.0, max_frames=5000)
+    assert _frame_budget(pairs(30.0), sampling) == 1000  # short: no fewer than a minute's worth
+    assert _frame_budget(pairs(180.0), sampling) == pytest.approx(3000, abs=1)
+    assert _frame_budget(pairs(600.0), sampling) == 5000

@@ -4,6 +4,7 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
+import hiros_calib.live
 from hiros_calib.extrinsics import relative_error
 from hiros_calib.live import (
     EVENTS_KEPT,
@@ -187,14 +188,15 @@ def test_a_wrong_pose_is_replaced_once_estimates_keep_disagreeing_with_it(make_s
 
 
 @pytest.mark.slow
-def test_disagreeing_estimates_must_also_fit_better_to_replace_the_pose(make_scene):
+def test_disagreeing_estimates_must_also_fit_better_to_replace_the_pose(make_scene, monkeypatch):
     """Estimates agreeing among themselves are not enough: data that cannot pin a pose down
     (one person walking on the spot) gives consistent but wrong ones. They must fit their
-    frames ``replace_margin`` better than the current pose; a margin no fit can meet keeps
+    frames ``REPLACE_MARGIN`` better than the current pose; a margin no fit can meet keeps
     even a pose 20° off."""
+    monkeypatch.setattr(hiros_calib.live, "REPLACE_MARGIN", 1.0)
     scene = make_scene(angles_deg=(0.0, 100.0), duration=40.0, noise=0.005)
     start, _ = _loaded(scene, 20.0)
-    live = LiveCalibrator(LiveCalibratorParams(**_NO_CHECK, replace_margin=1.0), start)
+    live = LiveCalibrator(LiveCalibratorParams(**_NO_CHECK), start)
     _feed(scene, live)
     assert not [m for _, m in live.events if "replaced" in m]
     assert live.drops["estimate_disagrees"] >= 3
