@@ -5,6 +5,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from scipy import stats
 
 from hiros_calib.sync.clock import PairOffset, fisher_z
 from hiros_calib.sync.params import SyncParams
@@ -102,8 +103,7 @@ def _paired_t(differences: np.ndarray) -> float:
     shared = differences[np.isfinite(differences)]
     if len(shared) < CONTEST_MIN_WINDOWS:
         return 0.0
-    spread = float(np.std(shared, ddof=1))
-    mean = float(np.mean(shared))
-    if spread == 0.0:
+    if np.ptp(shared) == 0.0:  # no spread: scipy would divide by zero
+        mean = float(shared[0])
         return math.copysign(math.inf, mean) if mean else 0.0
-    return mean / (spread / math.sqrt(len(shared)))
+    return float(stats.ttest_1samp(shared, 0.0).statistic)
