@@ -80,17 +80,7 @@ _CALIB_CONSTANTS = (
 capitals): the method's statistical and numerical choices, which no recording should need
 changed."""
 
-REMOVED_PARAMETERS: dict[str, str] = {
-    "compiled": "the optimizer and the filter always run their compiled kernels",
-    **{name: f"hiros_calib fixes it as the constant {name.upper()}" for name in _CALIB_CONSTANTS},
-    "loss_scale": "the calibration's robust loss flattens at the data's own robust scale",
-    **dict.fromkeys(
-        ("ransac_iterations", "frames_per_minute", "max_frames"),
-        "hiros_calib fixes the frames and RANSAC samples a pose draws on (FULL_SAMPLING)",
-    ),
-    "loss": "hiros_calib fixes its robust loss as the constant LOSS (soft_l1)",
-    "mirror_invariant": "the calibration's signature is always immune to left/right swaps",
-    "frame_weights": "the calibration always weighs each frame by its residual spread",
+_MERGER_REMOVED = {
     **dict.fromkeys(
         ("fuse_directions", "direction_iterations", "direction_eps", "direction_torso"),
         "the merger no longer rebuilds limbs along the cameras' link directions (it raised the "
@@ -107,14 +97,48 @@ REMOVED_PARAMETERS: dict[str, str] = {
     ),
     "extrapolate": "the merger always extrapolates; max_extrapolation 0 turns it off",
     "limb_residuals": "the merger always weighs a camera's limb whole",
-    "rate_tolerance": "hiros_filter fixes it as the constant RATE_TOLERANCE",
-    "sweeps": "hiros_optimizer fixes it as the constant SWEEPS",
-    "refinements": "hiros_optimizer fixes it as the constant REFINEMENTS",
+}
+
+_COMPILED = "the optimizer and the filter always run their compiled kernels"
+
+_BRIDGE_REMOVED = {
     "reset_after_backwards": "the bridges fix it as the constant RESET_AFTER_BACKWARDS "
     "(hiros_core.driver)",
 }
-"""Parameters hiros had and dropped (by name, any node): a file that still sets one loads,
-with a ``RemovedParameterWarning``, so that older parameter files keep working."""
+
+REMOVED_PARAMETERS: dict[str, dict[str, str]] = {
+    "calib": {
+        **{
+            name: f"hiros_calib fixes it as the constant {name.upper()}"
+            for name in _CALIB_CONSTANTS
+        },
+        "loss_scale": "the calibration's robust loss flattens at the data's own robust scale",
+        **dict.fromkeys(
+            ("ransac_iterations", "frames_per_minute", "max_frames"),
+            "hiros_calib fixes the frames and RANSAC samples a pose draws on (FULL_SAMPLING)",
+        ),
+        "loss": "hiros_calib fixes its robust loss as the constant LOSS (soft_l1)",
+        "mirror_invariant": "the calibration's signature is always immune to left/right swaps",
+        "frame_weights": "the calibration always weighs each frame by its residual spread",
+    },
+    "merger": _MERGER_REMOVED,
+    "optimizer": {
+        "compiled": _COMPILED,
+        "sweeps": "hiros_optimizer fixes it as the constant SWEEPS",
+        "refinements": "hiros_optimizer fixes it as the constant REFINEMENTS",
+    },
+    "filter": {
+        "compiled": _COMPILED,
+        "rate_tolerance": "hiros_filter fixes it as the constant RATE_TOLERANCE",
+    },
+    "azure_bridge": _BRIDGE_REMOVED,
+    "generic_bridge": _BRIDGE_REMOVED,
+}
+"""Parameters hiros had and dropped, by node (its name): a file that still sets one loads,
+with a ``RemovedParameterWarning``, so that older parameter files keep working.
+
+By node, because nodes share names (``window``, ``max_jump``, ``track_timeout``,
+``confidence_floor``, ...): one node's retired ``max_jump`` is another's parameter."""
 
 
 class RemovedParameterWarning(FutureWarning):
@@ -125,13 +149,20 @@ class RemovedParameterWarning(FutureWarning):
     """
 
 
-def removed_parameters(names: Iterable[str]) -> dict[str, str]:
-    """The dotted ``names`` that are ``REMOVED_PARAMETERS`` (by their last part), with why."""
-    return {
-        name: REMOVED_PARAMETERS[name.rsplit(".", 1)[-1]]
-        for name in names
-        if name.rsplit(".", 1)[-1] in REMOVED_PARAMETERS
-    }
+def removed_parameters(names: Iterable[str], node: str) -> dict[str, str]:
+    """The dotted ``names`` given to ``node`` that are ``REMOVED_PARAMETERS``, with why.
+
+    ``stage.name``, where ``stage`` is a node (the pipeline's parameters of its stages), is
+    ``stage``'s ``name``; any other name is the node's own.
+    """
+    removed = {}
+    for name in names:
+        section, _, rest = name.partition(".")
+        owner, leaf = (section, rest) if rest and section in REMOVED_PARAMETERS else (node, name)
+        reason = REMOVED_PARAMETERS.get(owner, {}).get(leaf)
+        if reason is not None:
+            removed[name] = reason
+    return removed
 
 
 def config_path(node_name: str) -> Path | None:
@@ -181,7 +212,7 @@ def load_config_defaults(node_name: str, path: Path | None = None) -> dict[str, 
             msg = f"{path}: ros__parameters of {node_name} must be a mapping, not {parameters!r}"
             raise ConfigError(msg)
         values.update(_flatten(parameters or {}))
-    for name, reason in removed_parameters(values).items():
+    for name, reason in removed_parameters(values, node_name).items():
         del values[name]
         warnings.warn(
             f"{path}: parameter {name} is ignored ({reason}); remove it from the file",

@@ -362,7 +362,7 @@ class NodeParameters(Generic[T]):
     def _warn_removed(self) -> None:
         """Log each given parameter hiros no longer has (rclpy ignores it: never declared)."""
         given = getattr(self._node, "_parameter_overrides", {})
-        for name, reason in removed_parameters(given).items():
+        for name, reason in removed_parameters(given, self._node.get_name()).items():
             self._node.get_logger().warning(
                 f"parameter {name} is ignored ({reason}); remove it from the parameter file"
             )

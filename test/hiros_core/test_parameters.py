@@ -39,11 +39,12 @@ def test_an_old_file_setting_a_removed_parameter_loads_with_a_warning(tmp_path: 
     path = tmp_path / "params.yaml"
     path.write_text(
         "pipeline:\n  ros__parameters:\n    filter: {compiled: true, max_gap: 0.4}\n"
-        "    optimizer: {compiled: false}\n"
+        "    optimizer: {compiled: false}\n    tracker: {compiled: true}\n"
     )
     with pytest.warns(RemovedParameterWarning) as caught:
         values = load_config_defaults("pipeline", path)
-    assert values == {"filter.max_gap": 0.4}
+    # by node: the tracker never had it (the pipeline refuses it as unknown)
+    assert values == {"filter.max_gap": 0.4, "tracker.compiled": True}
     assert sorted(str(w.message).split(": parameter ")[1].split()[0] for w in caught) == [
         "filter.compiled",
         "optimizer.compiled",

@@ -1,5 +1,5 @@
 """Every node's parameter file holds its dataclass's names and defaults; every parameter is
-described, with a range that holds its default.
+described, with a range that holds its default, and listed once in the README.
 
 The parameter files in config/ are what users copy and pass with ``--params-file``; the nodes
 read none of them unasked, so a file that drifts from the dataclass would make the same node
@@ -9,38 +9,37 @@ behave differently by entry point (as the optimizer's prior_weight once did: 0.0
 
 from __future__ import annotations
 
-import importlib
 import math
+import re
+from collections import Counter
 from pathlib import Path
 
 import pytest
+from node_parameters import EXAMPLES, NODES, declared_parameters, node_specs
 
 from hiros_core.parameters import load_config_defaults
-from hiros_ros.params import ParameterSpec, parameter_specs
 
-CONFIG = Path(__file__).resolve().parents[2] / "config"
-
-NODES = {
-    "azure_bridge": ("hiros_azure_bridge.node", "BridgeNodeParams", ()),
-    "calib": ("hiros_calib.node", "CalibNodeParams", "LIVE"),
-    "tracker": ("hiros_tracker.node", "TrackerNodeParams", "LIVE"),
-    "merger": ("hiros_merger.node", "MergerNodeParams", "LIVE"),
-    "optimizer": ("hiros_optimizer.node", "OptimizerNodeParams", "LIVE"),
-    "filter": ("hiros_filter.node", "FilterNodeParams", "LIVE"),
-    "pipeline": ("hiros_pipeline.node", "PipelineNodeParams", "LIVE"),
-    "visualizer": ("hiros_visualizer.node", "VisualizerNodeParams", "LIVE"),
-}
-"""Node name -> (module, parameters dataclass, its live names)."""
-
-EXAMPLES = {"generic_bridge": "azure_bridge"}
-"""Files that configure a node for another driver: their names must be the node's."""
+REPO = Path(__file__).resolve().parents[2]
+CONFIG = REPO / "config"
 
 
-def node_specs(node: str) -> dict[str, ParameterSpec]:
-    module_name, type_name, live_name = NODES[node]
-    module = importlib.import_module(module_name)
-    live = getattr(module, live_name) if live_name else ()
-    return {spec.name: spec for spec in parameter_specs(getattr(module, type_name), live)}
+def readme_parameters() -> Counter[tuple[str, str]]:
+    """``(node, name)`` of every parameter the README's tables list, with how often.
+
+    The tables of its "Parameters" section: the first column names the nodes, the second the
+    parameters (in backticks).
+    """
+    text = (REPO / "README.md").read_text(encoding="utf-8")
+    section = text[text.index("### Parameters") : text.index("### Topics and diagnostics")]
+    listed: Counter[tuple[str, str]] = Counter()
+    for line in section.splitlines():
+        cells = [cell.strip() for cell in line.split("|")[1:-1]]
+        if len(cells) < 3 or cells[0] in {"node", ""} or cells[0].startswith("---"):
+            continue
+        for node in cells[0].split(","):
+            for name in re.findall(r"`([\w.]+)`", cells[1]):
+                listed[node.strip(), name] += 1
+    return listed
 
 
 @pytest.mark.parametrize("node", sorted(NODES))
@@ -87,3 +86,12 @@ def test_topics_qos_and_layout_are_read_only(node: str) -> None:
     for spec in node_specs(node).values():
         if spec.name in fixed:
             assert spec.read_only, f"{node}: {spec.name} is not read-only"
+
+
+def test_every_parameter_is_listed_once_in_the_readme() -> None:
+    """Each node's parameters are in README's user or expert settings, once; nothing else is."""
+    listed = readme_parameters()
+    declared = {(node, name) for node in {*NODES, *EXAMPLES} for name in declared_parameters(node)}
+    assert sorted(declared - set(listed)) == [], "parameters the README does not list"
+    assert sorted(set(listed) - declared) == [], "the README lists parameters no node has"
+    assert [key for key, count in listed.items() if count > 1] == []

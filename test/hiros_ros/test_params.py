@@ -53,13 +53,14 @@ LIVE = ("rate", "filter", "gate.max_distance")
 
 @pytest.fixture
 def make_node(ros_env):
-    """``make_node(*ros_args)``: a node built with those ``--ros-args``, destroyed after."""
+    """``make_node(*ros_args, name=...)``: a node built with those ``--ros-args``, destroyed
+    after."""
     made = []
 
-    def make(*ros_args: str):
+    def make(*ros_args: str, name: str = "demo_params"):
         context = rclpy.Context()
         rclpy.init(args=["--ros-args", *ros_args], context=context)
-        made.append((rclpy.create_node("demo_params", context=context), context))
+        made.append((rclpy.create_node(name, context=context), context))
         return made[-1][0]
 
     yield make
@@ -100,7 +101,7 @@ def _keep_warnings(node: rclpy.node.Node, monkeypatch: pytest.MonkeyPatch) -> li
 
 
 def test_a_removed_parameter_given_is_ignored_with_a_warning(make_node, monkeypatch) -> None:
-    node = make_node("-p", "compiled:=true", "-p", "rate:=20.0")
+    node = make_node("-p", "compiled:=true", "-p", "rate:=20.0", name="filter")
     logged = _keep_warnings(node, monkeypatch)
     assert declare_params(node, DemoParams).params.rate == 20.0
     assert not node.has_parameter("compiled")
@@ -108,10 +109,18 @@ def test_a_removed_parameter_given_is_ignored_with_a_warning(make_node, monkeypa
     assert "parameter compiled is ignored" in logged[0]
 
 
+def test_a_parameter_another_node_retired_is_not_reported(make_node, monkeypatch) -> None:
+    """The filter's and the optimizer's retired names are no concern of the tracker's."""
+    node = make_node("-p", "compiled:=true", "-p", "sweeps:=1", name="tracker")
+    logged = _keep_warnings(node, monkeypatch)
+    declare_params(node, DemoParams)
+    assert logged == []
+
+
 def test_a_calib_setting_that_became_a_constant_is_ignored_with_a_warning(
     make_node, monkeypatch
 ) -> None:
-    node = make_node("-p", "grid_step:=0.02", "-p", "rate:=20.0")
+    node = make_node("-p", "grid_step:=0.02", "-p", "rate:=20.0", name="calib")
     logged = _keep_warnings(node, monkeypatch)
     assert declare_params(node, DemoParams).params.rate == 20.0
     assert not node.has_parameter("grid_step")
@@ -124,7 +133,7 @@ def test_a_calib_setting_that_became_a_constant_is_ignored_with_a_warning(
 def test_a_bridge_setting_that_became_a_constant_is_ignored_with_a_warning(
     make_node, monkeypatch
 ) -> None:
-    node = make_node("-p", "reset_after_backwards:=2.0", "-p", "rate:=20.0")
+    node = make_node("-p", "reset_after_backwards:=2.0", "-p", "rate:=20.0", name="generic_bridge")
     logged = _keep_warnings(node, monkeypatch)
     assert declare_params(node, DemoParams).params.rate == 20.0
     assert not node.has_parameter("reset_after_backwards")
