@@ -21,6 +21,7 @@ from pathlib import Path
 import numpy as np
 
 from hiros_core.errors import LayoutError
+from hiros_core.kinematics import KinematicTree
 from hiros_core.safe_yaml import load_yaml
 
 __all__ = [
@@ -120,6 +121,11 @@ class Layout:
                 if side in name:
                     perm[joint] = self._index.get(name.replace(side, other), joint)
         return perm
+
+    @cached_property
+    def tree(self) -> KinematicTree:
+        """The joint tree's index tables (levels, subtrees, parents before children)."""
+        return KinematicTree.from_layout(self)
 
 
 _AZURE_JOINTS = (

@@ -36,10 +36,9 @@ from hiros_core.accounting import Accounted, Drops
 from hiros_core.errors import ConfigError
 from hiros_core.layouts import Layout
 from hiros_core.model import Skeleton, SkeletonGroup, SkeletonRows, link_rows
+from hiros_core.stacking import LayoutRows, output_skeletons, stack_frame
 from hiros_filter.estimators import ButterworthBank, KalmanBank
 from hiros_filter.lengths import LengthKeeper
-from hiros_optimizer.kinematics import KinematicTree
-from hiros_optimizer.stacking import LayoutRows, output_skeletons, stack_frame
 
 __all__ = ["Filter", "FilterParams"]
 
@@ -132,7 +131,7 @@ class _Tracks:
         self.last_input = np.full((capacity, self.n_joints, 3), np.nan)
         self.last_output = np.full((capacity, self.n_joints, 3), np.nan)
         self.last_lengths = np.full((capacity, self.n_joints), np.nan)  # input link lengths
-        self.keeper = LengthKeeper(KinematicTree.from_layout(layout))
+        self.keeper = LengthKeeper(layout.tree)
         self.link_parents = np.asarray(layout.link_parents, dtype=np.intp)
         self.link_children = np.asarray(layout.link_children, dtype=np.intp)
         self.quaternions = np.full((capacity, self.n_joints, 4), np.nan)

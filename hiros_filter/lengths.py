@@ -26,7 +26,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from hiros_optimizer.kinematics import KinematicTree
+from hiros_core.kinematics import KinematicTree
 
 __all__ = ["LengthKeeper"]
 

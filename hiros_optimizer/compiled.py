@@ -36,7 +36,7 @@ from numba import njit
 from hiros_core.compiled import _link_rows, refresh_stale_caches
 from hiros_optimizer.kernel_args import FitTree
 
-__all__ = ["fit_frame", "fit_frame_links", "fit_people", "learn_frame", "unusable_rows"]
+__all__ = ["fit_frame", "fit_frame_links", "fit_people", "learn_frame"]
 
 _EPS = 1e-12
 _MIN_VELOCITY_DT = 1e-3  # s; closer frames (duplicates) would turn noise into huge velocities
@@ -555,25 +555,6 @@ def learn_frame(parents, frame, memory, window, filled, timeout):
             window[s, j, column] = _norm3(counted[j], counted[p]) if p >= 0 else np.nan
         filled[s] += 1
         _remember(s, stamps[i], seen, no_vectors, time_ns, timed, positions, velocities, vectors)
-
-
-@njit(cache=True, error_model="numpy")
-def unusable_rows(markers, present):
-    """``(P,)`` True where a present joint of ``markers`` ``(P, J, 20)`` has a non-finite position.
-
-    ``hiros_optimizer.stacking.stack_frame``'s check, in one call instead of five numpy ones.
-    """
-    n_people, n = present.shape
-    bad = np.zeros(n_people, dtype=np.bool_)
-    for i in range(n_people):
-        for j in range(n):
-            if present[i, j] and not (
-                np.isfinite(markers[i, j, 1])
-                and np.isfinite(markers[i, j, 2])
-                and np.isfinite(markers[i, j, 3])
-            ):
-                bad[i] = True
-    return bad
 
 
 def fit_people(

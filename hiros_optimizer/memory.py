@@ -19,9 +19,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from hiros_core.kinematics import link_lengths
 from hiros_core.layouts import Layout
 from hiros_optimizer import kernel_args
-from hiros_optimizer.kinematics import KinematicTree, link_lengths
 
 __all__ = ["FitSettings", "Memory"]
 
@@ -70,7 +70,7 @@ class Memory:
 
     def __init__(self, layout: Layout, window: int) -> None:
         self.layout = layout
-        self.tree = KinematicTree.from_layout(layout)
+        self.tree = layout.tree
         self._link_ends = (
             np.asarray(layout.link_parents, dtype=np.intp),
             np.asarray(layout.link_children, dtype=np.intp),

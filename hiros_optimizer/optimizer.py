@@ -39,9 +39,9 @@ from hiros_core.accounting import Accounted, Drops
 from hiros_core.errors import ConfigError
 from hiros_core.layouts import Layout, get_layout
 from hiros_core.model import Skeleton, SkeletonGroup, SkeletonRows
+from hiros_core.stacking import LayoutRows, output_skeletons, stack_frame
 from hiros_optimizer.learning import PersonProgress, limb_links, window_statistics
 from hiros_optimizer.memory import FitSettings, Memory
-from hiros_optimizer.stacking import LayoutRows, output_skeletons, stack_frame
 
 __all__ = [
     "REFINEMENTS",

@@ -4,13 +4,13 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.spatial.transform import Rotation
 
+from hiros_core.kinematics import link_lengths
 from hiros_core.layouts import AZURE_KINECT
 from hiros_core.model import Skeleton, SkeletonGroup, sec_to_ns
 from hiros_filter import Filter, FilterParams
-from hiros_optimizer.kinematics import KinematicTree, link_lengths
 
 RATE = 30.0
-TREE = KinematicTree.from_layout(AZURE_KINECT)
+TREE = AZURE_KINECT.tree
 PARENTS = np.asarray(AZURE_KINECT.parents)
 J = AZURE_KINECT.n_joints
 

@@ -10,13 +10,12 @@ from scipy.spatial.transform import Rotation
 
 from hiros_core.layouts import AZURE_KINECT
 from hiros_core.model import Skeleton, SkeletonGroup, sec_to_ns
-from hiros_optimizer.kinematics import KinematicTree
 
 
 def _moving_person(n_frames, seed=0, rate=30.0):
     """(T, J, 3) positions of a person whose links keep fixed lengths, and those lengths (J,)."""
     rng = np.random.default_rng(seed)
-    tree = KinematicTree.from_layout(AZURE_KINECT)
+    tree = AZURE_KINECT.tree
     n = AZURE_KINECT.n_joints
     lengths = rng.uniform(0.08, 0.45, n)
     lengths[0] = np.nan

@@ -3,10 +3,11 @@ import optimizer_reference
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from hiros_core.kinematics import link_lengths
 from hiros_core.layouts import AZURE_KINECT, KINECT_V2
-from hiros_optimizer.kinematics import KinematicTree, fit_fixed_lengths, link_lengths
+from hiros_optimizer.kinematics import fit_fixed_lengths
 
-TREE = KinematicTree.from_layout(AZURE_KINECT)
+TREE = AZURE_KINECT.tree
 
 
 def test_tree_levels_cover_every_joint_once():
@@ -81,7 +82,7 @@ def test_free_links_follow_the_measurement(moving_person):
 
 
 def test_other_layout_and_missing_joints():
-    tree = KinematicTree.from_layout(KINECT_V2)
+    tree = KINECT_V2.tree
     rng = np.random.default_rng(3)
     n = KINECT_V2.n_joints
     positions = rng.normal(size=(2, n, 3))
@@ -104,7 +105,7 @@ def test_other_layout_and_missing_joints():
 def test_compiled_fit_equals_the_numpy_statement(seed, layout, sweeps, refinements):
     """Weightless joints and subtrees, a NaN measurement, a free link, people without prior."""
     rng = np.random.default_rng(seed)
-    tree = KinematicTree.from_layout(layout)
+    tree = layout.tree
     people, joints = 4, layout.n_joints
     lengths = rng.uniform(0.05, 0.4, (people, joints))
     lengths[:, tree.parents < 0] = np.nan

@@ -4,6 +4,7 @@ import pytest
 
 from hiros_core.accounting import Merged
 from hiros_core.errors import ConfigError
+from hiros_core.kinematics import link_lengths
 from hiros_core.layouts import AZURE_KINECT
 from hiros_core.model import Skeleton, SkeletonGroup
 from hiros_optimizer import (
@@ -14,7 +15,6 @@ from hiros_optimizer import (
     write_person_calibrations,
 )
 from hiros_optimizer import optimizer as optimizer_module
-from hiros_optimizer.kinematics import link_lengths
 from hiros_optimizer.learning import LIMB_JOINTS
 
 PARENTS = np.asarray(AZURE_KINECT.parents)

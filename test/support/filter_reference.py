@@ -15,11 +15,11 @@ from functools import lru_cache
 
 import numpy as np
 
+from hiros_core.kinematics import KinematicTree
 from hiros_core.model import SkeletonRows, link_rows
+from hiros_core.stacking import LayoutRows, output_skeletons
 from hiros_filter.estimators import KalmanBank, _block
 from hiros_filter.filter import Filter, _Running, _Tracks
-from hiros_optimizer.kinematics import KinematicTree
-from hiros_optimizer.stacking import LayoutRows, output_skeletons
 
 __all__ = [
     "ReferenceFilter",

@@ -11,8 +11,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from hiros_core.kinematics import KinematicTree, link_lengths
 from hiros_core.model import link_rows
-from hiros_optimizer.kinematics import KinematicTree, link_lengths
 from hiros_optimizer.memory import FitSettings, Memory, _weights
 
 __all__ = ["ReferenceMemory", "fit_fixed_lengths", "unusable_rows"]

@@ -96,12 +96,12 @@ def stack_frame(
 def _unusable_rows(markers: np.ndarray, present: np.ndarray) -> np.ndarray:
     """``(n,)`` True where a present joint's position is not finite.
 
-    A compiled kernel (``hiros_optimizer.compiled.unusable_rows``; its numpy statement is
+    A compiled kernel (``hiros_core.compiled.unusable_rows``; its numpy statement is
     ``test/support/optimizer_reference.py``'s): at a few people the five numpy calls it takes
     cost more than the rest of the stacking. Imported at the first call, as the stages load
     their kernels (``hiros_core.compiled`` states the rule).
     """
-    from hiros_optimizer.compiled import unusable_rows
+    from hiros_core.compiled import unusable_rows
 
     return unusable_rows(markers, present)
 

@@ -7,7 +7,7 @@ from hypothesis import strategies as st
 
 from hiros_core.layouts import AZURE_KINECT
 from hiros_core.model import Skeleton, SkeletonRows, stack_rows
-from hiros_optimizer.stacking import _unusable_rows, output_skeletons, stack_frame
+from hiros_core.stacking import _unusable_rows, output_skeletons, stack_frame
 
 J = AZURE_KINECT.n_joints
 
