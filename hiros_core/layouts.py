@@ -27,10 +27,71 @@ from hiros_core.safe_yaml import load_yaml
 __all__ = [
     "AZURE_KINECT",
     "KINECT_V2",
+    "BodyJoints",
     "Layout",
     "get_layout",
     "load_layout",
 ]
+
+
+_SPINE = ("SpineNaval", "SpineMid", "SpineChest", "SpineShoulder", "Neck")
+"""Joints between the root and the head, bottom up (Azure Kinect and Kinect v2 names)."""
+
+
+@dataclass(frozen=True)
+class BodyJoints:
+    """The joints a body's own axes come from, found by name (Azure Kinect and Kinect v2).
+
+    Left minus right gives the body's sides, root to neck its up, and the pointers (ankle ->
+    foot, head -> nose) where it faces. The tracker decides facing from them and the merger
+    reflects flipped views with them, so both read the same joints in the same order.
+
+    Attributes:
+        root: the layout's root joint.
+        neck: the neck, ``-1`` when the layout has none.
+        left: ``(hip, shoulder)`` on the left, ``-1`` where the layout has none.
+        right: ``(hip, shoulder)`` on the right, ``-1`` where the layout has none.
+        torso: the root, then the spine joints up to the neck, bottom up.
+        feet: ``(ankle, foot)`` left then right, those the layout has both joints of.
+        head: ``(head, nose)``, or empty when the layout lacks either.
+
+    """
+
+    root: int
+    neck: int
+    left: tuple[int, int]
+    right: tuple[int, int]
+    torso: tuple[int, ...]
+    feet: tuple[tuple[int, int], ...]
+    head: tuple[int, ...]
+
+    @classmethod
+    def of(cls, layout: Layout) -> BodyJoints:
+        """Look the joints up in ``layout`` by name."""
+        index = {name: i for i, name in enumerate(layout.joint_names)}
+        root = layout.parents.index(-1)
+
+        def pair(a: str, b: str) -> tuple[int, ...]:
+            return (index[a], index[b]) if a in index and b in index else ()
+
+        feet = (pair("AnkleLeft", "FootLeft"), pair("AnkleRight", "FootRight"))
+        return cls(
+            root=root,
+            neck=index.get("Neck", -1),
+            left=(index.get("HipLeft", -1), index.get("ShoulderLeft", -1)),
+            right=(index.get("HipRight", -1), index.get("ShoulderRight", -1)),
+            torso=(root, *(index[name] for name in _SPINE if name in index)),
+            feet=tuple(f for f in feet if f),
+            head=pair("Head", "Nose"),
+        )
+
+    @property
+    def sides(self) -> tuple[np.ndarray, np.ndarray]:
+        """``(k,)`` left and right joints of the pairs the layout has both of (hips, shoulders)."""
+        both = [(a, b) for a, b in zip(self.left, self.right, strict=True) if a >= 0 and b >= 0]
+        left = np.array([a for a, _ in both], dtype=np.int64)
+        right = np.array([b for _, b in both], dtype=np.int64)
+        return left, right
 
 
 @dataclass(frozen=True)
@@ -121,6 +182,11 @@ class Layout:
                 if side in name:
                     perm[joint] = self._index.get(name.replace(side, other), joint)
         return perm
+
+    @cached_property
+    def body(self) -> BodyJoints:
+        """The joints the body's own axes come from (sides, up, facing), by name."""
+        return BodyJoints.of(self)
 
     @cached_property
     def tree(self) -> KinematicTree:

@@ -156,22 +156,16 @@ class _BodyAxes:
 
     @classmethod
     def of(cls, layout: Layout) -> _BodyAxes:
-        """Find the joints by name (Azure Kinect and Kinect v2 names)."""
-        names = {name: i for i, name in enumerate(layout.joint_names)}
-        root = layout.parents.index(-1)
-        neck = names.get("Neck", -1)
-        left = np.array([names.get("HipLeft", -1), names.get("ShoulderLeft", -1)])
-        right = np.array([names.get("HipRight", -1), names.get("ShoulderRight", -1)])
-        torso_names = ("SpineNaval", "SpineMid", "SpineChest", "SpineShoulder", "Neck")
-        torso = np.array([root] + [names[n] for n in torso_names if n in names])
-        pairs = (("AnkleLeft", "FootLeft"), ("AnkleRight", "FootRight"), ("Head", "Nose"))
-        pointers = np.array(
-            [(names[a], names[b]) for a, b in pairs if a in names and b in names], dtype=np.int64
-        ).reshape(-1, 2)
-        has_front = neck >= 0 and bool((left >= 0).all() and (right >= 0).all())
+        """The layout's named body joints (``Layout.body``) as the kernels' arrays."""
+        joints = layout.body
+        left, right = np.array(joints.left), np.array(joints.right)
+        torso = np.array(joints.torso)
+        head = [joints.head] if joints.head else []
+        pointers = np.array([*joints.feet, *head], dtype=np.int64).reshape(-1, 2)
+        has_front = joints.neck >= 0 and bool((left >= 0).all() and (right >= 0).all())
         body = BodyLayout(
-            root=root,
-            neck=neck,
+            root=joints.root,
+            neck=joints.neck,
             left=left,
             right=right,
             torso=torso,

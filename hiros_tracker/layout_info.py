@@ -86,7 +86,7 @@ class _BodyFrame:
 
     root: int
     neck: int
-    left: np.ndarray  # shoulder and hip on the left
+    left: np.ndarray  # hip and shoulder on the left (``Layout.body.sides``)
     right: np.ndarray
     feet: np.ndarray  # (2, 2) ankle -> foot, left and right
     head: np.ndarray  # (2,) head -> nose, or empty
@@ -104,20 +104,15 @@ class _BodyFrame:
 
 @cache
 def _body_frame(layout: Layout) -> _BodyFrame:
-    names = {name: i for i, name in enumerate(layout.joint_names)}
-
-    def pair(a: str, b: str) -> list[int]:
-        return [names[a], names[b]] if a in names and b in names else []
-
-    sides = [pair(f"{j}Left", f"{j}Right") for j in ("Shoulder", "Hip")]
-    feet = [p for p in (pair("AnkleLeft", "FootLeft"), pair("AnkleRight", "FootRight")) if p]
+    body = layout.body
+    left, right = body.sides
     return _BodyFrame(
-        root=layout.parents.index(-1),
-        neck=names.get("Neck", -1),
-        left=np.array([s[0] for s in sides if s], dtype=np.int64),
-        right=np.array([s[1] for s in sides if s], dtype=np.int64),
-        feet=np.array(feet, dtype=np.int64).reshape(-1, 2),
-        head=np.array(pair("Head", "Nose"), dtype=np.int64),
+        root=body.root,
+        neck=body.neck,
+        left=left,
+        right=right,
+        feet=np.array(body.feet, dtype=np.int64).reshape(-1, 2),
+        head=np.array(body.head, dtype=np.int64),
     )
 
 

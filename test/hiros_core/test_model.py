@@ -36,6 +36,38 @@ def test_azure_layout_tree_and_mirror() -> None:
     assert np.array_equal(KINECT_V2.mirror[KINECT_V2.mirror], np.arange(25))
 
 
+def test_body_joints_are_found_by_name_in_both_kinect_layouts() -> None:
+    """Hips before shoulders on each side, the spine bottom up, the facing pointers."""
+    for layout in (AZURE_KINECT, KINECT_V2):
+        body, at = layout.body, layout.index
+        assert body.left == (at("HipLeft"), at("ShoulderLeft"))
+        assert body.right == (at("HipRight"), at("ShoulderRight"))
+        assert body.neck == at("Neck")
+        assert body.torso[0] == layout.parents.index(-1)
+        assert body.torso[-1] == at("Neck")
+        assert body.feet == ((at("AnkleLeft"), at("FootLeft")), (at("AnkleRight"), at("FootRight")))
+        left, right = body.sides
+        assert np.array_equal(layout.mirror[left], right)
+    assert AZURE_KINECT.body.head == (AZURE_KINECT.index("Head"), AZURE_KINECT.index("Nose"))
+    assert KINECT_V2.body.head == ()  # Kinect v2 has no nose
+
+
+def test_body_joints_leave_out_what_a_layout_lacks(tmp_path) -> None:
+    path = tmp_path / "few.yaml"
+    path.write_text(
+        "name: few\njoints: [Pelvis, Neck, HipLeft, HipRight, ShoulderLeft]\n"
+        "parents: [-1, 0, 0, 0, 1]\n"
+    )
+    body = get_layout(path).body
+    assert body.right == (3, -1)  # no right shoulder
+    assert body.torso == (0, 1)
+    assert body.feet == ()
+    assert body.head == ()
+    left, right = body.sides
+    assert left.tolist() == [2]
+    assert right.tolist() == [3]
+
+
 def test_layout_from_yaml_and_errors(tmp_path) -> None:
     path = tmp_path / "three.yaml"
     path.write_text("name: three\njoints: [Root, Mid, TipLeft]\nparents: [-1, 0, 1]\n")
