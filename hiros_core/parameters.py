@@ -97,6 +97,19 @@ _MERGER_REMOVED = {
     ),
     "extrapolate": "the merger always extrapolates; max_extrapolation 0 turns it off",
     "limb_residuals": "the merger always weighs a camera's limb whole",
+    **{
+        name: f"hiros_merger fixes it as the constant {constant}"
+        for name, constant in (
+            ("confidence_power", "CONFIDENCE_POWER"),
+            ("confidence_floor", "CONFIDENCE_FLOOR"),
+            ("staleness_scale", "STALENESS_SCALE"),
+            ("occlusion_weight", "OCCLUSION_WEIGHT"),
+            ("iterations", "ROBUST_ITERATIONS"),
+            ("outlier_cutoff", "OUTLIER_CUTOFF"),
+            ("limb_cutoff", "LIMB_CUTOFF"),
+            ("max_jump", "MAX_JUMP"),
+        )
+    },
 }
 
 _COMPILED = "the optimizer and the filter always run their compiled kernels"

@@ -15,17 +15,17 @@ Data flow of ``Merger.update`` (one call per tracker output; the node calls exac
 Reliability of joint ``j`` of the detection of camera ``c`` (after Colombel et al., 2021, who
 weight each camera by confidence, distance and view; the product form is ours)::
 
-    w = conf^confidence_power            SDK confidence (occluded joints come as LOW)
+    w = conf^CONFIDENCE_POWER            SDK confidence (occluded joints come as LOW)
         × (1 + depth_gain · depth)^-2    depth noise grows ~linearly with distance (variance ²)
         × view(cos θ)                     θ: angle between the body's front and the camera
         × flipped                         ``flipped_weight`` if the detection's feet and nose
                                           point backwards (a front/back flip), which is first
                                           reflected back through its frontal plane
         × occlusion                       another person's torso on the camera's ray
-        × staleness                       1 / (1 + (Δt / staleness_scale)²)
+        × staleness                       1 / (1 + (Δt / STALENESS_SCALE)²)
 
 then the robust mean multiplies by a Cauchy weight ``1 / (1 + (r / outlier_scale)²)`` of each
-joint's distance ``r`` to the current estimate (0 beyond ``outlier_cutoff``), starting from the
+joint's distance ``r`` to the current estimate (0 beyond ``OUTLIER_CUTOFF``), starting from the
 weighted median, so that one camera's flipped limb or swapped leg does not pull the result.
 ``r`` is the mean over the joint's limb in that detection: a camera's limb
 is weighed whole, so the fused limb is one weighted mean of the cameras' limbs rather than
@@ -67,7 +67,19 @@ from hiros_merger.kernel_args import (
 )
 from hiros_merger.latest import LatestDetections
 
-__all__ = ["OTHER_FRAME", "Merger", "MergerParams"]
+__all__ = [
+    "CONFIDENCE_FLOOR",
+    "CONFIDENCE_POWER",
+    "LIMB_CUTOFF",
+    "MAX_JUMP",
+    "OCCLUSION_WEIGHT",
+    "OTHER_FRAME",
+    "OUTLIER_CUTOFF",
+    "ROBUST_ITERATIONS",
+    "STALENESS_SCALE",
+    "Merger",
+    "MergerParams",
+]
 
 T = TypeVar("T")
 
@@ -79,6 +91,32 @@ _Z_UP = np.array([0.0, 0.0, 1.0])
 OTHER_FRAME = "not in the world frame"
 """Drop reason of the detections of an input group in another frame than the world's."""
 
+# The fusion's settings no setup needs to change (they were parameters of the merger node):
+CONFIDENCE_POWER = 2.0
+"""Exponent of the SDK confidence in a joint's weight: squared, as a variance weighs."""
+CONFIDENCE_FLOOR = 0.05
+"""Smallest confidence used in the weight: a joint the SDK gives NONE still counts a little."""
+STALENESS_SCALE = 0.05
+"""Seconds; a detection of age Δt weighs ``1 / (1 + (Δt / STALENESS_SCALE)²)``: a frame older
+than the others (one 30 Hz period and more) counts for less than a fresh one."""
+OCCLUSION_WEIGHT = 0.5
+"""Weight factor of a joint behind another person's torso (``occlusion_radius``)."""
+ROBUST_ITERATIONS = 3
+"""Reweighting iterations of the robust mean, from the weighted median (a numerical choice)."""
+OUTLIER_CUTOFF = 0.4
+"""Metres; a joint (its limb's mean distance) farther than this from the estimate gets no
+weight, as long as another camera's joint is within it: a flipped limb is out, not just less."""
+LIMB_CUTOFF = 0.8
+"""Metres; a camera's limb (torso, head, each arm, each leg) one of whose joints is this far
+from the estimate gets no weight (a single joint's blunder), as long as another camera's is
+within it."""
+MAX_JUMP = 1.0
+"""Seconds; input stamped this much before the newest input so far restarts the merger (its
+detections and output clock, counted ``stamps went back``): the earlier input was stamped far
+ahead by mistake, or its source restarted (a replayed recording looping). Without it every
+later detection would be older than the one kept and dropped, for good. Tracker outputs are
+never a second late."""
+
 
 @dataclass
 class MergerParams:
@@ -89,8 +127,6 @@ class MergerParams:
         output_rate: Hz; 0 outputs on each input at its newest stamp.
         max_extrapolation: seconds; each detection is brought to the output time with its
             joint velocities, over this much time at most (0 turns extrapolation off).
-        confidence_power: exponent of the SDK confidence in the weight.
-        confidence_floor: smallest confidence used (a NONE joint still counts a little).
         depth_gain: per metre; the depth weight is ``(1 + depth_gain · depth)^-2``.
         oblique_gain: the view weight is ``1 / (1 + oblique_gain · |sin θ|)²``, θ the angle
             between the body's front and the direction to the camera: a body seen from the
@@ -103,44 +139,23 @@ class MergerParams:
             scene's up, ``Merger.up``), and weighs this much: the plane is itself an estimate.
         occlusion_radius: metres; a joint whose camera ray passes this close to another
             person's torso, in front of the joint, is occluded (0 turns the check off).
-        occlusion_weight: weight factor of an occluded joint.
-        staleness_scale: seconds; scale of the weight of older detections.
-        outlier_scale: metres; Cauchy scale of the robust mean.
-        outlier_cutoff: metres; a joint farther than this from the estimate gets no weight (as
-            long as another camera's joint is within it): a flipped limb is out, not just less.
-        iterations: reweighting iterations of the robust mean.
-        limb_cutoff: metres; a camera's limb (torso, head, each arm, each leg) one of whose
-            joints is this far from the estimate gets no weight (a single joint's blunder).
-            The robust mean weighs each camera's limb whole, by its mean joint distance to
-            the estimate: an SDK's errors are coherent along a limb, and joints taken from
-            different cameras' versions of one limb bend it (angle spikes) even when each
-            camera has the angle right.
+        outlier_scale: metres; Cauchy scale of the robust mean. The robust mean weighs each
+            camera's limb whole, by its mean joint distance to the estimate: an SDK's errors
+            are coherent along a limb, and joints taken from different cameras' versions of
+            one limb bend it (angle spikes) even when each camera has the angle right.
         track_timeout: seconds; a track unseen this long is forgotten.
-        max_jump: seconds; input stamped this much before the newest input so far restarts
-            the merger (its detections and output clock, counted ``stamps went back``): the
-            earlier input was stamped far ahead by mistake, or its source restarted (a
-            replayed recording looping). Without it every later detection would be older
-            than the one kept and dropped, for good.
 
     """
 
     window: float = 0.1
     output_rate: float = 0.0
     max_extrapolation: float = 0.1
-    confidence_power: float = 2.0
-    confidence_floor: float = 0.05
     depth_gain: float = 0.33
     oblique_gain: float = 1.0
     flipped_weight: float = 0.5
     occlusion_radius: float = 0.2
-    occlusion_weight: float = 0.5
-    staleness_scale: float = 0.05
     outlier_scale: float = 0.4
-    outlier_cutoff: float = 0.4
-    iterations: int = 3
     track_timeout: float = 1.0
-    max_jump: float = 1.0
-    limb_cutoff: float = 0.8
 
 
 @dataclass(frozen=True)
@@ -222,7 +237,22 @@ def _read(bundle: type[T], params: MergerParams, **given: object) -> T:
 
 def _fuse_settings(params: MergerParams) -> FuseSettings:
     """The fusion's parameters as the kernels read them."""
-    return FuseSettings(_read(WeightSettings, params), _read(RobustSettings, params))
+    weights = _read(
+        WeightSettings,
+        params,
+        confidence_power=CONFIDENCE_POWER,
+        confidence_floor=CONFIDENCE_FLOOR,
+        staleness_scale=STALENESS_SCALE,
+        occlusion_weight=OCCLUSION_WEIGHT,
+    )
+    robust = _read(
+        RobustSettings,
+        params,
+        iterations=ROBUST_ITERATIONS,
+        outlier_cutoff=OUTLIER_CUTOFF,
+        limb_cutoff=LIMB_CUTOFF,
+    )
+    return FuseSettings(weights, robust)
 
 
 def _quaternion_mean(quaternions: np.ndarray, weights: np.ndarray) -> np.ndarray:
@@ -352,9 +382,9 @@ class Merger(Accounted):
         return group.frame_id == self._world_frame
 
     def _went_back(self, stamp_ns: int) -> bool:
-        """Whether input stamped ``stamp_ns`` lies ``max_jump`` before the newest so far."""
+        """Whether input stamped ``stamp_ns`` lies ``MAX_JUMP`` before the newest so far."""
         newest = self._newest_in_ns
-        back = newest is not None and stamp_ns < newest - round(self.params.max_jump * 1e9)
+        back = newest is not None and stamp_ns < newest - round(MAX_JUMP * 1e9)
         if newest is None or back or stamp_ns > newest:
             self._newest_in_ns = stamp_ns
         return back

@@ -74,7 +74,6 @@ RANGES: dict[str, tuple[float, float]] = {
             "min_confidence",
             "min_link_presence",
             "min_peak",
-            "occlusion_weight",
             "position_smoothing",
         ),
         (0.0, 1.0),

@@ -96,3 +96,20 @@ def test_an_old_pipeline_file_loads_without_the_stages_removed_parameters(tmp_pa
         "optimizer.sweeps",
     ]
     assert "constant RATE_TOLERANCE" in messages[0]
+
+
+def test_a_name_one_node_retired_stays_another_node_s_parameter(tmp_path: Path) -> None:
+    """max_jump and confidence_floor became constants of the merger only: the tracker and the
+    optimizer keep their own, from the same file."""
+    path = tmp_path / "pipeline.yaml"
+    path.write_text(
+        "pipeline:\n  ros__parameters:\n"
+        "    merger: {max_jump: 2.0, confidence_floor: 0.1}\n"
+        "    tracker: {max_jump: 2.0}\n    optimizer: {confidence_floor: 0.2}\n"
+    )
+    with pytest.warns(RemovedParameterWarning) as caught:
+        values = load_config_defaults("pipeline", path)
+    assert values == {"tracker.max_jump": 2.0, "optimizer.confidence_floor": 0.2}
+    messages = sorted(str(w.message).split(": parameter ")[1] for w in caught)
+    assert [m.split()[0] for m in messages] == ["merger.confidence_floor", "merger.max_jump"]
+    assert "constant MAX_JUMP" in messages[1]

@@ -15,7 +15,7 @@ from merger_reference import reference_fuse
 
 from hiros_core.layouts import AZURE_KINECT
 from hiros_merger import kernels
-from hiros_merger.kernel_args import Fusion, TrackDetections
+from hiros_merger.kernel_args import FuseSettings, Fusion, TrackDetections
 from hiros_merger.merger import MergerParams, _axes, _fuse_settings
 
 AXES = _axes(AZURE_KINECT)
@@ -81,18 +81,30 @@ def _frame(rng: np.random.Generator) -> TrackDetections:
 PARAMS = st.builds(
     MergerParams,
     max_extrapolation=st.sampled_from([0.0, 0.1]),
-    iterations=st.integers(0, 4),
-    confidence_power=st.sampled_from([1.0, 1.5, 2.0]),
     oblique_gain=st.sampled_from([0.0, 1.0]),
     occlusion_radius=st.sampled_from([0.0, 0.2, 0.4]),
 )
 
 
 @settings(max_examples=60, deadline=None)
-@given(seed=st.integers(0, 2**32 - 1), params=PARAMS, tilt=st.sampled_from([np.nan, 0.0, 0.2]))
-def test_fuse_equals_the_numpy_statement(seed: int, params: MergerParams, tilt: float) -> None:
+@given(
+    seed=st.integers(0, 2**32 - 1),
+    params=PARAMS,
+    iterations=st.integers(0, 4),
+    confidence_power=st.sampled_from([1.0, 1.5, 2.0]),
+    tilt=st.sampled_from([np.nan, 0.0, 0.2]),
+)
+def test_fuse_equals_the_numpy_statement(
+    seed: int, params: MergerParams, iterations: int, confidence_power: float, tilt: float
+) -> None:
+    """Over the parameters and, beyond the merger's constants, the robust mean's iterations
+    and the confidence's power (the kernels take them as settings)."""
     detections = _frame(np.random.default_rng(seed))
-    fuse_settings = _fuse_settings(params)
+    settings_ = _fuse_settings(params)
+    fuse_settings = FuseSettings(
+        settings_.weights._replace(confidence_power=confidence_power),
+        settings_.robust._replace(iterations=iterations),
+    )
     up = np.array([tilt, 0.0, 1.0]) / np.hypot(tilt, 1.0)  # NaN: the scene's up not known yet
     got = kernels.fuse(detections, fuse_settings, AXES.body, up)
     want = reference_fuse(detections, fuse_settings, AXES.body, up)

@@ -246,7 +246,7 @@ def test_a_front_back_flipped_view_is_reflected_back():
     flipped = pose.copy()
     flipped[:, 0] = 2 * pose[0, 0] - pose[:, 0]  # reflected through the frontal plane
     flipped += np.array([0.0, 0.0, 0.05])  # its own error, which it keeps
-    params = MergerParams(outlier_scale=10.0, outlier_cutoff=10.0, limb_cutoff=10.0)
+    params = MergerParams(outlier_scale=10.0)
     merger = Merger(params)
     merger.update(_group([_detection(pose, "k01")]))  # the people's vertical: z
     np.testing.assert_allclose(merger.up, [0.0, 0.0, 1.0])

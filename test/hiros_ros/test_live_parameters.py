@@ -25,8 +25,8 @@ def test_the_stage_nodes_hand_changes_to_their_stages(ros_context) -> None:
     try:
         assert set_one(tracker, "gate_distance", 0.8).successful
         assert tracker.tracker.params.gate_distance == 0.8
-        assert set_one(merger, "confidence_power", 1.0).successful
-        assert merger.stage.params.confidence_power == 1.0
+        assert set_one(merger, "oblique_gain", 0.5).successful
+        assert merger.stage.params.oblique_gain == 0.5
         assert set_one(pipeline, "merger.depth_gain", 0.5).successful
         assert set_one(pipeline, "filter.measurement_noise", 0.02).successful
         assert set_one(pipeline, "tracker.min_hits", 3).successful

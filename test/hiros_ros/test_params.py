@@ -117,6 +117,21 @@ def test_a_parameter_another_node_retired_is_not_reported(make_node, monkeypatch
     assert logged == []
 
 
+def test_a_name_one_node_retired_is_reported_by_that_node_only(make_node, monkeypatch) -> None:
+    """The merger's max_jump is a constant; the tracker's is a parameter."""
+    merger = make_node("-p", "max_jump:=2.0", name="merger")
+    logged = _keep_warnings(merger, monkeypatch)
+    declare_params(merger, DemoParams)
+    assert logged == [
+        "parameter max_jump is ignored (hiros_merger fixes it as the constant MAX_JUMP); "
+        "remove it from the parameter file"
+    ]
+    tracker = make_node("-p", "max_jump:=2.0", name="tracker")
+    logged = _keep_warnings(tracker, monkeypatch)
+    declare_params(tracker, DemoParams)
+    assert logged == []
+
+
 def test_a_calib_setting_that_became_a_constant_is_ignored_with_a_warning(
     make_node, monkeypatch
 ) -> None:
