@@ -139,10 +139,22 @@ REMOVED_PARAMETERS: dict[str, dict[str, str]] = {
         "compiled": _COMPILED,
         "sweeps": "hiros_optimizer fixes it as the constant SWEEPS",
         "refinements": "hiros_optimizer fixes it as the constant REFINEMENTS",
+        **{
+            name: f"hiros_optimizer fixes it as the constant {name.upper()}"
+            for name in ("min_link_presence", "outlier_threshold", "outlier_distance")
+        },
     },
     "filter": {
         "compiled": _COMPILED,
         "rate_tolerance": "hiros_filter fixes it as the constant RATE_TOLERANCE",
+        **{
+            name: f"hiros_filter fixes it as the constant {name.upper()}"
+            for name in ("max_noise_scale", "max_gap", "track_timeout")
+        },
+    },
+    "visualizer": {
+        "label_height": "hiros_visualizer fixes it as the constant LABEL_HEIGHT (markers.py)",
+        "arrow_time": "hiros_visualizer fixes it as the constant ARROW_TIME (overlays.py)",
     },
     "azure_bridge": _BRIDGE_REMOVED,
     "generic_bridge": _BRIDGE_REMOVED,

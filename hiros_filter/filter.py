@@ -18,7 +18,7 @@ Per track id and per joint, three causal estimators run side by side
   sample ``1 - exp(-2π f_c dt)`` (the discrete first-order low-pass at
   ``orientation_cutoff_frequency``), and the angular velocity from consecutive outputs.
 
-A track unseen for more than ``max_gap`` seconds, or a joint absent that long, restarts from its
+A track unseen for more than ``MAX_GAP`` seconds, or a joint absent that long, restarts from its
 next measurement (no extrapolation across gaps, no blow-up); a joint absent for a shorter time
 is carried by the Kalman prediction so the low-pass keeps a continuous input, and stays absent in
 the output. Frames whose stamp is not after the track's last one are dropped with a count.
@@ -40,7 +40,14 @@ from hiros_core.stacking import LayoutRows, output_skeletons, stack_frame
 from hiros_filter.estimators import ButterworthBank, KalmanBank
 from hiros_filter.lengths import LengthKeeper
 
-__all__ = ["Filter", "FilterParams"]
+__all__ = [
+    "MAX_GAP",
+    "MAX_NOISE_SCALE",
+    "RATE_TOLERANCE",
+    "TRACK_TIMEOUT",
+    "Filter",
+    "FilterParams",
+]
 
 _FILTERS = ("butterworth", "kalman")
 _RATE_WINDOW = 64  # recent frame intervals the sampling rate is estimated from
@@ -51,6 +58,19 @@ RATE_TOLERANCE = 0.15
 
 A camera's frame rate is fixed (15 or 30 Hz), so the estimate moves only with jitter or a
 changed source: 15 % ignores the jitter and catches a 30 -> 15 Hz change."""
+
+MAX_NOISE_SCALE = 10.0
+"""Largest factor of the adaptive process noise: a joint whose innovations are larger than the
+Kalman filter expects (a movement starting) gets its process noise scaled up by their
+normalised size, smoothed, up to this factor."""
+
+MAX_GAP = 0.5
+"""Seconds a track or joint may be unseen before it restarts from its next measurement: longer
+than a few dropped frames at 15 Hz, shorter than the motion stays predictable."""
+
+TRACK_TIMEOUT = 5.0
+"""Seconds after which an unseen track's state is freed (its id is the tracker's: a track
+back after that restarts, as after ``MAX_GAP``)."""
 
 
 @dataclass
@@ -67,13 +87,8 @@ class FilterParams:
         cutoff_frequency: Hz, -3 dB point of the low-pass.
         sample_frequency: Hz of the input; <= 0 estimates it from the stamps.
         jerk_spectral_density: Kalman process noise, m^2/s^5 (higher: follows faster, smooths less).
-        max_noise_scale: adaptive process noise: a joint whose innovations are larger than the
-            filter expects (a movement starting) gets its process noise scaled up by their
-            normalised size, smoothed, up to this factor (1 = fixed noise).
         measurement_noise: Kalman position noise, metres (standard deviation).
         orientation_cutoff_frequency: Hz of the orientation smoothing.
-        max_gap: seconds a track or joint may be unseen before it restarts.
-        track_timeout: seconds after which an unseen track's state is freed.
         keep_link_lengths: links whose input length does not change from frame to frame (the
             optimizer's calibrated links) keep that length in the output, with velocities and
             accelerations that agree with it (:mod:`hiros_filter.lengths`).
@@ -85,11 +100,8 @@ class FilterParams:
     cutoff_frequency: float = 6.0
     sample_frequency: float = -1.0
     jerk_spectral_density: float = 300.0
-    max_noise_scale: float = 10.0
     measurement_noise: float = 0.01
     orientation_cutoff_frequency: float = 6.0
-    max_gap: float = 0.5
-    track_timeout: float = 5.0
     keep_link_lengths: bool = True
 
     def __post_init__(self) -> None:
@@ -99,13 +111,11 @@ class FilterParams:
         if self.butterworth_order < 1 or self.cutoff_frequency <= 0:
             msg = "butterworth_order must be >= 1 and cutoff_frequency > 0 Hz"
             raise ConfigError(msg)
-        if min(self.jerk_spectral_density, self.measurement_noise) <= 0 or (
-            self.max_noise_scale < 1
-        ):
-            msg = "jerk_spectral_density, measurement_noise must be > 0, max_noise_scale >= 1"
+        if min(self.jerk_spectral_density, self.measurement_noise) <= 0:
+            msg = "jerk_spectral_density and measurement_noise must be > 0"
             raise ConfigError(msg)
-        if self.orientation_cutoff_frequency <= 0 or self.max_gap <= 0:
-            msg = "orientation_cutoff_frequency and max_gap must be > 0"
+        if self.orientation_cutoff_frequency <= 0:
+            msg = "orientation_cutoff_frequency must be > 0"
             raise ConfigError(msg)
 
 
@@ -141,7 +151,7 @@ class _Tracks:
             (capacity, self.n_joints),
             params.jerk_spectral_density,
             params.measurement_noise,
-            max_noise_scale=params.max_noise_scale,
+            max_noise_scale=MAX_NOISE_SCALE,
         )
         self.low_pass: ButterworthBank | None = None
         self.designed_for = np.zeros(capacity)  # rate each slot's low-pass state belongs to
@@ -163,7 +173,6 @@ class _Tracks:
         kalman.q = params.jerk_spectral_density
         kalman.r = r
         kalman.initial[0, 0] = kalman.r
-        kalman.max_noise_scale = params.max_noise_scale
         self.low_pass = None
         self.designed_for[:] = 0.0
         self._kernel_arguments = None
@@ -272,7 +281,7 @@ class Filter(Accounted):
         out = SkeletonGroup(group.stamp_ns, group.frame_id, [])
         batches: dict[str, tuple[list[Skeleton], list[_Running], LayoutRows]] = {}
         seen: set[int] = set()
-        max_gap_ns = round(self.params.max_gap * 1e9)
+        max_gap_ns = round(MAX_GAP * 1e9)
         places = stack_frame(group.skeletons, self.drops) if group.skeletons else []
         for skeleton, place in zip(group.skeletons, places, strict=True):
             if place is None or not self._valid(skeleton, seen):
@@ -315,7 +324,7 @@ class Filter(Accounted):
     def _continues(self, elapsed_ns: int, max_gap_ns: int) -> bool | None:
         """Whether a track's new frame continues it (True), restarts it (False) or is dropped.
 
-        A frame far (over ``max_gap``) before the track's previous one restarts the track:
+        A frame far (over ``MAX_GAP``) before the track's previous one restarts the track:
         the previous stamp was a glitch or the source restarted, and dropping would stop
         the track for good after one frame stamped far in the future.
         """
@@ -407,7 +416,7 @@ class Filter(Accounted):
         kalman, model, lengths, orientations, link_ends = tracks.kernel_arguments(self.params)
         return filter_step(
             kalman, model,
-            (rows, tracks.time_ns, tracks.joint_time_ns, round(self.params.max_gap * 1e9)),
+            (rows, tracks.time_ns, tracks.joint_time_ns, round(MAX_GAP * 1e9)),
             (markers, present, stamps), lengths, orientations, link_ends,
         )  # fmt: skip
 
@@ -422,7 +431,7 @@ class Filter(Accounted):
         """Filter the ``(n, J, 20)`` rows of running tracks in place (and their state)."""
         dt = (stamps - tracks.time_ns[rows]) * 1e-9
         measured = markers[..., 1:4]
-        max_gap_ns = round(self.params.max_gap * 1e9)
+        max_gap_ns = round(MAX_GAP * 1e9)
         joint_time_ns = tracks.joint_time_ns[rows]
         restart = present & (stamps[:, None] - joint_time_ns > max_gap_ns)
         kalman = tracks.kalman
@@ -524,7 +533,7 @@ class Filter(Accounted):
         previous = np.where(begin, flat, previous)
         flat = np.nan_to_num(np.where(np.isfinite(flat), flat, previous))
         previous = np.nan_to_num(previous)
-        limit = max(1, round(self.params.max_gap * rate))
+        limit = max(1, round(MAX_GAP * rate))
         steps = np.clip(np.round(dt * rate).astype(int), 1, limit)
         output = np.empty((n, channels))
         for count in np.unique(steps):  # usually one: every track shares the frame's dt
@@ -573,7 +582,7 @@ class Filter(Accounted):
         np.copyto(markers[..., 17:20], tracks.angular_accelerations[rows], where=keep)
 
     def _forget_old_tracks(self, stamp_ns: int) -> None:
-        timeout_ns = round(self.params.track_timeout * 1e9)
+        timeout_ns = round(TRACK_TIMEOUT * 1e9)
         for tracks in self._layouts.values():
             times = tracks.time_ns.tolist()  # Python ints: cheaper to compare one by one
             for track_id, row in list(tracks.slots.items()):

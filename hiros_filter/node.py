@@ -14,11 +14,8 @@ LIVE = (
     "butterworth_order",
     "sample_frequency",
     "jerk_spectral_density",
-    "max_noise_scale",
     "measurement_noise",
     "orientation_cutoff_frequency",
-    "max_gap",
-    "track_timeout",
 )
 """Parameters applied while the node runs (``Filter.set_params``); the rest are read-only."""
 

@@ -1,6 +1,6 @@
 """Learning a person's limb lengths link by link, and what a person's learning has reached.
 
-A link's length is *learnt* once it is measured in at least ``min_link_presence`` of the last
+A link's length is *learnt* once it is measured in at least ``MIN_LINK_PRESENCE`` of the last
 ``N`` frames and its robust coefficient of variation (``1.4826 MAD / median``) over them is
 below ``max_calibration_coefficient_of_variation`` (Hi-ROS's acceptance rule, per link and with
 robust statistics so that a few bad frames do not spoil it). Each link locks on its own: a

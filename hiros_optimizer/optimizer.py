@@ -2,7 +2,7 @@
 
 Per track id the stage learns the limb (link) lengths from the person's frames, link by link
 (:mod:`hiros_optimizer.learning`): over the last ``number_of_frames_for_calibration`` frames a
-link measured in at least ``min_link_presence`` of them whose robust coefficient of variation
+link measured in at least ``MIN_LINK_PRESENCE`` of them whose robust coefficient of variation
 (``1.4826 MAD / median``) is below ``max_calibration_coefficient_of_variation`` is learnt, and
 from then on constrained to its (unbiased) median. Links not learnt yet keep learning from the
 raw measurements and follow them meanwhile, so chronically noisy or unseen short links (hand
@@ -15,8 +15,8 @@ Once a link is constrained, each frame's joints are replaced by the positions cl
 measurement, weighted by confidence, that keep the learnt lengths exactly
 (:func:`hiros_optimizer.kinematics.fit_fixed_lengths`, all people of a layout at once).
 Outliers are joints that break the body and the motion at once: a joint at either end of a link
-whose measured length is off by more than ``outlier_threshold`` (relative, Hi-ROS's rule) is
-down-weighted by ``(outlier_distance / d)^2`` when it lies ``d > outlier_distance`` from the
+whose measured length is off by more than ``OUTLIER_THRESHOLD`` (relative, Hi-ROS's rule) is
+down-weighted by ``(OUTLIER_DISTANCE / d)^2`` when it lies ``d > OUTLIER_DISTANCE`` from the
 motion prediction (last output + velocity × dt). Requiring both keeps fast but consistent
 motion (a whole arm swinging 25 cm in a frame) at full weight, and tells which end of a broken
 link jumped. A small prior towards the prediction (``prior_weight``) keeps unmeasured or
@@ -44,6 +44,9 @@ from hiros_optimizer.learning import PersonProgress, limb_links, window_statisti
 from hiros_optimizer.memory import FitSettings, Memory
 
 __all__ = [
+    "MIN_LINK_PRESENCE",
+    "OUTLIER_DISTANCE",
+    "OUTLIER_THRESHOLD",
     "REFINEMENTS",
     "SWEEPS",
     "Optimizer",
@@ -59,6 +62,18 @@ REFINEMENTS = 2
 """Gauss-Newton steps on the length spheres that finish it (from the last frame's solution,
 a sweep and two steps are enough: a numerical choice, not a setting)."""
 
+MIN_LINK_PRESENCE = 0.5
+"""Fraction of a person's calibration frames a link must be measured in to be learnt; rarer
+links (a hand tip the SDK rarely sees) stay free."""
+
+OUTLIER_THRESHOLD = 0.2
+"""Relative link-length error that makes both ends of a link suspect (Hi-ROS's rule)."""
+
+OUTLIER_DISTANCE = 0.15
+"""Metres from the motion prediction beyond which a suspect joint is down-weighted, by
+``(OUTLIER_DISTANCE / d)^2``: a whole arm swinging 25 cm in a frame is motion, not an outlier,
+as long as its lengths hold."""
+
 
 @dataclass
 class OptimizerParams:
@@ -71,13 +86,8 @@ class OptimizerParams:
         number_of_frames_for_calibration: frames per person to learn the limb lengths from.
         max_calibration_coefficient_of_variation: a link's length is learnt (and from then
             on constrained) when its robust CV over those frames is below this.
-        min_link_presence: fraction of those frames a link must be measured in to be learnt;
-            rarer links stay free.
         acceptance_timeout: seconds from a track's first frame within which its limb links
             should be learnt; a person not accepted by then is reported with the reason.
-        outlier_threshold: relative link-length error that makes both ends of a link suspect.
-        outlier_distance: metres from the prediction beyond which a suspect joint is
-            down-weighted.
         prior_weight: weight of the motion prediction relative to a joint confidence of 1.
         confidence_floor: least weight of a present joint in the fit: the SDK's "none"
             confidence (0) still carries a usable estimate, far better than extrapolation.
@@ -91,10 +101,7 @@ class OptimizerParams:
 
     number_of_frames_for_calibration: int = 60
     max_calibration_coefficient_of_variation: float = 0.2
-    min_link_presence: float = 0.5
     acceptance_timeout: float = 5.0
-    outlier_threshold: float = 0.2
-    outlier_distance: float = 0.15
     prior_weight: float = 0.01
     confidence_floor: float = 0.1
     track_timeout: float = 1.0
@@ -109,16 +116,11 @@ class OptimizerParams:
         if self.max_calibration_coefficient_of_variation <= 0:
             msg = "max_calibration_coefficient_of_variation must be greater than 0"
             raise ConfigError(msg)
-        if not 0 < self.min_link_presence <= 1:
-            msg = "min_link_presence must be in (0, 1]"
-            raise ConfigError(msg)
         if not self.acceptance_timeout > 0:
             msg = "acceptance_timeout must be greater than 0 seconds"
             raise ConfigError(msg)
-        if min(self.outlier_threshold, self.outlier_distance) <= 0 or (
-            min(self.prior_weight, self.confidence_floor) < 0
-        ):
-            msg = "outlier_threshold, outlier_distance must be > 0; prior_weight, floor >= 0"
+        if min(self.prior_weight, self.confidence_floor) < 0:
+            msg = "prior_weight and confidence_floor must be 0 or more"
             raise ConfigError(msg)
 
 
@@ -236,7 +238,7 @@ class Optimizer(Accounted):
         self._memories: dict[str, Memory] = {}
         params = self.params
         self._settings = FitSettings(
-            params.confidence_floor, params.outlier_threshold, params.outlier_distance,
+            params.confidence_floor, OUTLIER_THRESHOLD, OUTLIER_DISTANCE,
             params.prior_weight, params.track_timeout, SWEEPS, REFINEMENTS,
         )  # fmt: skip
         self.new_calibrations: list[int] = []
@@ -506,7 +508,7 @@ class Optimizer(Accounted):
         layout = memory.layout
         statistics = window_statistics(
             memory.window[[item.track.row for item in due]],
-            params.min_link_presence,
+            MIN_LINK_PRESENCE,
             params.max_calibration_coefficient_of_variation,
         )
         links, limbs = layout.link_children, limb_links(layout)

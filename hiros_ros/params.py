@@ -72,7 +72,6 @@ RANGES: dict[str, tuple[float, float]] = {
             "max_ambiguity",
             "min_calibrated_fraction",
             "min_confidence",
-            "min_link_presence",
             "min_peak",
             "position_smoothing",
         ),
@@ -90,7 +89,6 @@ RANGES: dict[str, tuple[float, float]] = {
         (1, _INT_MAX),
     ),
     "number_of_frames_for_calibration": (3, _INT_MAX),
-    "max_noise_scale": (1.0, math.inf),
     "sample_frequency": (-math.inf, math.inf),  # <= 0: estimated from the stamps
 }
 """Range of a numeric parameter by (leaf) name; one not listed may be any value >= 0."""

@@ -23,6 +23,7 @@ from hiros_core.layouts import Layout
 from hiros_core.model import SkeletonGroup, shared_stack, warm_up_group
 
 __all__ = [
+    "LABEL_HEIGHT",
     "VisualizerParams",
     "encode_skeleton_markers",
     "id_color",
@@ -38,6 +39,10 @@ _NO_COLORS = np.empty((0, 4), dtype=np.float32)
 _NO_COLORS.flags.writeable = False
 
 
+LABEL_HEIGHT = 0.12
+"""Height (m) of the id label's text, drawn above each skeleton: readable from across a room."""
+
+
 @dataclass
 class VisualizerParams:
     """How skeletons are drawn."""
@@ -46,8 +51,6 @@ class VisualizerParams:
     """Diameter (m) of a joint's sphere."""
     link_width: float = 0.02
     """Width (m) of the lines between joints."""
-    label_height: float = 0.12
-    """Height (m) of the id label's text, drawn above each skeleton."""
     lifetime: float = 0.25
     """Seconds a marker stays without a newer one (a lost skeleton disappears)."""
 
@@ -86,7 +89,7 @@ def skeleton_markers(
     data.ids[:] = [_marker_id(i, k) for i in ids for k in (0, 1, 2)]
     data.types[:] = _KINDS * len(skeletons)
     data.colors[:] = [_id_color(int(i)) for i in ids for _ in (0, 1, 2)]
-    sizes = (params.joint_size, params.link_width, params.label_height) * len(skeletons)
+    sizes = (params.joint_size, params.link_width, LABEL_HEIGHT) * len(skeletons)
     data.scales[:] = np.array(sizes)[:, None]
     layout = skeletons[0].layout
     if all(s.layout is layout for s in skeletons):

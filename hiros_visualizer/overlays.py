@@ -1,7 +1,7 @@
 """What the visualizer draws beside the skeletons, and the markers of people who left.
 
 * velocity and acceleration arrows (one ARROW per joint, from the joint to where the motion
-  would take it in ``arrow_time`` seconds: ``v t`` and ``a t^2`` metres), off by default;
+  would take it in ``ARROW_TIME`` seconds: ``v t`` and ``a t^2`` metres), off by default;
 * joint-angle text next to the joints asked for (``hiros_eval.body.JOINT_ANGLES``, degrees);
 * per-joint transforms (a TF frame per joint of each person) for tools that follow frames;
 * ``Drawing``: per topic, what was drawn, so that a person who left has their markers
@@ -29,6 +29,7 @@ from hiros_visualizer.markers import VisualizerParams, encode_skeleton_markers, 
 
 __all__ = [
     "ARROW",
+    "ARROW_TIME",
     "DELETE",
     "DELETEALL",
     "Drawing",
@@ -44,17 +45,19 @@ DELETE, DELETEALL = 2, 3
 _JOINT_SLOTS = 64  # marker ids per person in the per-joint namespaces (layouts have <= 32 joints)
 _MIN_ARROW = 0.005  # m: shorter arrows (a joint at rest) are not drawn
 
+ARROW_TIME = 0.2
+"""Seconds: an arrow reaches where the joint would be after this time (``v t``, ``a t^2`` m),
+long enough to see a walk's arrows, short enough not to cross the room."""
+
 
 @dataclass
 class OverlayParams:
     """What is drawn beside the skeletons (all off by default)."""
 
     velocity_arrows: bool = False
-    """Draw an arrow per joint to where its velocity would take it after arrow_time."""
+    """Draw an arrow per joint to where its velocity would take it after ``ARROW_TIME``."""
     acceleration_arrows: bool = False
-    """Draw an arrow per joint of its acceleration times arrow_time squared."""
-    arrow_time: float = 0.2
-    """s: an arrow reaches where the joint would be after this time (``v t``, ``a t^2`` m)."""
+    """Draw an arrow per joint of its acceleration times ``ARROW_TIME`` squared."""
     joint_angles: list[str] = field(default_factory=list)
     """Angles to print beside their joint, by name (``knee_left``, ``elbow_right``, ...)."""
 
@@ -116,7 +119,7 @@ def arrow_markers(
     Marker ids are ``64 * skeleton id + joint`` in ``<namespace>/<kind>``; colours are the
     person's, darker for accelerations.
     """
-    seconds = params.arrow_time if kind == "velocity" else params.arrow_time**2
+    seconds = ARROW_TIME if kind == "velocity" else ARROW_TIME**2
     rows, colors = [], []
     for skeleton in group.skeletons:
         vectors = skeleton.velocities if kind == "velocity" else skeleton.accelerations

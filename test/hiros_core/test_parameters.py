@@ -38,13 +38,13 @@ def test_a_parameter_file_for_all_nodes_is_read(tmp_path: Path) -> None:
 def test_an_old_file_setting_a_removed_parameter_loads_with_a_warning(tmp_path: Path) -> None:
     path = tmp_path / "params.yaml"
     path.write_text(
-        "pipeline:\n  ros__parameters:\n    filter: {compiled: true, max_gap: 0.4}\n"
+        "pipeline:\n  ros__parameters:\n    filter: {compiled: true, cutoff_frequency: 4.0}\n"
         "    optimizer: {compiled: false}\n    tracker: {compiled: true}\n"
     )
     with pytest.warns(RemovedParameterWarning) as caught:
         values = load_config_defaults("pipeline", path)
     # by node: the tracker never had it (the pipeline refuses it as unknown)
-    assert values == {"filter.max_gap": 0.4, "tracker.compiled": True}
+    assert values == {"filter.cutoff_frequency": 4.0, "tracker.compiled": True}
     assert sorted(str(w.message).split(": parameter ")[1].split()[0] for w in caught) == [
         "filter.compiled",
         "optimizer.compiled",

@@ -9,6 +9,7 @@ from scipy.spatial.transform import Rotation
 from hiros_core.errors import ConfigError
 from hiros_core.model import Skeleton, SkeletonGroup, sec_to_ns
 from hiros_filter import Filter, FilterParams
+from hiros_filter import filter as filter_module
 
 RATE = 30.0
 J = 32
@@ -89,7 +90,7 @@ def test_sampling_rate_is_estimated_and_followed():
 
 @pytest.mark.parametrize("mode", ["kalman", "butterworth"])
 def test_gap_and_new_track_restart_without_blow_up(mode):
-    stage = Filter(FilterParams(filter=mode, max_gap=0.3))
+    stage = Filter(FilterParams(filter=mode))  # back after 1 s: past MAX_GAP
     times = np.arange(30) / RATE
     moving = base_pose(4)[None] + times[:, None, None] * np.array([3.0, 0.0, 0.0])
     feed(stage, moving, times)
@@ -179,13 +180,14 @@ def test_params_are_checked():
         FilterParams(cutoff_frequency=0.0)
 
 
-def test_adaptive_noise_follows_a_movement_start_sooner():
+def test_adaptive_noise_follows_a_movement_start_sooner(monkeypatch):
     times = np.arange(60) / RATE
     start = np.clip(times - 1.0, 0.0, None)  # still for 1 s, then a 3 m/s swing
     trajectory = base_pose(8)[None] + start[:, None, None] * np.array([3.0, 0.0, 0.0])
     errors = {}
     for scale in (1.0, 10.0):
-        out = feed(Filter(FilterParams(max_noise_scale=scale)), trajectory, times)
+        monkeypatch.setattr(filter_module, "MAX_NOISE_SCALE", scale)  # 1: a fixed noise
+        out = feed(Filter(), trajectory, times)
         got = np.stack([s.positions for s in out[33:40]])  # after the first surprise
         errors[scale] = np.abs(got - trajectory[33:40]).max()
     assert errors[10.0] < 0.8 * errors[1.0]

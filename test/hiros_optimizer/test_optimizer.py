@@ -220,7 +220,7 @@ def test_params_are_checked():
     with pytest.raises(ConfigError):
         OptimizerParams(number_of_frames_for_calibration=1)
     with pytest.raises(ConfigError):
-        OptimizerParams(min_link_presence=0.0)
+        OptimizerParams(prior_weight=-0.1)
     with pytest.raises(ConfigError):
         OptimizerParams(acceptance_timeout=0.0)
 

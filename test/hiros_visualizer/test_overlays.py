@@ -9,7 +9,14 @@ from hiros_core.layouts import AZURE_KINECT, KINECT_V2
 from hiros_core.model import Skeleton, SkeletonGroup
 from hiros_eval.body import JOINT_ANGLES, joint_angles
 from hiros_visualizer import Drawing, OverlayParams, joint_transforms, overlays_from_names
-from hiros_visualizer.overlays import ARROW, DELETE, DELETEALL, angle_markers, arrow_markers
+from hiros_visualizer.overlays import (
+    ARROW,
+    ARROW_TIME,
+    DELETE,
+    DELETEALL,
+    angle_markers,
+    arrow_markers,
+)
 
 
 def person(seed, skeleton_id, layout=AZURE_KINECT):
@@ -25,7 +32,7 @@ def test_arrows_go_from_each_joint_along_its_motion():
     a = person(0, 4)
     a.velocities[3] = np.nan  # unknown velocity: no arrow
     a.velocities[5] = 0.0  # at rest: no arrow
-    params = OverlayParams(velocity_arrows=True, arrow_time=0.5)
+    params = OverlayParams(velocity_arrows=True)
     data = arrow_markers(SkeletonGroup(7, "world", [a]), "filter", "velocity", params, 0.25)
     assert set(data.types.tolist()) == {ARROW}
     assert set(data.namespaces) == {"filter/velocity"}
@@ -33,10 +40,12 @@ def test_arrows_go_from_each_joint_along_its_motion():
     assert joints == [j for j in range(AZURE_KINECT.n_joints) if j not in (3, 5)]
     for joint, points in zip(joints, data.points, strict=True):
         np.testing.assert_allclose(
-            points, [a.positions[joint], a.positions[joint] + 0.5 * a.velocities[joint]]
+            points, [a.positions[joint], a.positions[joint] + ARROW_TIME * a.velocities[joint]]
         )
     accel = arrow_markers(SkeletonGroup(7, "world", [a]), "filter", "acceleration", params, 0.25)
-    np.testing.assert_allclose(accel.points[0][1] - accel.points[0][0], 0.25 * a.accelerations[0])
+    np.testing.assert_allclose(
+        accel.points[0][1] - accel.points[0][0], ARROW_TIME**2 * a.accelerations[0]
+    )
 
 
 def test_joint_angles_as_text_beside_their_joint():
