@@ -156,6 +156,18 @@ REMOVED_PARAMETERS: dict[str, dict[str, str]] = {
         "label_height": "hiros_visualizer fixes it as the constant LABEL_HEIGHT (markers.py)",
         "arrow_time": "hiros_visualizer fixes it as the constant ARROW_TIME (overlays.py)",
     },
+    "tracker": {
+        **dict.fromkeys(
+            ("velocity_weight", "orientation_weight"),
+            "the tracker compares a detection with a track by joint positions only (the "
+            "velocity and orientation costs were off by default and earned nothing)",
+        ),
+        **dict.fromkeys(
+            ("flip_episode", "flip_misread"),
+            "the tracker weighs each detection's facing evidence on its own (SDK flip "
+            "episodes were off by default: on, they made hiros bench tracking worse)",
+        ),
+    },
     "azure_bridge": _BRIDGE_REMOVED,
     "generic_bridge": _BRIDGE_REMOVED,
 }

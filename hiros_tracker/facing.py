@@ -3,9 +3,9 @@
 An SDK sometimes reports a body front/back flipped (its left labelled right). Each detection
 of a track gives log-odds that the track's sides are right (``_facing_evidence``): the front
 its sides say against the way its feet and nose point, each hypothesis weighted by the flip
-prior of the view its camera would have, SDK flips followed as episodes
-(``_episode_evidence``) and walking forward as extra evidence. The log-odds fade over the
-facing memory; a track whose log-odds fall below minus the threshold is relabelled.
+prior of the view its camera would have, and walking forward as extra evidence. The log-odds
+fade over the facing memory; a track whose log-odds fall below minus the threshold is
+relabelled.
 """
 
 from __future__ import annotations
@@ -76,7 +76,7 @@ def _trunk_mean(
 
 
 @njit(cache=True, error_model="numpy")
-def _facing_evidence(  # noqa: PLR0915, PLR0917 - one loop over the frame's pairs
+def _facing_evidence(  # noqa: PLR0917 - one loop over the frame's pairs
     tracks: TrackFields,
     rows: np.ndarray,
     canonical: np.ndarray,
@@ -97,10 +97,8 @@ def _facing_evidence(  # noqa: PLR0915, PLR0917 - one loop over the frame's pair
       when ``a·f < 0``;
     - with the camera's position known, ``cos = f·unit(flat(camera - root))``: the track seen
       from the back (cos < -0.5) takes ``flip_prior_back``, else ``flip_prior``, under each
-      hypothesis (reversed: front ``-f``); the evidence is ``_episode_evidence`` (when
-      ``flip_episode > 0``; it updates ``flip_state``, ``flip_ns`` and ``flip_known`` of this
-      camera) or ``_independent_evidence``; without it ``±log((1 - p) / p)``, ``p`` the flip
-      prior, negative when flipped;
+      hypothesis (reversed: front ``-f``); the evidence is ``_independent_evidence``; without
+      it ``±log((1 - p) / p)``, ``p`` the flip prior, negative when flipped;
     - a track moving faster than ``walking_speed`` (its ``flat`` body velocity) adds
       ``walking_evidence`` when it moves along ``f``, subtracts it when against.
 
@@ -113,13 +111,10 @@ def _facing_evidence(  # noqa: PLR0915, PLR0917 - one loop over the frame's pair
 
     """
     positions, velocity = tracks.positions, tracks.velocity
-    flip_state, flip_ns, flip_known = tracks.flip_state, tracks.flip_ns, tracks.flip_known
     camera, has_camera = view.camera_position, view.has_camera
-    cam, stamp_ns = view.camera, view.stamp_ns
     root, left, right, pointers = body.root, body.left, body.right, body.pointers
     flip_prior, flip_prior_back = priors.flip_prior, priors.flip_prior_back
     walking_speed, walking_evidence = priors.walking_speed, priors.walking_evidence
-    episode, noise = priors.flip_episode, priors.flip_misread
     n_pairs = len(rows)
     evidence = np.zeros(n_pairs)
     doubt_step = np.zeros(n_pairs)
@@ -168,14 +163,7 @@ def _facing_evidence(  # noqa: PLR0915, PLR0917 - one loop over the frame's pair
             cosine = fx * cx + fy * cy + fz * cz
             prior_right = flip_prior_back if cosine < -0.5 else flip_prior
             prior_wrong = flip_prior_back if -cosine < -0.5 else flip_prior
-            if episode > 0.0 and math.isfinite(cosine):
-                elapsed = (stamp_ns - flip_ns[r, cam]) * 1e-9 if flip_known[r, cam] else -1.0
-                value = _episode_evidence(
-                    flip_state[r, cam], flipped, prior_right, prior_wrong, episode, noise, elapsed
-                )
-                flip_ns[r, cam], flip_known[r, cam] = stamp_ns, True
-            else:
-                value = _independent_evidence(flipped, prior_right, prior_wrong)
+            value = _independent_evidence(flipped, prior_right, prior_wrong)
         else:  # no camera pose: a flipped-looking detection is simply evidence against
             value = (-1.0 if flipped else 1.0) * math.log((1.0 - flip_prior) / flip_prior)
         walk = _walking(velocity[r], (fx, fy, fz), up, walking_speed, walking_evidence)
@@ -220,48 +208,6 @@ def _independent_evidence(flipped: bool, prior_right: float, prior_wrong: float)
 
 
 @njit(cache=True, error_model="numpy")
-def _episode_evidence(  # noqa: PLR0917
-    state: np.ndarray,
-    flipped: bool,
-    prior_right: float,
-    prior_wrong: float,
-    episode: float,
-    noise: float,
-    elapsed: float,
-) -> float:
-    """Log-odds one detection adds for its track's facing, knowing SDK flips last seconds.
-
-    An SDK flips a body front/back for seconds at a time, so one camera's consecutive flipped
-    detections are one event, not independent votes. For each hypothesis (the track's sides
-    right, or reversed) a two-state filter follows whether this camera's SDK is in a flip
-    episode: episodes last ``episode`` s on average and cover the share of time the view's
-    flip prior says; an observation is misread with probability ``noise``. The detection adds
-    the log ratio of the two hypotheses' predictive likelihoods; a run of flipped detections
-    then costs about one flip prior, plus little per frame, instead of a prior per frame.
-
-    ``state`` ``(2,)``: P(SDK flipped) under "right" and "reversed", updated in place;
-    ``elapsed`` s since this camera's previous detection of the track (< 0: the first).
-    """
-    priors = (prior_right, prior_wrong)
-    likely = np.empty(2)
-    for h in range(2):
-        if elapsed < 0.0:
-            before = priors[h]
-        else:  # relax towards the view's prior: leave rate 1/episode, share = prior
-            keep = math.exp(-elapsed / (episode * (1.0 - priors[h])))
-            before = state[h] * keep + priors[h] * (1.0 - keep)
-        # under "right" a flipped observation means the SDK flipped; under "reversed", not
-        sdk_flip_seen = flipped if h == 0 else not flipped
-        if sdk_flip_seen:
-            with_flip, without_flip = before * (1.0 - noise), (1.0 - before) * noise
-        else:
-            with_flip, without_flip = before * noise, (1.0 - before) * (1.0 - noise)
-        likely[h] = with_flip + without_flip
-        state[h] = with_flip / likely[h]
-    return math.log(likely[0] / likely[1])
-
-
-@njit(cache=True, error_model="numpy")
 def turn_facing(  # noqa: PLR0917 - the tracks, the frame's pairs, the view, body and priors
     tracks: TrackFields,
     rows: np.ndarray,
@@ -283,15 +229,14 @@ def turn_facing(  # noqa: PLR0917 - the tracks, the frame's pairs, the view, bod
     facing_memory) + evidence[u]`` (``dt`` s since then, at least 0); its doubt (``DOUBT_LIMIT``)
     past the limit sets them below the threshold. Below
     ``-facing_threshold`` the track is relabelled with ``body.mirror`` (all parts,
-    ``relabel``), its log-odds and held left-right axis negated and its flip states'
-    hypotheses exchanged. ``tracks``
-    changes in place, and ``view.up`` too (``_update_up``, before the evidence).
+    ``relabel``), its log-odds and held left-right axis negated. ``tracks`` changes in place,
+    and ``view.up`` too (``_update_up``, before the evidence).
 
     Returns:
         ``(U,)`` which tracks were relabelled.
 
     """
-    facing, facing_ns, flip_state = tracks.facing, tracks.facing_ns, tracks.flip_state
+    facing, facing_ns = tracks.facing, tracks.facing_ns
     memory, threshold = priors.facing_memory, priors.facing_threshold
     stamp_ns = view.stamp_ns
     world_up = _update_up(view.up, tracks.positions, rows, body.root, body.neck)
@@ -311,8 +256,6 @@ def turn_facing(  # noqa: PLR0917 - the tracks, the frame's pairs, the view, bod
             for a in range(3):
                 tracks.sides[r, a] = -tracks.sides[r, a]
             facing[r] = -facing[r]
-            for c in range(flip_state.shape[1]):  # the hypotheses trade places
-                flip_state[r, c, 0], flip_state[r, c, 1] = flip_state[r, c, 1], flip_state[r, c, 0]
             turned[u] = True
             tracks.doubt[r] = 0.0
     return turned

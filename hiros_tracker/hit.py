@@ -15,7 +15,7 @@ from hiros_tracker.kernel_args import (
     HitSettings,
     TrackFields,
 )
-from hiros_tracker.labels import _take_orientations, canonical_poses, hold_axes, label_frame
+from hiros_tracker.labels import canonical_poses, hold_axes, label_frame
 from hiros_tracker.track_update import fold_hits
 
 __all__ = [
@@ -36,8 +36,8 @@ def hit_frame(  # noqa: PLR0917 - the tracks, the frame, its pairs, view, layout
 
     In order: the detections in their tracks' labelling (``canonical_poses``), their
     left-right axes folded into their tracks' held ones (``hold_axes``), folded in
-    (``fold_hits``), their orientations taken (``settings.orient``), the tracks' facing
-    weighed (``settings.weigh``, ``turn_facing``), and, when every track hit is confirmed,
+    (``fold_hits``), the tracks' facing weighed (``settings.weigh``, ``turn_facing``), and,
+    when every track hit is confirmed,
     the output detections labelled in place (``settings.label``, ``label_frame``); a frame
     with tracks to confirm or votes to count leaves that to the caller, which must confirm
     before labelling.
@@ -68,15 +68,6 @@ def hit_frame(  # noqa: PLR0917 - the tracks, the frame, its pairs, view, layout
         hold_axes(held, canonical, tracks.last_hit_ns, view)
     hits = Hits(rows, canonical, frame.det_ids[dets], view.camera, view.stamp_ns)
     full = fold_hits(tracks, hits, settings.update)
-    if settings.orient:
-        _take_orientations(
-            tracks.orientations,
-            rows,
-            frame.stacked.markers,
-            frame.index[dets],
-            flips,
-            layout.mirror,
-        )
     turned = np.zeros(len(rows), dtype=np.bool_)
     if settings.weigh:
         turned = turn_facing(tracks, rows, canonical, view, layout.body, settings.priors)

@@ -109,7 +109,6 @@ class TrackFields(NamedTuple):
     """The ``TrackTable`` fields the frame kernels read and change in place."""
 
     positions: np.ndarray  # (T, J, 3)
-    orientations: np.ndarray  # (T, J, 4)
     velocities: np.ndarray  # (T, J, 3) joint velocities
     velocity: np.ndarray  # (T, 3) body velocity
     time_ns: np.ndarray  # (T,) the poses' times
@@ -130,9 +129,6 @@ class TrackFields(NamedTuple):
     doubt: np.ndarray  # (T,) the cameras' evidence against the sides while walking backwards
     # (``facing.DOUBT_LIMIT``)
     sides: np.ndarray  # (T, 3) held left-right axis, m (``labels.hold_axes``; 0: none yet)
-    flip_state: np.ndarray  # (T, C, 2) P(SDK flipped) under each facing hypothesis
-    flip_ns: np.ndarray  # (T, C) the camera's previous detection of the track
-    flip_known: np.ndarray  # (T, C) whether ``flip_ns`` is set
     confirmed: np.ndarray  # (T,)
     ids: np.ndarray  # (T,)
 
@@ -176,8 +172,6 @@ class FacingPriors(NamedTuple):
     walking_evidence: float
     facing_memory: float  # s
     facing_threshold: float
-    flip_episode: float  # s; 0 treats detections as independent
-    flip_misread: float
 
 
 class FacingView(NamedTuple):
@@ -221,7 +215,6 @@ class HitSettings(NamedTuple):
 
     update: UpdateSettings
     align: bool  # hold hips, eyes, ears and the body's sides to the shoulders and the track
-    orient: bool  # tracks take their detections' orientations
     weigh: bool  # weigh the facing
     label: bool  # label the output detections when every track hit is confirmed
     priors: FacingPriors

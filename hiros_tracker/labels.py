@@ -269,46 +269,16 @@ def _follow_walk(axis: np.ndarray, velocity: np.ndarray, up: np.ndarray, elapsed
 
 
 @njit(cache=True, error_model="numpy")
-def _take_orientations(  # noqa: PLR0917
-    orientations: np.ndarray,
-    rows: np.ndarray,
-    markers: np.ndarray,
-    dets: np.ndarray,
-    flips: np.ndarray,
-    layout: MirrorLayout,
-) -> None:
-    """Track ``rows[u]`` takes the orientations of the detection in row ``dets[u]``.
-
-    Relabelled by ``flips[u]``, when it has any (``markers`` ``(D, J, 20)``, orientation in
-    columns 4:8): the orientation cost compares a detection with its track's last ones.
-    """
-    part, mirror = layout.part, layout.mirror
-    order = np.empty(len(part), dtype=np.int64)
-    for u in range(len(rows)):
-        d = dets[u]
-        known = False
-        for j in range(len(part)):
-            for a in range(4):
-                known |= math.isfinite(markers[d, j, 4 + a])
-        if known:
-            _order(flips[u], part, mirror, order)
-            for j in range(len(part)):
-                for a in range(4):
-                    orientations[rows[u], j, a] = markers[d, order[j], 4 + a]
-
-
-@njit(cache=True, error_model="numpy")
 def relabel(tracks: TrackFields, r: int, permutation: np.ndarray) -> None:
     """Reorder track ``r``'s joints (swap the sides of some parts) in every per-joint field.
 
     ``permutation`` ``(J,)``: joint ``j`` takes what joint ``permutation[j]`` held, in the
-    pose, orientations, joint velocities, running sums and the window's records.
+    pose, joint velocities, running sums and the window's records.
     """
-    positions, orientations, velocities = tracks.positions, tracks.orientations, tracks.velocities
+    positions, velocities = tracks.positions, tracks.velocities
     sums, record_terms = tracks.sums, tracks.record_terms
     record_start, record_count = tracks.record_start, tracks.record_count
     positions[r] = positions[r][permutation]
-    orientations[r] = orientations[r][permutation]
     velocities[r] = velocities[r][permutation]
     for c in range(sums.shape[1]):
         sums[r, c] = sums[r, c][permutation]

@@ -68,7 +68,6 @@ class FrameMatching:
     def _match(  # noqa: PLR0917
         self,
         table: TrackTable,
-        detections: list[Skeleton],
         positions: np.ndarray,
         det_ids: np.ndarray,
         stamp: int,
@@ -87,8 +86,8 @@ class FrameMatching:
             ``(T, D, K)`` the mirrored parts of every pair.
 
         """
-        cost, flips, feasible, levels = self._costs(table, detections, positions, det_ids,
-                                                    stamp, camera, info)  # fmt: skip
+        cost, flips, feasible, levels = self._costs(table, positions, det_ids, stamp, camera,
+                                                    info)  # fmt: skip
         n_tracks, n_det = cost.shape
         track_levels = levels.tolist()
         if n_tracks and min(track_levels) == max(track_levels):  # one level (usual): one solve
@@ -114,7 +113,6 @@ class FrameMatching:
     def _costs(  # noqa: PLR0917
         self,
         table: TrackTable,
-        detections: list[Skeleton],
         positions: np.ndarray,
         det_ids: np.ndarray,
         stamp: int,
@@ -136,38 +134,9 @@ class FrameMatching:
         gate_tracks = GateTracks(table.last_hit_ns, table.confirmed, table.body_ids, table.seen)
         frame = GateFrame(det_ids, camera, stamp, stamp - round(params.recent_window * 1e9))
         gate = GateSettings(params.body_id_bonus, params.gate_distance, params.gate_growth)
-        if params.velocity_weight <= 0 and params.orientation_weight <= 0:
-            return kernels.frame_costs(
-                tracks, positions, info.weights, parts, match, gate_tracks, frame, gate
-            )
-        cost, flips = kernels.match_costs(tracks, positions, stamp, info.weights, parts, match)
-        cost = cost + self._motion_costs(table, detections, info.parts, flips)
-        feasible, levels = kernels.gate_costs(cost, gate_tracks, frame, gate)
-        return cost, flips, feasible, levels
-
-    def _motion_costs(
-        self,
-        table: TrackTable,
-        detections: list[Skeleton],
-        parts: _MirrorParts,
-        flips: np.ndarray,
-    ) -> np.ndarray:
-        """``(T, D)`` weighted velocity (m/s) and orientation (rad) differences, 0 if unknown."""
-        params = self.params
-        order = parts.permutation(flips)  # (T, D, J): each pair's relabelling
-        pick = np.arange(len(detections))[None, :, None]
-        cost = np.zeros(flips.shape[:2])
-        if params.velocity_weight > 0:
-            det_v = np.array([d.velocities for d in detections])[pick, order]  # (T, D, J, 3)
-            track_v = table.velocities[: table.n, None]
-            cost += params.velocity_weight * _nan_mean(np.linalg.norm(det_v - track_v, axis=3))
-        if params.orientation_weight > 0:
-            det_q = np.array([d.orientations for d in detections])[pick, order]
-            track_q = table.orientations[: table.n, None]
-            dot = np.abs((det_q * track_q).sum(axis=3))
-            angle = 2.0 * np.arccos(np.clip(dot, 0.0, 1.0))
-            cost += params.orientation_weight * _nan_mean(angle)
-        return cost
+        return kernels.frame_costs(
+            tracks, positions, info.weights, parts, match, gate_tracks, frame, gate
+        )
 
     def _pairs(  # noqa: PLR0917
         self,
@@ -240,7 +209,6 @@ class FrameMatching:
         settings = HitSettings(
             update,
             align=params.mirror_check and params.facing_check,
-            orient=params.orientation_weight > 0,
             weigh=facing,
             label=found.stacked and not voting,
             priors=self._priors,
@@ -286,8 +254,6 @@ class FrameMatching:
             params.walking_evidence,
             params.facing_memory,
             params.facing_threshold,
-            params.flip_episode,
-            params.flip_misread,
         )
 
     @staticmethod
@@ -384,9 +350,3 @@ class FrameMatching:
             detection.id = int(track_ids[u])
             output.append(detection)
         return output
-
-
-def _nan_mean(values: np.ndarray) -> np.ndarray:
-    """Mean over the last axis ignoring NaN; 0 where all are NaN."""
-    finite = np.isfinite(values)
-    return np.where(finite, values, 0.0).sum(axis=-1) / np.maximum(finite.sum(axis=-1), 1)

@@ -30,8 +30,6 @@ LIVE = (
     "gate_growth",
     "min_confidence",
     "body_id_bonus",
-    "velocity_weight",
-    "orientation_weight",
     "recent_window",
     "duplicate_distance",
     "min_hits",

@@ -103,10 +103,6 @@ class TrackerParams:
             track's previous detection, and added to the track's other candidates when that id
             is in the frame: a tie-breaker when two people are close, small enough that
             positions overrule a camera's own id changes and swaps.
-        velocity_weight: metres of cost per m/s of velocity difference (0: positions only;
-            used when detections carry velocities).
-        orientation_weight: metres of cost per radian of joint orientation difference
-            (0: positions only; used when detections carry orientations).
         mirror_check: compare each mirror part also with its left/right mirror and keep the
             cheaper labelling (front/back flips, side swaps).
         mirror_margin: metres (mean over a part's joints) the mirror must be cheaper by.
@@ -122,13 +118,6 @@ class TrackerParams:
             person's front or side.
         flip_prior_back: the same when the camera sees the person's back (cos < -0.5).
         facing_memory: seconds over which the facing evidence fades.
-        flip_episode: mean seconds an SDK keeps a body front/back flipped once it flips it;
-            a camera's consecutive flipped detections then weigh as one event, so one
-            camera's episode cannot outvote the others (0, the default: every detection
-            independent). Off by default: 1.5 s lowers the demo's joint-angle RMSE 15.7 ->
-            14.5 deg but raises the merged error of ``hiros bench tracking`` (4 people
-            crossing) from 0.56 to 0.75 of the best camera's.
-        flip_misread: chance that a detection's facing is misread (pointers across the body).
         facing_threshold: log-odds against the track's facing at which it is relabelled.
         walking_speed: m/s above which a person is taken to face where they walk.
         walking_evidence: log-odds added per detection for facing the walking direction.
@@ -163,8 +152,6 @@ class TrackerParams:
     position_smoothing: float = 0.25
     velocity_window: float = 0.25
     body_id_bonus: float = 0.1
-    velocity_weight: float = 0.0
-    orientation_weight: float = 0.0
     mirror_check: bool = True
     mirror_margin: float = 0.02
     mirror_vote: bool = True
@@ -172,8 +159,6 @@ class TrackerParams:
     flip_prior: float = 0.1
     flip_prior_back: float = 0.7
     facing_memory: float = 3.0
-    flip_episode: float = 0.0
-    flip_misread: float = 0.05
     facing_threshold: float = 3.0
     walking_speed: float = 0.4
     walking_evidence: float = 1.0
@@ -402,7 +387,7 @@ class Tracker(FrameMatching, TrackLifecycle, Accounted):
         table = self._tracks_for(found.positions.shape[1], code)
         stamp = detections[0].src_time_ns
         det_ids = np.array([d.id for d in detections], dtype=np.int64)
-        assigned = self._match(table, detections, found.positions, det_ids, stamp, code, info)
+        assigned = self._match(table, found.positions, det_ids, stamp, code, info)
         pairs = self._pairs(table, *assigned, found, stamp)
         if not len(pairs[0]):
             return []

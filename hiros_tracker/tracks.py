@@ -9,7 +9,7 @@ assignment resolve alike); removing tracks compacts the rows. Arrays keep spare 
 
 Per track (``J`` joints, ``C`` cameras, ``R`` record slots):
 
-- ``positions`` ``(J, 3)``: the smoothed pose at ``time_ns``; ``orientations`` ``(J, 4)``;
+- ``positions`` ``(J, 3)``: the smoothed pose at ``time_ns``;
 - ``velocities`` ``(J, 3)``: least-squares slopes of the recent detections with one intercept
   per camera (a constant offset between two cameras' calibrations must not read as motion),
   kept as running sums ``sums`` ``(C, J, 9)`` (terms n, t, t², p, t·p; t from ``epoch_ns``)
@@ -22,9 +22,6 @@ Per track (``J`` joints, ``C`` cameras, ``R`` record slots):
 - counters and stamps (ns): ``hits``, ``confirmed``, ``born_ns``, ``time_ns``, ``last_hit_ns``,
   ``epoch_ns``, ``facing`` (log-odds that its sides are right) and ``facing_ns``, ``doubt``
   (its cameras' evidence against its sides while it walks backwards, ``facing.DOUBT_LIMIT``);
-- per camera, whether its SDK is in a front/back flip episode for the track: ``flip_state``
-  ``(C, 2)`` P(flipped) if the track's sides are right / reversed, at ``flip_ns`` ``(C,)``,
-  ``flip_known`` ``(C,)`` once the camera has seen the track (``facing._episode_evidence``);
 - ``limbs`` ``(J,)``: the mean length of the link ending at each joint over the track's
   detections (0 before a detection shows it), ``limb_count`` ``(J,)`` how many it averages,
   capped at ``LIMB_MEMORY`` (a running mean that still follows a slow change): the body's
@@ -50,15 +47,15 @@ LIMB_MEMORY = 300
 """Detections a track's limb lengths average at most (10 s of one camera at 30 Hz)."""
 
 _FLOAT_FIELDS = (
-    "positions", "orientations", "velocities", "velocity", "facing", "sums", "flip_state",
-    "limbs", "limb_count", "sides", "doubt",
+    "positions", "velocities", "velocity", "facing", "sums", "limbs", "limb_count", "sides",
+    "doubt",
 )  # fmt: skip
 _INT_FIELDS = (
     "ids", "born_ns", "time_ns", "last_hit_ns", "epoch_ns", "facing_ns", "hits", "n_cameras",
-    "body_ids", "record_ns", "record_camera", "record_start", "record_count", "flip_ns",
+    "body_ids", "record_ns", "record_camera", "record_start", "record_count",
 )  # fmt: skip
-_BOOL_FIELDS = ("confirmed", "seen", "flip_known")
-_CAMERA_FIELDS = ("sums", "body_ids", "seen", "flip_state", "flip_ns", "flip_known")
+_BOOL_FIELDS = ("confirmed", "seen")
+_CAMERA_FIELDS = ("sums", "body_ids", "seen")
 _ROW_FIELDS = (*_FLOAT_FIELDS, *_INT_FIELDS, *_BOOL_FIELDS, "record_terms")
 
 
@@ -73,11 +70,10 @@ class TrackTable:
         self.mirrored: list[set[int]] = []
         joints, cameras, records = n_joints, max(n_cameras, 1), _RECORDS
         shapes = {
-            "positions": (joints, 3), "orientations": (joints, 4), "velocities": (joints, 3),
+            "positions": (joints, 3), "velocities": (joints, 3),
             "velocity": (3,), "sums": (cameras, joints, 9), "body_ids": (cameras,),
             "seen": (cameras,), "record_ns": (records,), "record_camera": (records,),
-            "record_terms": (records, joints, 9), "flip_state": (cameras, 2),
-            "flip_ns": (cameras,), "flip_known": (cameras,), "limbs": (joints,),
+            "record_terms": (records, joints, 9), "limbs": (joints,),
             "limb_count": (joints,), "sides": (3,),
         }  # fmt: skip
         for name in _ROW_FIELDS:
@@ -86,7 +82,6 @@ class TrackTable:
             self._set(name, np.zeros((capacity, *shapes.get(name, ())), dtype=dtype))
 
     positions: np.ndarray
-    orientations: np.ndarray
     velocities: np.ndarray
     velocity: np.ndarray
     facing: np.ndarray
@@ -107,9 +102,6 @@ class TrackTable:
     confirmed: np.ndarray
     seen: np.ndarray
     record_terms: np.ndarray
-    flip_state: np.ndarray
-    flip_ns: np.ndarray
-    flip_known: np.ndarray
     limbs: np.ndarray
     limb_count: np.ndarray
     sides: np.ndarray
@@ -135,7 +127,6 @@ class TrackTable:
             getattr(self, name)[row] = 0
         self.ids[row] = track_id
         self.positions[row] = positions
-        self.orientations[row] = np.nan
         self.born_ns[row] = self.time_ns[row] = self.last_hit_ns[row] = time_ns
         self.epoch_ns[row] = self.facing_ns[row] = time_ns
         self.n_cameras[row] = 1
