@@ -24,6 +24,7 @@ import numpy as np
 from numba import njit
 
 from hiros_core.compiled import _link_rows, refresh_stale_caches
+from hiros_filter.kernel_args import KalmanFrame
 
 __all__ = ["filter_step", "kalman_step", "keep_lengths", "smooth_orientations"]
 
@@ -185,12 +186,14 @@ def keep_lengths(parents, order, states, measured, present, previous_lengths):
 
 
 @njit(cache=True)
-def smooth_orientations(markers, present, rows, dt, quaternions, velocities, accelerations, cutoff):
+def smooth_orientations(markers, present, rows, dt, orientations):
     """``Filter._smooth_orientations`` of running tracks (``dt`` known), in place.
 
-    ``markers`` ``(n, J, 20)`` are the output rows; ``quaternions`` ``(S, J, 4)``,
-    ``velocities`` and ``accelerations`` ``(S, J, 3)`` the tracks' orientation state.
+    ``markers`` ``(n, J, 20)`` are the output rows; ``orientations`` is the tracks'
+    ``kernel_args.OrientationState``.
     """
+    quaternions, velocities = orientations.quaternions, orientations.velocities
+    accelerations, cutoff = orientations.accelerations, orientations.cutoff
     n, n_joints = present.shape
     unit = np.empty(4)
     end = np.empty(4)
@@ -278,25 +281,23 @@ def filter_step(kalman, model, tracks, frame, lengths, orientations, link_ends):
     """``Filter._step`` in Kalman mode for a frame's running tracks, one call (same numbers).
 
     Args:
-        kalman: ``(x, P, scale)`` of the ``KalmanBank`` (updated in place).
-        model: ``(q, r, max_scale, rate, initial (3, 3))`` its constants.
-        tracks: ``(rows, time_ns, joint_time_ns, max_gap_ns)``: the tracks' slots and stamps
-            (updated in place).
-        frame: ``(markers (n, J, 20), present (n, J), stamps (n,))``: the input rows, which
-            become the output rows in place.
-        lengths: ``(keep, parents, order, last_lengths)``: whether to keep link lengths, the
-            layout's tree and the tracks' previous input lengths (updated in place).
-        orientations: ``(quaternions, velocities, accelerations, cutoff)`` their state.
-        link_ends: ``(parents, children)`` of the layout's links.
+        kalman: ``kernel_args.KalmanState`` of the ``KalmanBank`` (updated in place).
+        model: ``kernel_args.KalmanModel``, its constants.
+        tracks: ``kernel_args.TrackStamps``: the tracks' slots and stamps (updated in place).
+        frame: ``kernel_args.FrameRows``: the input rows, which become the output rows in place.
+        lengths: ``kernel_args.LengthState``: whether to keep link lengths, the layout's tree
+            and the tracks' previous input lengths (updated in place).
+        orientations: ``kernel_args.OrientationState`` (updated in place).
+        link_ends: ``kernel_args.LinkEnds`` of the layout's links.
 
     Returns:
         ``(n, J, 20)`` link rows and ``(n, J)`` link presence of the output rows.
 
     """
-    x, P, scale = kalman
-    initial = model[4]
-    rows, time_ns, joint_time_ns, max_gap_ns = tracks
-    markers, present, stamps = frame
+    x, P, scale = kalman.x, kalman.P, kalman.scale
+    rows, stamps, present = tracks.rows, frame.stamps, frame.present
+    time_ns, joint_time_ns = tracks.time_ns, tracks.joint_time_ns
+    markers = frame.markers
     n, n_joints = present.shape
     dt = np.empty(n)
     for i in range(n):
@@ -305,8 +306,10 @@ def filter_step(kalman, model, tracks, frame, lengths, orientations, link_ends):
     restart = np.zeros((n, n_joints), dtype=np.bool_)
     for i in range(n):
         for j in range(n_joints):
-            restart[i, j] = present[i, j] and stamps[i] - joint_time_ns[rows[i], j] > max_gap_ns
-    kalman_step(kalman, model, (rows, dt, np.round(dt, 6), present & ~restart, measured))
+            gap = stamps[i] - joint_time_ns[rows[i], j]
+            restart[i, j] = present[i, j] and gap > tracks.max_gap_ns
+    corrected = present & ~restart
+    kalman_step(kalman, model, KalmanFrame(rows, dt, np.round(dt, 6), corrected, measured))
     states = np.empty((3, n, n_joints, 3))  # positions, velocities, accelerations
     for i in range(n):
         s = rows[i]
@@ -314,22 +317,23 @@ def filter_step(kalman, model, tracks, frame, lengths, orientations, link_ends):
             if restart[i, j]:  # KalmanBank.reset: at rest on the measurement
                 x[s, :, :, j] = 0.0
                 x[s, 0, :, j] = measured[i, j]
-                P[s, :, :, j] = initial
+                P[s, :, :, j] = model.initial
                 scale[s, j] = 1.0
             if present[i, j]:
                 joint_time_ns[s, j] = stamps[i]
             for quantity in range(3):
                 for axis in range(3):
                     states[quantity, i, j, axis] = x[s, quantity, axis, j]
-    keep, parents, order, last_lengths = lengths
-    if keep:
-        input_lengths = keep_lengths(parents, order, states, measured, present, last_lengths[rows])
+    if lengths.keep:
+        last_lengths = lengths.last_lengths
+        input_lengths = keep_lengths(
+            lengths.parents, lengths.order, states, measured, present, last_lengths[rows]
+        )
         for i in range(n):
             last_lengths[rows[i]] = input_lengths[i]
     for i in range(n):
         time_ns[rows[i]] = stamps[i]
-    quaternions, velocities, accelerations, cutoff = orientations
-    smooth_orientations(markers, present, rows, dt, quaternions, velocities, accelerations, cutoff)
+    smooth_orientations(markers, present, rows, dt, orientations)
     for i in range(n):
         for j in range(n_joints):
             if present[i, j]:
@@ -337,7 +341,7 @@ def filter_step(kalman, model, tracks, frame, lengths, orientations, link_ends):
                     markers[i, j, 1 + axis] = states[0, i, j, axis]
                     markers[i, j, 8 + axis] = states[1, i, j, axis]
                     markers[i, j, 14 + axis] = states[2, i, j, axis]
-    return _link_rows(markers, present, link_ends[0], link_ends[1])
+    return _link_rows(markers, present, link_ends.parents, link_ends.children)
 
 
 refresh_stale_caches(globals())  # the kernels above call hiros_core.compiled's _link_rows

@@ -38,6 +38,15 @@ from hiros_core.layouts import Layout
 from hiros_core.model import Skeleton, SkeletonGroup, SkeletonRows, link_rows
 from hiros_core.stacking import LayoutRows, output_skeletons, stack_frame
 from hiros_filter.estimators import ButterworthBank, KalmanBank
+from hiros_filter.kernel_args import (
+    FrameRows,
+    KalmanModel,
+    KalmanState,
+    LengthState,
+    LinkEnds,
+    OrientationState,
+    TrackStamps,
+)
 from hiros_filter.lengths import LengthKeeper
 
 __all__ = [
@@ -127,6 +136,16 @@ class _Running(NamedTuple):
     row: int
 
 
+class _KernelArguments(NamedTuple):
+    """The bundles :func:`~hiros_filter.compiled.filter_step` takes that last beyond a frame."""
+
+    kalman: KalmanState
+    model: KalmanModel
+    lengths: LengthState
+    orientations: OrientationState
+    link_ends: LinkEnds
+
+
 class _Tracks:
     """State of every track of one layout, one row (slot) per track id."""
 
@@ -155,7 +174,7 @@ class _Tracks:
         )
         self.low_pass: ButterworthBank | None = None
         self.designed_for = np.zeros(capacity)  # rate each slot's low-pass state belongs to
-        self._kernel_arguments: tuple | None = None
+        self._kernel_arguments: _KernelArguments | None = None
 
     def retune(self, params: FilterParams) -> None:
         """Take new noise and low-pass parameters, keeping every track's state.
@@ -177,7 +196,7 @@ class _Tracks:
         self.designed_for[:] = 0.0
         self._kernel_arguments = None
 
-    def kernel_arguments(self, params: FilterParams) -> tuple:
+    def kernel_arguments(self, params: FilterParams) -> _KernelArguments:
         """The state and constants :func:`~hiros_filter.compiled.filter_step` takes, grouped.
 
         Built once (and again after the tables grow): packing them is a dozen attribute
@@ -185,17 +204,34 @@ class _Tracks:
         """
         if self._kernel_arguments is None:
             kalman = self.kalman
-            self._kernel_arguments = (
-                (kalman.x, kalman.P, kalman.scale),
-                (float(kalman.q), float(kalman.r), float(kalman.max_noise_scale),
-                 float(kalman.adaptation_rate), kalman.initial),
-                (bool(params.keep_link_lengths), self.keeper.tree.parents,
-                 self.keeper.tree.order, self.last_lengths),
-                (self.quaternions, self.angular_velocities, self.angular_accelerations,
-                 float(params.orientation_cutoff_frequency)),
-                (self.link_parents, self.link_children),
-            )  # fmt: skip
+            self._kernel_arguments = _KernelArguments(
+                kalman=KalmanState(x=kalman.x, P=kalman.P, scale=kalman.scale),
+                model=KalmanModel(
+                    q=float(kalman.q),
+                    r=float(kalman.r),
+                    max_scale=float(kalman.max_noise_scale),
+                    rate=float(kalman.adaptation_rate),
+                    initial=kalman.initial,
+                ),
+                lengths=LengthState(
+                    keep=bool(params.keep_link_lengths),
+                    parents=self.keeper.tree.parents,
+                    order=self.keeper.tree.order,
+                    last_lengths=self.last_lengths,
+                ),
+                orientations=self.orientations(params),
+                link_ends=LinkEnds(parents=self.link_parents, children=self.link_children),
+            )
         return self._kernel_arguments
+
+    def orientations(self, params: FilterParams) -> OrientationState:
+        """The tracks' orientations, as ``compiled.smooth_orientations`` takes them."""
+        return OrientationState(
+            quaternions=self.quaternions,
+            velocities=self.angular_velocities,
+            accelerations=self.angular_accelerations,
+            cutoff=float(params.orientation_cutoff_frequency),
+        )
 
     def slot(self, track_id: int) -> int:
         """The row of ``track_id``, allocating (and growing the arrays) when new."""
@@ -413,12 +449,23 @@ class Filter(Accounted):
         """:meth:`_step_rows` and the links in Kalman mode, as one kernel call (same numbers)."""
         from hiros_filter.compiled import filter_step
 
-        kalman, model, lengths, orientations, link_ends = tracks.kernel_arguments(self.params)
+        bundles = tracks.kernel_arguments(self.params)
+        stamped = TrackStamps(
+            rows=rows,
+            time_ns=tracks.time_ns,
+            joint_time_ns=tracks.joint_time_ns,
+            max_gap_ns=round(MAX_GAP * 1e9),
+        )
+        frame = FrameRows(markers=markers, present=present, stamps=stamps)
         return filter_step(
-            kalman, model,
-            (rows, tracks.time_ns, tracks.joint_time_ns, round(MAX_GAP * 1e9)),
-            (markers, present, stamps), lengths, orientations, link_ends,
-        )  # fmt: skip
+            bundles.kalman,
+            bundles.model,
+            stamped,
+            frame,
+            bundles.lengths,
+            bundles.orientations,
+            bundles.link_ends,
+        )
 
     def _step_rows(
         self,
@@ -563,10 +610,7 @@ class Filter(Accounted):
         if dt is not None:
             from hiros_filter.compiled import smooth_orientations
 
-            smooth_orientations(
-                markers, present, rows, dt, tracks.quaternions, tracks.angular_velocities,
-                tracks.angular_accelerations, self.params.orientation_cutoff_frequency,
-            )  # fmt: skip
+            smooth_orientations(markers, present, rows, dt, tracks.orientations(self.params))
             return
         # A start: the valid orientations as they are, without angular rates.
         quaternions = markers[..., 4:8]
