@@ -229,8 +229,8 @@ def turn_facing(  # noqa: PLR0917 - the tracks, the frame's pairs, the view, bod
     facing_memory) + evidence[u]`` (``dt`` s since then, at least 0); its doubt (``DOUBT_LIMIT``)
     past the limit sets them below the threshold. Below
     ``-facing_threshold`` the track is relabelled with ``body.mirror`` (all parts,
-    ``relabel``), its log-odds and held left-right axis negated. ``tracks`` changes in place,
-    and ``view.up`` too (``_update_up``, before the evidence).
+    ``relabel``), its log-odds and held left-right axes (its own and its cameras') negated.
+    ``tracks`` changes in place, and ``view.up`` too (``_update_up``, before the evidence).
 
     Returns:
         ``(U,)`` which tracks were relabelled.
@@ -255,6 +255,7 @@ def turn_facing(  # noqa: PLR0917 - the tracks, the frame's pairs, the view, bod
             relabel(tracks, r, body.mirror)
             for a in range(3):
                 tracks.sides[r, a] = -tracks.sides[r, a]
+            tracks.camera_sides[r] = -tracks.camera_sides[r]
             facing[r] = -facing[r]
             turned[u] = True
             tracks.doubt[r] = 0.0

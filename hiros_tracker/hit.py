@@ -60,6 +60,10 @@ def hit_frame(  # noqa: PLR0917 - the tracks, the frame, its pairs, view, layout
         rows,
         layout.body.left,
         layout.body.right,
+        tracks.camera_sides,
+        tracks.camera_sides_ns,
+        view.camera,
+        view.stamp_ns,
     )
     canonical, flips = canonical_poses(
         frame.positions, dets, flips, layout.mirror, settings.align, layout.sides, held

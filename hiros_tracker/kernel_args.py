@@ -103,6 +103,10 @@ class HeldSides(NamedTuple):
     track_rows: np.ndarray  # (U,) each detection's track row
     left: np.ndarray  # (2,) left shoulder and hip; empty: sides not held
     right: np.ndarray  # (2,) right shoulder and hip
+    camera_axes: np.ndarray  # (T, C, 3) each camera's last detection's axis (0: none)
+    camera_ns: np.ndarray  # (T, C) its stamp
+    camera: int  # the frame's camera code
+    stamp_ns: int  # the frame's stamp
 
 
 class TrackFields(NamedTuple):
@@ -129,6 +133,8 @@ class TrackFields(NamedTuple):
     doubt: np.ndarray  # (T,) the cameras' evidence against the sides while walking backwards
     # (``facing.DOUBT_LIMIT``)
     sides: np.ndarray  # (T, 3) held left-right axis, m (``labels.hold_axes``; 0: none yet)
+    camera_sides: np.ndarray  # (T, C, 3) each camera's last detection's axis, as labelled
+    camera_sides_ns: np.ndarray  # (T, C) its stamp
     confirmed: np.ndarray  # (T,)
     ids: np.ndarray  # (T,)
 

@@ -135,6 +135,13 @@ clearly faster than a step aside or back, and than the error of a slow walker's 
 WALK_MEMORY = 0.3
 """Seconds over which a walking track's held left-right axis turns to face where it goes
 (``hold_axes``)."""
+CAMERA_WEIGHT = 0.8
+"""Weight of a camera's last detection's axis beside the track's held one (both unit) in what
+the camera's next detection is held to (``_reference_axis``): under 1, so that the held axis
+decides where the two point apart (a camera whose labels went wrong is put back)."""
+CAMERA_GAP = 0.2
+"""Seconds within which a camera's last detection of a track still tells its next one's sides
+(``_reference_axis``): a few frames at 15-30 Hz; longer, the person may have turned."""
 
 
 @njit(cache=True, error_model="numpy")
@@ -181,12 +188,39 @@ def _sides_axis(pose: np.ndarray, left: np.ndarray, right: np.ndarray) -> np.nda
 def _reference_axis(held: HeldSides, r: int) -> np.ndarray:
     """``(3,)`` the left-right axis the detections of track ``r`` are held to.
 
-    The track's held axis (``held.axes[r]``, ``hold_axes``) once it has one, else its pose's.
+    The track's held axis (``held.axes[r]``, ``hold_axes``) once it has one, else its pose's,
+    as a unit vector; plus ``CAMERA_WEIGHT`` times the unit axis of the frame's camera's last
+    detection of the track as labelled (``held.camera_axes``) when that is at most
+    ``CAMERA_GAP`` old. A person turns continuously in every camera's stream, whereas the
+    track's held axis, averaged over ``SIDE_MEMORY`` across cameras, lags a fast turn at the
+    end of a walk far enough that correct detections would count as reversed and be
+    relabelled into the mirror; the camera's own last axis has turned with the body, and
+    its drifting bias is the same one frame later. With a weight under 1 the camera's axis
+    wins unless the two point nearly opposite ways, so a camera whose labels went wrong is
+    still put back by a track that disagrees with it outright; an SDK flip reverses the
+    detection against both.
     """
     axis = held.axes[r]
-    if axis[0] != 0.0 or axis[1] != 0.0 or axis[2] != 0.0:
-        return axis
-    return _sides_axis(held.tracks[r], held.left, held.right)
+    if axis[0] == 0.0 and axis[1] == 0.0 and axis[2] == 0.0:
+        axis = _sides_axis(held.tracks[r], held.left, held.right)
+    size = math.sqrt(np.sum(axis * axis))
+    reference = axis / size if size > 0.0 else axis.copy()
+    if held.camera >= held.camera_axes.shape[1]:
+        return reference
+    last = held.camera_axes[r, held.camera]
+    last_size = math.sqrt(np.sum(last * last))
+    recent = (held.stamp_ns - held.camera_ns[r, held.camera]) * 1e-9 <= CAMERA_GAP
+    if last_size > 0.0 and recent:
+        for a in range(3):
+            reference[a] += CAMERA_WEIGHT * last[a] / last_size
+    return reference
+
+
+@njit(cache=True, error_model="numpy")
+def _cosine(a: np.ndarray, b: np.ndarray) -> float:
+    """Cosine of two ``(3,)`` vectors; 0 where either is zero."""
+    scale = math.sqrt(np.sum(a * a) * np.sum(b * b))
+    return np.sum(a * b) / scale if scale > 0.0 else 0.0
 
 
 @njit(cache=True, error_model="numpy")
@@ -210,13 +244,17 @@ def hold_axes(
     """Fold each detection's left-right axis (in its track's labelling) into its track's.
 
     ``axes[r] <- k axes[r] + (1 - k) axis(canonical[u])`` for ``r = held.track_rows[u]``,
-    ``axis`` the left shoulder and hip less the right ones (m), ``k = exp(-dt /
-    SIDE_MEMORY)`` and ``dt`` s since the track's previous hit (``last_hit_ns`` ``(T,)``,
-    before this frame's); a track without an axis yet (0) takes the detection's. A detection
-    missing one of those joints adds nothing. Before that, a track walking faster than
+    ``axis`` the left shoulder and hip less the right ones (m), ``k = exp(-c dt /
+    SIDE_MEMORY)``, ``dt`` s since the track's previous hit (``last_hit_ns`` ``(T,)``,
+    before this frame's) and ``c`` how steady the detection's axis is in its camera's stream
+    (``_steadiness``: the cosine with the camera's last, at least 0): a detection that
+    continues its camera's counts fully, one that jumped across the body not at all. A
+    track without an axis yet (0) takes the detection's, and the axis is kept as its camera's
+    last (``held.camera_axes``, ``_reference_axis``). A detection missing one of those joints
+    adds nothing. Before that, a track walking faster than
     ``WALK_SPEED`` (its body velocity across the up, ``view.up``) has its axis pulled
-    towards that of a body facing where it walks (``_follow_walk``). ``held.axes`` changes
-    in place.
+    towards that of a body facing where it walks (``_follow_walk``). ``held.axes`` and
+    ``held.camera_axes`` change in place.
 
     The held axis is what the next detections' sides are held to (``_reference_axis``): the
     track's pose follows each detection by ``position_smoothing``, so a run of noisy
@@ -224,7 +262,12 @@ def hold_axes(
     labelled) can turn its shoulders through each other within a tenth of a second, and
     the detections after are then relabelled to the mirror (repeated-motion, noisy-sdk).
     The walking direction is evidence no SDK error moves: it comes from where the body is,
-    not from its labels.
+    not from its labels. A noisy detection whose axis jumped from its camera's last is
+    what turned the held axis part of the way without a turn of the body: folded in whole,
+    a few of them carried it far enough that the next detections, correct, counted as
+    reversed. Weighed by the stream's steadiness instead of against the held axis itself,
+    the axis still follows a fast turn (each camera's stream turns with the body), where
+    it would stall on its own lag.
     """
     upright = view.up[3] != 0.0
     for u in range(len(held.track_rows)):
@@ -234,11 +277,35 @@ def hold_axes(
             continue
         known = held.axes[r, 0] != 0.0 or held.axes[r, 1] != 0.0 or held.axes[r, 2] != 0.0
         elapsed = max(view.stamp_ns - last_hit_ns[r], 0) * 1e-9
-        keep = math.exp(-elapsed / SIDE_MEMORY) if known else 0.0
+        keep = 0.0
+        if known:
+            keep = math.exp(-elapsed * _steadiness(held, r, axis, view) / SIDE_MEMORY)
         if known and upright:
             _follow_walk(held.axes[r], held.velocity[r], view.up, elapsed)
         for a in range(3):
             held.axes[r, a] = keep * held.axes[r, a] + (1.0 - keep) * axis[a]
+        if view.camera < held.camera_axes.shape[1]:
+            held.camera_axes[r, view.camera] = axis
+            held.camera_ns[r, view.camera] = view.stamp_ns
+
+
+@njit(cache=True, error_model="numpy")
+def _steadiness(held: HeldSides, r: int, axis: np.ndarray, view: FacingView) -> float:
+    """How much a detection's left-right axis ``(3,)`` counts in its track's held one, 0..1.
+
+    The cosine with the axis of its camera's last detection of the track (``held.camera_axes``,
+    as labelled), at least 0, where that is at most ``CAMERA_GAP`` old; else 1. A body turns
+    a few degrees between two frames of a camera and the camera's bias drifts slowly, so an
+    axis far from the camera's last is the SDK's noise of this frame.
+    """
+    if view.camera >= held.camera_axes.shape[1]:
+        return 1.0
+    last = held.camera_axes[r, view.camera]
+    if (view.stamp_ns - held.camera_ns[r, view.camera]) * 1e-9 > CAMERA_GAP:
+        return 1.0
+    if last[0] == 0.0 and last[1] == 0.0 and last[2] == 0.0:
+        return 1.0
+    return max(_cosine(axis, last), 0.0)
 
 
 @njit(cache=True, error_model="numpy")

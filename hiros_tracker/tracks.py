@@ -27,7 +27,9 @@ Per track (``J`` joints, ``C`` cameras, ``R`` record slots):
   capped at ``LIMB_MEMORY`` (a running mean that still follows a slow change): the body's
   shape, which tells a person returning from another one (``Tracker``'s re-identification);
 - ``sides`` ``(3,)``: the held left-right axis its detections' sides are held to (m; 0 before
-  the first, and after a relabelling by ``relabel``), ``labels.hold_axes``;
+  the first, and after a relabelling by ``relabel``), ``labels.hold_axes``; per camera, the
+  left-right axis of its last detection as labelled, ``camera_sides`` ``(C, 3)`` (0: none),
+  at ``camera_sides_ns`` ``(C,)``;
 - ``votes``/``mirrored``: Python, for the mirror-vote fallback only (camera -> (ns, flips)).
 """
 
@@ -48,14 +50,14 @@ LIMB_MEMORY = 300
 
 _FLOAT_FIELDS = (
     "positions", "velocities", "velocity", "facing", "sums", "limbs", "limb_count", "sides",
-    "doubt",
+    "doubt", "camera_sides",
 )  # fmt: skip
 _INT_FIELDS = (
     "ids", "born_ns", "time_ns", "last_hit_ns", "epoch_ns", "facing_ns", "hits", "n_cameras",
-    "body_ids", "record_ns", "record_camera", "record_start", "record_count",
+    "body_ids", "record_ns", "record_camera", "record_start", "record_count", "camera_sides_ns",
 )  # fmt: skip
 _BOOL_FIELDS = ("confirmed", "seen")
-_CAMERA_FIELDS = ("sums", "body_ids", "seen")
+_CAMERA_FIELDS = ("sums", "body_ids", "seen", "camera_sides", "camera_sides_ns")
 _ROW_FIELDS = (*_FLOAT_FIELDS, *_INT_FIELDS, *_BOOL_FIELDS, "record_terms")
 
 
@@ -74,7 +76,8 @@ class TrackTable:
             "velocity": (3,), "sums": (cameras, joints, 9), "body_ids": (cameras,),
             "seen": (cameras,), "record_ns": (records,), "record_camera": (records,),
             "record_terms": (records, joints, 9), "limbs": (joints,),
-            "limb_count": (joints,), "sides": (3,),
+            "limb_count": (joints,), "sides": (3,), "camera_sides": (cameras, 3),
+            "camera_sides_ns": (cameras,),
         }  # fmt: skip
         for name in _ROW_FIELDS:
             dtype = float if name in _FLOAT_FIELDS or name == "record_terms" else np.int64
@@ -106,6 +109,8 @@ class TrackTable:
     limb_count: np.ndarray
     sides: np.ndarray
     doubt: np.ndarray
+    camera_sides: np.ndarray
+    camera_sides_ns: np.ndarray
 
     @property
     def capacity(self) -> int:
@@ -203,10 +208,12 @@ class TrackTable:
     def relabel(self, row: int, permutation: np.ndarray) -> None:
         """Reorder a track's joints (swap the sides of some parts); votes are the caller's.
 
-        Its held left-right axis is forgotten (the pose's is used until detections give it anew).
+        Its held left-right axes (the track's and each camera's) are forgotten (the pose's is
+        used until detections give them anew).
         """
         kernels.relabel(self.hit_fields(), row, permutation)
         self.sides[row] = 0.0
+        self.camera_sides[row] = 0.0
 
     def _grow_rows(self) -> None:
         for name in _ROW_FIELDS:

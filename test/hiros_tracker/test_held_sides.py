@@ -9,6 +9,9 @@ from hiros_tracker.kernel_args import FacingView, HeldSides, SideLayout
 from hiros_tracker.labels import SIDE_MEMORY, WALK_MEMORY, WALK_SPEED
 from hiros_tracker.tracker import _body_frame, _mirror_parts, _side_arrays
 
+_NO_CAMERA = (np.zeros((1, 1, 3)), np.zeros((1, 1), dtype=np.int64), 0, 0)
+"""``HeldSides``' camera fields of a track no camera has given an axis yet."""
+
 
 def _standing() -> np.ndarray:
     """``(J, 3)`` a person facing +x (left = +y), joints placed by name."""
@@ -20,16 +23,20 @@ def _standing() -> np.ndarray:
     return pose
 
 
-def _canonical(
+def _canonical(  # noqa: PLR0917 - the detection, its track and what the track holds
     detection: np.ndarray,
     track: np.ndarray,
     matched: np.ndarray | None = None,
     axis: np.ndarray | None = None,
+    camera_axis: np.ndarray | None = None,
+    camera_age: float = 0.0,
 ) -> np.ndarray:
     """The flips ``canonical_poses`` gives a detection whose parts matched ``matched``.
 
     ``matched`` ``(K,)``: the parts the association took mirrored (default: none); ``axis``
-    ``(3,)`` the track's held left-right axis (default: none yet, the pose's).
+    ``(3,)`` the track's held left-right axis (default: none yet, the pose's);
+    ``camera_axis`` ``(3,)`` that of the camera's last detection of the track, ``camera_age``
+    s before this one (default: none).
     """
     parts = _mirror_parts(AZURE_KINECT)
     shoulders, pairs, pair_parts = _side_arrays(AZURE_KINECT, parts)
@@ -37,7 +44,13 @@ def _canonical(
     if matched is None:
         matched = np.zeros(parts.count, dtype=bool)
     axes = np.zeros((1, 3)) if axis is None else axis[None].astype(float)
-    held = HeldSides(track[None], axes, np.zeros((1, 3)), np.array([0]), frame.left, frame.right)
+    camera = _NO_CAMERA
+    if camera_axis is not None:
+        stamp = round(camera_age * 1e9)
+        camera = (camera_axis[None, None].astype(float), np.zeros((1, 1), dtype=np.int64), 0, stamp)
+    held = HeldSides(
+        track[None], axes, np.zeros((1, 3)), np.array([0]), frame.left, frame.right, *camera
+    )
     _, flips = kernels.canonical_poses(
         detection[None],
         np.array([0]),
@@ -106,12 +119,53 @@ def test_detections_are_held_to_the_tracks_held_axis_not_to_its_dragged_pose() -
     assert flips.all()
 
 
+def test_a_detection_that_goes_on_turning_with_its_camera_keeps_its_labels() -> None:
+    # A fast turn at the end of a walk: the track's held axis (left = +y) lags the body by
+    # 125 deg, so the detection alone counts as reversed; the camera's previous detection,
+    # 1/30 s before, had already turned 110 deg. It keeps its labels.
+    track = _standing()
+    detection = _turned(track, 125.0)
+    held = np.array([0.0, 1.0, 0.0])
+    assert _canonical(detection, track, axis=held).all()  # the held axis alone: relabelled
+    last = _axis(_turned(track, 110.0))
+    assert not _canonical(detection, track, axis=held, camera_axis=last, camera_age=1 / 30).any()
+    stale = _canonical(detection, track, axis=held, camera_axis=last, camera_age=0.5)
+    assert stale.all()  # the camera's axis of half a second before tells nothing
+
+
+def test_a_camera_whose_labels_went_wrong_is_held_to_the_track() -> None:
+    # The camera's previous detection went into the track with its sides reversed (170 deg
+    # off the held axis); its next one, as reversed, is relabelled all the same.
+    track = _standing()
+    detection = _turned(track, 175.0)
+    last = _axis(_turned(track, 170.0))
+    flips = _canonical(detection, track, axis=np.array([0.0, 1.0, 0.0]), camera_axis=last)
+    assert flips.all()
+
+
+def test_a_cameras_last_axis_is_kept_and_turned_with_its_track() -> None:
+    track = _standing()
+    held = _held(track)
+    kernels.hold_axes(held, track[None], np.zeros(1, dtype=np.int64), _view(7))
+    assert held.camera_axes[0, 0] == pytest.approx(_axis(track))
+    assert held.camera_ns[0, 0] == 7
+
+
 def _held(track: np.ndarray, velocity: tuple[float, float, float] = (0.0, 0.0, 0.0)) -> HeldSides:
     """One track at ``track`` with no held axis yet, moving at ``velocity`` (m/s)."""
     frame = _body_frame(AZURE_KINECT)
     velocities = np.array([velocity], dtype=float)
     return HeldSides(
-        track[None], np.zeros((1, 3)), velocities, np.array([0]), frame.left, frame.right
+        track[None],
+        np.zeros((1, 3)),
+        velocities,
+        np.array([0]),
+        frame.left,
+        frame.right,
+        np.zeros((1, 1, 3)),
+        np.zeros((1, 1), dtype=np.int64),
+        0,
+        0,
     )
 
 
@@ -131,10 +185,37 @@ def test_the_held_axis_follows_detections_over_its_memory() -> None:
     first = np.zeros(1, dtype=np.int64)
     kernels.hold_axes(held, track[None], first, _view(0))  # a first detection: taken whole
     assert held.axes[0] == pytest.approx(_axis(track))
-    turned = _turned(track, 90.0)
-    kernels.hold_axes(held, turned[None], first, _view(round(SIDE_MEMORY * 1e9)))  # 1/e kept
-    keep = np.exp(-1.0)
+    turned = _turned(track, 60.0)
+    kernels.hold_axes(held, turned[None], first, _view(round(SIDE_MEMORY * 1e9 / 2)))
+    # half a memory's time, weighed by the cosine with the camera's last detection (0.5)
+    keep = np.exp(-0.5 * np.cos(np.radians(60.0)))
     assert held.axes[0] == pytest.approx(keep * _axis(track) + (1 - keep) * _axis(turned))
+
+
+def test_a_detection_that_jumped_across_its_cameras_stream_leaves_the_held_axis() -> None:
+    # A noisy detection whose torso lies 95 deg off its camera's last one, 0.1 s before: not
+    # clearly reversed, so kept as labelled, but it says nothing of the track's sides.
+    track = _standing()
+    held = _held(track)
+    first = np.zeros(1, dtype=np.int64)
+    kernels.hold_axes(held, track[None], first, _view(0))
+    across = _turned(track, 95.0)
+    kernels.hold_axes(held, across[None], first, _view(round(0.1e9)))
+    assert held.axes[0] == pytest.approx(_axis(track))
+    assert held.camera_axes[0, 0] == pytest.approx(_axis(across))  # its camera's last, still
+
+
+def test_a_detection_after_its_cameras_gap_counts_whole() -> None:
+    # Its camera last saw the track half a second before: the body may have turned since.
+    track = _standing()
+    held = _held(track)
+    first = np.zeros(1, dtype=np.int64)
+    kernels.hold_axes(held, track[None], first, _view(0))
+    across = _turned(track, 95.0)
+    stamp = round(0.5e9)
+    kernels.hold_axes(held, across[None], first, _view(stamp))
+    keep = np.exp(-0.5 / SIDE_MEMORY)
+    assert held.axes[0] == pytest.approx(keep * _axis(track) + (1 - keep) * _axis(across))
 
 
 @pytest.mark.parametrize("speed", [0.0, 0.5 * WALK_SPEED])
