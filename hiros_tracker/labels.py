@@ -245,9 +245,10 @@ def hold_axes(
 
     ``axes[r] <- k axes[r] + (1 - k) axis(canonical[u])`` for ``r = held.track_rows[u]``,
     ``axis`` the left shoulder and hip less the right ones (m), ``k = exp(-c dt /
-    SIDE_MEMORY)``, ``dt`` s since the track's previous hit (``last_hit_ns`` ``(T,)``,
-    before this frame's) and ``c`` how steady the detection's axis is in its camera's stream
-    (``_steadiness``: the cosine with the camera's last, at least 0): a detection that
+    SIDE_MEMORY)``, ``dt`` s since the axis last took a detection's (``_last_fold_ns``; the
+    track's previous hit, ``last_hit_ns`` ``(T,)``, before any) and ``c`` how steady the
+    detection's axis is in its camera's stream (``_steadiness``: the cosine with the
+    camera's last, at least 0): a detection that
     continues its camera's counts fully, one that jumped across the body not at all. A
     track without an axis yet (0) takes the detection's, and the axis is kept as its camera's
     last (``held.camera_axes``, ``_reference_axis``). A detection missing one of those joints
@@ -276,7 +277,7 @@ def hold_axes(
         if not (math.isfinite(axis[0]) and math.isfinite(axis[1]) and math.isfinite(axis[2])):
             continue
         known = held.axes[r, 0] != 0.0 or held.axes[r, 1] != 0.0 or held.axes[r, 2] != 0.0
-        elapsed = max(view.stamp_ns - last_hit_ns[r], 0) * 1e-9
+        elapsed = max(view.stamp_ns - _last_fold_ns(held, r, last_hit_ns[r]), 0) * 1e-9
         keep = 0.0
         if known:
             keep = math.exp(-elapsed * _steadiness(held, r, axis, view) / SIDE_MEMORY)
@@ -287,6 +288,21 @@ def hold_axes(
         if view.camera < held.camera_axes.shape[1]:
             held.camera_axes[r, view.camera] = axis
             held.camera_ns[r, view.camera] = view.stamp_ns
+
+
+@njit(cache=True, error_model="numpy")
+def _last_fold_ns(held: HeldSides, r: int, last_hit_ns: int) -> int:
+    """When track ``r``'s held axis last took a detection's: its cameras' latest axis stamp.
+
+    ``last_hit_ns`` (the track's previous hit) where no camera has given an axis yet. A hit
+    without a torso (a shoulder or hip occluded) adds nothing to the axis, so it must not use
+    up the time the next detection's fold is weighed by: with two cameras, one of them
+    missing the torso for a while halved how fast the axis followed a turn.
+    """
+    latest = 0
+    for c in range(held.camera_ns.shape[1]):
+        latest = max(latest, held.camera_ns[r, c])
+    return latest if latest > 0 else last_hit_ns
 
 
 @njit(cache=True, error_model="numpy")

@@ -162,16 +162,16 @@ def _held(track: np.ndarray, velocity: tuple[float, float, float] = (0.0, 0.0, 0
         np.array([0]),
         frame.left,
         frame.right,
-        np.zeros((1, 1, 3)),
-        np.zeros((1, 1), dtype=np.int64),
+        np.zeros((1, 2, 3)),
+        np.zeros((1, 2), dtype=np.int64),
         0,
         0,
     )
 
 
-def _view(stamp_ns: int) -> FacingView:
+def _view(stamp_ns: int, camera: int = 0) -> FacingView:
     """A camera's view at ``stamp_ns`` in a z-up world (its position does not matter here)."""
-    return FacingView(np.array([0.0, 0.0, 1.0, 1.0]), np.zeros(3), True, 0, stamp_ns)
+    return FacingView(np.array([0.0, 0.0, 1.0, 1.0]), np.zeros(3), True, camera, stamp_ns)
 
 
 def _axis(pose: np.ndarray) -> np.ndarray:
@@ -203,6 +203,22 @@ def test_a_detection_that_jumped_across_its_cameras_stream_leaves_the_held_axis(
     kernels.hold_axes(held, across[None], first, _view(round(0.1e9)))
     assert held.axes[0] == pytest.approx(_axis(track))
     assert held.camera_axes[0, 0] == pytest.approx(_axis(across))  # its camera's last, still
+
+
+def test_a_hit_without_a_torso_leaves_the_axis_its_time() -> None:
+    # Camera 1 sees the track between camera 0's two detections, but not its hips: its hit
+    # adds nothing to the held axis and must not use up the time camera 0's next detection
+    # (turned 60 deg, a turn going on) is weighed by.
+    track = _standing()
+    held = _held(track)
+    kernels.hold_axes(held, track[None], np.zeros(1, dtype=np.int64), _view(1))
+    hipless = track.copy()
+    hipless[AZURE_KINECT.joint_names.index("HipLeft")] = np.nan
+    kernels.hold_axes(held, hipless[None], np.array([1]), _view(round(0.05e9), camera=1))
+    turned = _turned(track, 60.0)
+    kernels.hold_axes(held, turned[None], np.array([round(0.05e9)]), _view(round(0.1e9) + 1))
+    keep = np.exp(-0.5 * np.cos(np.radians(60.0)))  # 0.1 s of the memory's 0.2, cos 0.5
+    assert held.axes[0] == pytest.approx(keep * _axis(track) + (1 - keep) * _axis(turned))
 
 
 def test_a_detection_after_its_cameras_gap_counts_whole() -> None:
