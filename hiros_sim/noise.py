@@ -67,6 +67,8 @@ __all__ = [
     "flip_front_back",
     "in_view",
     "occluded",
+    "plant_legs",
+    "planted_feet",
 ]
 
 LEVEL_NONE, LEVEL_LOW, LEVEL_MEDIUM = 0, 1, 2
@@ -87,6 +89,15 @@ for _side, _other in (("Left", "Right"), ("Right", "Left")):
         _LEFT_RIGHT_LEGS[_IDX(f"{_part}{_side}")] = _IDX(f"{_part}{_other}")
 LEGS_SWAP = _LEFT_RIGHT_LEGS
 """Permutation swapping only the legs (the SDK's most common left/right confusion)."""
+LEGS = tuple(
+    tuple(_IDX(f"{part}{side}") for part in ("Hip", "Knee", "Ankle", "Foot"))
+    for side in ("Left", "Right")
+)
+"""Hip, knee, ankle and foot joints of the left and the right leg."""
+PLANTED_SPEED = 0.3
+"""A foot slower than this (m/s) is planted: twice the floor fit's ``RESTING_SPEED``, so that
+the frames the fit takes as resting on the SDK's noisy speeds, just before and after the true
+foot rests, are planted too (at the fit's own speed, the foot rests 0.2 cm higher on walks)."""
 
 
 def in_view(
@@ -227,3 +238,120 @@ def fit_body_model(
         posed[..., joints, :] = posed[..., parents, :] + lengths[..., joints, None] * direction
     centre = posed.mean(axis=-2, keepdims=True)
     return centre + np.asarray(scale)[..., None, None] * (posed - centre)
+
+
+def planted_feet(positions: np.ndarray, rate: float) -> np.ndarray:
+    """``(P, N, 2)`` True where the left and the right foot of true ``(P, N, 32, 3)`` joints rest.
+
+    A foot is planted where its joint moves slower than :data:`PLANTED_SPEED` over the floor
+    fit's ``SPEED_BASELINE`` (``hiros_calib.world``); the first and last half baseline and
+    absent frames (NaN) count as moving.
+    """
+    # imported here: hiros_calib takes a quarter of a second to import, and every ``hiros``
+    # command imports this package to list the simulator's presets in its help
+    from hiros_calib.world import speed_over_baseline
+
+    times = np.arange(positions.shape[1]) / rate
+    feet = [leg[3] for leg in LEGS]
+    speed = np.stack([speed_over_baseline(person[:, feet], times) for person in positions])
+    return speed < PLANTED_SPEED  # NaN never rests
+
+
+def _unit(vectors: np.ndarray) -> np.ndarray:
+    norm = np.linalg.norm(vectors, axis=-1, keepdims=True)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return vectors / np.maximum(norm, 1e-9)
+
+
+def plant_legs(
+    fitted: np.ndarray,
+    evidence: np.ndarray,
+    truth: np.ndarray,
+    scale: np.ndarray,
+    planted: np.ndarray,
+) -> np.ndarray:
+    """The fitted skeletons with each planted foot on its own evidence: the legs give.
+
+    The rigid model posed root outward (:func:`fit_body_model`) puts a foot at the end of its
+    leg, so the foot carries the pelvis's, hip's and knee's errors and, since a noisy limb
+    direction shortens the leg's vertical reach, rests too high. The real SDK keeps a planted
+    foot where it is while the pelvis moves (docs/world-frame.md). So, where a foot is
+    planted, the leg is posed again from its fitted hip towards the foot's evidence:
+
+    1. the ankle's target is at the foot link's length from the foot's evidence, towards the
+       ankle's evidence;
+    2. where that target is beyond the leg's reach (the hip too high above it), the heel
+       rises: the ankle turns about the foot's evidence towards the hip (:func:`_within_reach`);
+    3. the knee bends so that thigh and shank reach the target (two-bone inverse kinematics,
+       the knee on the side of the rigid fit's knee), or the straight leg points at it;
+    4. the foot goes at its link's length from the ankle, towards its evidence: on it, but
+       where even a raised heel cannot reach (a little above it).
+
+    Every link keeps its length (the true one times ``scale``), as the real SDK's limbs keep
+    their ratios; the rest of the body is left as fitted.
+
+    Args:
+        fitted: ``(P, N, 32, 3)`` :func:`fit_body_model`'s skeletons.
+        evidence: ``(P, N, 32, 3)`` the noisy joints they were fitted to.
+        truth: ``(P, N, 32, 3)`` true joints (the limb lengths).
+        scale: ``(P, N)`` the fit's whole-body scale.
+        planted: ``(P, N, 2)`` where the left and right foot rest (:func:`planted_feet`).
+
+    """
+    lengths = np.linalg.norm(truth - truth[..., np.maximum(_PARENTS, 0), :], axis=-1)
+    lengths = lengths * scale[..., None]
+    placed = fitted.copy()
+    for side, (hip, knee, ankle, foot) in enumerate(LEGS):
+        legs = _bent_leg(placed, evidence, lengths, (hip, knee, ankle, foot))
+        for joint, position in zip((knee, ankle, foot), legs, strict=True):
+            placed[..., joint, :] = np.where(
+                planted[..., side, None], position, placed[..., joint, :]
+            )
+    return placed
+
+
+def _bent_leg(
+    placed: np.ndarray, evidence: np.ndarray, lengths: np.ndarray, leg: tuple[int, int, int, int]
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Knee, ankle and foot of a leg from its placed hip towards its foot's evidence."""
+    hip, knee, ankle, foot = leg
+    thigh, shank, link = lengths[..., knee], lengths[..., ankle], lengths[..., foot, None]
+    foot_seen = evidence[..., foot, :]
+    target = foot_seen + link * _unit(evidence[..., ankle, :] - foot_seen)
+    start = placed[..., hip, :]
+    target = _within_reach(target, start, thigh + shank, foot_seen, link[..., 0])
+    along = _unit(target - start)
+    distance = np.clip(
+        np.linalg.norm(target - start, axis=-1), np.abs(thigh - shank) + 1e-6, thigh + shank
+    )
+    bend = placed[..., knee, :] - start
+    side = _unit(bend - np.einsum("...c,...c", bend, along)[..., None] * along)
+    cos = np.clip((thigh**2 + distance**2 - shank**2) / (2.0 * thigh * distance), -1.0, 1.0)
+    knee_at = start + thigh[..., None] * (
+        cos[..., None] * along + np.sqrt(1.0 - cos * cos)[..., None] * side
+    )
+    ankle_at = knee_at + shank[..., None] * _unit(target - knee_at)
+    return knee_at, ankle_at, ankle_at + link * _unit(foot_seen - ankle_at)
+
+
+def _within_reach(
+    target: np.ndarray, hip: np.ndarray, reach: np.ndarray, foot: np.ndarray, link: np.ndarray
+) -> np.ndarray:
+    """The ankle's target, or where it is out of the leg's reach, the heel raised.
+
+    The ankle then turns about the foot up towards the hip: the point at the leg's reach
+    from the hip and the link's length from the foot nearest the target. Where even that is
+    out of reach, the target stays (the straight leg's foot stops short of its evidence).
+    """
+    axis = foot - hip
+    distance = np.linalg.norm(axis, axis=-1)
+    axis = _unit(axis)
+    # the circle where the two spheres meet: its centre along the axis, its radius
+    along = (distance**2 + reach**2 - link**2) / (2.0 * np.maximum(distance, 1e-9))
+    radius = np.sqrt(np.maximum(reach**2 - along**2, 0.0))
+    offset = target - hip
+    across = _unit(offset - np.einsum("...c,...c", offset, axis)[..., None] * axis)
+    raised = hip + along[..., None] * axis + radius[..., None] * across
+    beyond = np.linalg.norm(offset, axis=-1) > reach
+    meets = distance <= reach + link
+    return np.where((beyond & meets)[..., None], raised, target)

@@ -35,15 +35,16 @@ __all__ = ["Clip", "PersonPath", "Repetitions", "body_forward", "prepare_clip"]
 _FOOT_ABOVE_FLOOR = 0.04
 """Height of the mocap's lowest foot or ankle joint above the floor (5th percentile), metres:
 where a clip is put on the floor."""
-SDK_FOOT_HEIGHTS = {"Foot": 0.110, "Ankle": 0.158}
+SDK_FOOT_HEIGHTS = {"Foot": 0.110, "Ankle": 0.164}
 """Height (m) above the floor at which the simulated SDK's foot and ankle joints rest, by joint.
 
 Fitted so that the simulated SDK, on the UNIPD take's own motion and view (``hiros_sim.fit``'s
 scene: one camera 3.3 m away), reports them resting where the real Azure Kinect did on that
-take: 11.0 cm and 17.6 cm above the suit's floor (docs/world-frame.md, session 15). The
+take: 11.0 cm and 17.6 cm above the suit's floor (docs/world-frame.md, sessions 15 and 16). The
 mocap's own foot joints sit elsewhere (the CMU toe 6-7 cm, the Xsens toe 1.7 cm, the
-Bandai-Namco toe 4-4.5 cm), and the SDK's body model raises a noisy foot by a few millimetres
-to centimetres more."""
+Bandai-Namco toe 4-4.5 cm). The simulated SDK keeps a planted foot on its evidence
+(``hiros_sim.noise.plant_legs``), but where its straight leg cannot reach, a little above it:
+the foot rests 0.4 cm above the truth's there."""
 _ROUNDS = 4
 """Rounds in which a moved foot joint's resting frames and height settle."""
 _STILL = 0.5
@@ -137,13 +138,16 @@ def prepare_clip(motion: BvhMotion) -> Clip:
 
 
 def _as_the_sdk_defines(positions: np.ndarray, rate: float) -> np.ndarray:
-    """The foot and ankle joints moved along the shank to rest at ``SDK_FOOT_HEIGHTS``.
+    """The foot and ankle joints moved to rest at ``SDK_FOOT_HEIGHTS``, the foot link rigid.
 
     The Azure Kinect SDK's foot joint rests well above a mocap toe marker, and its ankle above
     the mocap's ankle (docs/world-frame.md); the truth uses the SDK's definitions, as for the
-    other joints (``hiros_sim.mapping``). Each joint keeps its motion and moves by one
-    constant distance along its shank (knee - ankle), chosen so that its median height where
-    it rests becomes the SDK's.
+    other joints (``hiros_sim.mapping``). Each joint first moves by one constant distance
+    along its shank (knee - ankle), chosen so that its median height where it rests becomes
+    the SDK's. The foot then goes at one fixed distance from the ankle, in the direction it
+    got (:func:`_rigid_foot`): two joints moved along a turning shank by different amounts
+    would make the link between them vary in length, and the real SDK's foot link varies only
+    with its body scale (3.5 %, as every other limb).
     """
     idx = AZURE_KINECT.index
     moved = positions.copy()
@@ -157,7 +161,25 @@ def _as_the_sdk_defines(positions: np.ndarray, rate: float) -> np.ndarray:
                 rest = _resting(moved[:, joint], rate)
                 rise = float(np.median(shank[rest, 2]))  # the shank's vertical share at rest
                 moved[:, joint] += (height - float(np.median(moved[rest, joint, 2]))) / rise * shank
+        _rigid_foot(moved, idx(f"Ankle{side}"), idx(f"Foot{side}"), rate)
     return moved
+
+
+def _rigid_foot(positions: np.ndarray, ankle: int, foot: int, rate: float) -> None:
+    """Put the ``foot`` joint at one distance from the ``ankle`` (in place), in its direction.
+
+    The distance is the link's median length, then settled so that the foot still rests at
+    ``SDK_FOOT_HEIGHTS["Foot"]``.
+    """
+    link = positions[:, foot] - positions[:, ankle]
+    direction = link / np.linalg.norm(link, axis=-1, keepdims=True)
+    length = float(np.median(np.linalg.norm(link, axis=-1)))
+    for _ in range(_ROUNDS):
+        positions[:, foot] = positions[:, ankle] + length * direction
+        rest = _resting(positions[:, foot], rate)
+        drop = float(np.median(direction[rest, 2]))  # the link's vertical share at rest (< 0)
+        length += (SDK_FOOT_HEIGHTS["Foot"] - float(np.median(positions[rest, foot, 2]))) / drop
+    positions[:, foot] = positions[:, ankle] + length * direction
 
 
 def _resting(joint: np.ndarray, rate: float) -> np.ndarray:

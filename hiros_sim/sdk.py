@@ -28,6 +28,8 @@ from hiros_sim.noise import (
     flip_front_back,
     in_view,
     occluded,
+    plant_legs,
+    planted_feet,
 )
 from hiros_sim.params import SimParams
 from hiros_sim.people import Clip, body_forward
@@ -39,7 +41,10 @@ __all__ = ["CameraStream", "bumped_pose", "observe"]
 
 _IDX = AZURE_KINECT.index
 _THUMBS = np.array([_IDX("ThumbLeft"), _IDX("ThumbRight")])
-_THUMBS = np.array([_IDX("ThumbLeft"), _IDX("ThumbRight")])
+_LOWER_LEGS = np.array(
+    [_IDX(f"{part}{side}") for side in ("Left", "Right") for part in ("Ankle", "Foot")]
+)
+"""Ankle and foot joints, left then right: quieter while their foot is planted."""
 _EXTREMITIES = np.array(
     [
         _IDX(f"{part}{side}")
@@ -170,7 +175,9 @@ def _joint_noise(
     """What the SDK reports for true ``(P, N, 32, 3)`` positions (model in ``hiros_sim.noise``).
 
     The evidence is each joint plus correlated noise (part of it one shift of the whole body)
-    and a fixed bias; the SDK's rigid body model, scaled per frame, is fitted to it.
+    and a fixed bias, a planted foot's ankle and foot quieter (``planted_gain``); the SDK's
+    rigid body model, scaled per frame, is fitted to it, and its legs then bend so that each
+    planted foot stays on its evidence.
     """
     obliqueness = np.sqrt(np.clip(1.0 - _facing_cos(positions, forward) ** 2, 0.0, 1.0))
     depth = np.abs(positions[..., 2])
@@ -181,6 +188,8 @@ def _joint_noise(
     gain = gain * np.where(joint_in, 1.0, params.out_of_view_gain)
     if params.extremity_gain != 1.0:
         gain[..., _EXTREMITIES] *= params.extremity_gain
+    planted = planted_feet(positions, params.rate)
+    gain[..., _LOWER_LEGS] *= np.where(np.repeat(planted, 2, axis=-1), params.planted_gain, 1.0)
     sigma = sigma * gain
     rho = float(np.exp(-1.0 / (params.rate * params.noise_correlation_time)))
     n_people, n_frames, n_joints, _ = positions.shape
@@ -199,7 +208,9 @@ def _joint_noise(
     length_gain[..., _THUMBS] += params.thumb_length_cv * ar1_noise(
         rng, (n_people, n_frames, _THUMBS.size), rho
     )
-    fitted = fit_body_model(positions + error + bias, positions, scale, length_gain)
+    evidence = positions + error + bias
+    fitted = fit_body_model(evidence, positions, scale, length_gain)
+    fitted = plant_legs(fitted, evidence, positions, scale, planted)
     if params.noise_residual > 0.0:
         fitted += params.noise_residual * gain[..., None] * ar1_noise(rng, positions.shape, rho)
     return fitted

@@ -1,3 +1,5 @@
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
@@ -5,7 +7,14 @@ from hiros_core.errors import RecordingError
 from hiros_core.layouts import AZURE_KINECT
 from hiros_eval.body import limb_length_cv
 from hiros_sim import SimParams
-from hiros_sim.fit import DEFAULT_CSV, fit_noise, read_kinect_csv, simulated_errors, skeleton_errors
+from hiros_sim.fit import (
+    DEFAULT_BVH,
+    DEFAULT_CSV,
+    fit_noise,
+    read_kinect_csv,
+    simulated_errors,
+    skeleton_errors,
+)
 
 THUMBS = np.array([10, 17])
 FEET = [AZURE_KINECT.index("FootLeft"), AZURE_KINECT.index("FootRight")]
@@ -90,6 +99,7 @@ def test_independent_residual_breaks_the_limb_ratios():
     params = SimParams(n_cameras=1, n_people=1, duration=10.0, noise_residual=0.01)
     assert np.nanmedian(simulated_errors(params).unscaled_limb_cv) > 0.02
     rigid = simulated_errors(SimParams(n_cameras=1, n_people=1, duration=10.0))
+    # planted legs bent to their feet too (hiros_sim.noise.plant_legs)
     assert np.nanmedian(rigid.unscaled_limb_cv) < 0.005
 
 
@@ -134,3 +144,25 @@ def test_vertical_scatter_of_resting_feet_and_pelvis():
     assert np.isnan(
         skeleton_errors([(observed, reference, np.ones(frames, bool))], 1 / 30).vertical_scatter
     ).all()
+
+
+def test_simulated_planted_feet_are_quiet_like_the_real_take():
+    """On the take's scene the simulated resting foot scatters vertically as the real one does
+    (1.24 cm, ``test_noise_fit_is_finite_and_plausible``): well below the pelvis."""
+    take = SimParams(
+        n_cameras=1,
+        n_people=1,
+        duration=30.0,
+        camera_radius=3.3,
+        walk_area=0.0,
+        bvh_files=(str(DEFAULT_BVH),),
+        seed=2,
+    )
+    foot, pelvis = simulated_errors(take, facing_only=True).vertical_scatter
+    assert 0.009 < foot < 0.017
+    assert foot < 0.5 * pelvis
+    # the planted foot's evidence as noisy as the rest of the body: the foot is not quiet
+    noisy_foot, _ = simulated_errors(
+        replace(take, planted_gain=1.0), facing_only=True
+    ).vertical_scatter
+    assert noisy_foot > 0.025

@@ -3,7 +3,16 @@ import pytest
 
 from hiros_core.layouts import AZURE_KINECT
 from hiros_sim import default_bvh_files, read_bvh
-from hiros_sim.noise import ar1_noise, fit_body_model, flip_front_back, in_view, occluded
+from hiros_sim.noise import (
+    LEGS,
+    ar1_noise,
+    fit_body_model,
+    flip_front_back,
+    in_view,
+    occluded,
+    plant_legs,
+    planted_feet,
+)
 from hiros_sim.people import body_forward, prepare_clip
 
 IDX = AZURE_KINECT.index
@@ -122,3 +131,58 @@ def test_fit_body_model_errors_are_coherent_and_do_not_grow(standing):
     child, parent = error[:, 1:].reshape(-1, 3), error[:, parents[1:]].reshape(-1, 3)
     correlation = np.sum(child * parent) / np.sqrt(np.sum(child**2) * np.sum(parent**2))
     assert correlation > 0.2  # independent joint noise would give 0
+
+
+def test_planted_feet_rest_where_the_foot_is_still(standing):
+    frames = 90  # 3 s at 30 Hz: the right foot steps forward at 1 m/s during the second
+    poses = np.repeat(standing[None], frames, axis=0)
+    step = np.clip((np.arange(frames) - 30) / 30.0, 0.0, 1.0)
+    poses[:, IDX("FootRight"), 0] += step
+    planted = planted_feet(poses[None], 30.0)[0]
+    assert planted[10:-10, 0].all()  # the left foot never moves (but for the ends)
+    assert not planted[[0, -1]].any()  # the speed is not measured at the ends
+    assert not planted[35:55, 1].any()
+    assert planted[75:84, 1].all()
+    assert planted[6:24, 1].all()
+
+
+def _leg_lengths(skeletons, leg):
+    parents = np.asarray(AZURE_KINECT.parents)
+    return np.linalg.norm(skeletons[..., leg, :] - skeletons[..., parents[list(leg)], :], axis=-1)
+
+
+def test_plant_legs_without_noise_is_the_truth(standing):
+    truth = _random_poses(standing, np.random.default_rng(3), 20)[None]
+    placed = plant_legs(truth, truth, truth, np.ones((1, 20)), np.ones((1, 20, 2), bool))
+    np.testing.assert_allclose(placed, truth, atol=1e-9)
+
+
+def test_plant_legs_puts_a_planted_foot_on_its_evidence(standing):
+    """The knee gives: the foot on its evidence where the leg reaches, every link its length."""
+    rng = np.random.default_rng(4)
+    truth = _random_poses(standing, rng, 200)[None]
+    sigma = np.full(32, 0.03)
+    sigma[list(LEGS[0][2:])] = 0.01  # a planted ankle and foot are seen better
+    evidence = truth + rng.normal(0.0, 1.0, truth.shape) * sigma[:, None]
+    scale = rng.uniform(0.95, 1.05, (1, 200))
+    fitted = fit_body_model(evidence, truth, scale, np.ones((1, 200, 32)))
+    planted = np.zeros((1, 200, 2), bool)
+    planted[..., 0] = True  # the left foot rests, the right one swings
+    placed = plant_legs(fitted, evidence, truth, scale, planted)
+    hip, knee, ankle, foot = LEGS[0]
+    untouched = np.setdiff1d(np.arange(32), [knee, ankle, foot])
+    np.testing.assert_array_equal(placed[..., untouched, :], fitted[..., untouched, :])
+    true_lengths = _leg_lengths(truth, (knee, ankle, foot)) * scale[..., None]
+    np.testing.assert_allclose(_leg_lengths(placed, (knee, ankle, foot)), true_lengths, rtol=1e-9)
+    reach = true_lengths[..., 0] + true_lengths[..., 1]
+    hip_to_ankle = np.linalg.norm(placed[..., ankle, :] - placed[..., hip, :], axis=-1)
+    within = hip_to_ankle < reach - 1e-6
+    assert 0.5 < within.mean() < 1.0  # most legs bend, some cannot reach
+    miss = np.linalg.norm(placed[..., foot, :] - evidence[..., foot, :], axis=-1)
+    np.testing.assert_allclose(miss[within], 0.0, atol=1e-9)
+    # out of reach, the leg is straight and its foot stops short of its evidence
+    np.testing.assert_allclose(hip_to_ankle[~within], reach[~within], rtol=1e-9)
+    assert np.all(miss[~within] > 0.0)
+    # the rigid fit's feet carry the leg's errors: the planted ones are nearer their evidence
+    rigid_miss = np.linalg.norm(fitted[..., foot, :] - evidence[..., foot, :], axis=-1)
+    assert np.median(miss) < 0.5 * np.median(rigid_miss)
