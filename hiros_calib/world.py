@@ -76,8 +76,9 @@ files without confidences have weight 1 everywhere)."""
 DOUBT_POINTS = 200
 """Fewer resting-foot samples than this make the floor doubtful."""
 
-DOUBT_RESIDUAL = 0.08
-"""Resting feet scattering more than this (m, RMS) about their plane make the floor doubtful."""
+DOUBT_FLOOR_ERROR = 0.01
+"""A floor height whose standard error (m, :func:`_floor_error`) is above this is doubtful: its
+95 % interval (two standard errors) is then wider than the 2 cm the world is meant to hold."""
 
 DOUBT_SPREAD = 1.0
 """Up moving more than this (deg) when one camera is left out makes it doubtful."""
@@ -104,6 +105,9 @@ class FloorFit:
     up_spread_deg: float = math.nan
     """How far up moves (deg) when any one camera is left out; NaN with one camera or when up
     is the body's."""
+    floor_error_m: float = math.nan
+    """Standard error of ``floor_height`` (m, :func:`_floor_error`); NaN where it cannot be
+    told (the feet of fewer than two camera and foot pairs)."""
 
     def quality(self) -> dict[str, Any]:
         """The figures for the calibration file."""
@@ -117,21 +121,26 @@ class FloorFit:
             "floor_up_spread_deg": (
                 round(self.up_spread_deg, 2) if math.isfinite(self.up_spread_deg) else None
             ),
+            "floor_height_error_cm": (
+                round(100 * self.floor_error_m, 2) if math.isfinite(self.floor_error_m) else None
+            ),
             "floor_doubtful": "; ".join(self.doubts()),
         }
 
     def doubts(self) -> list[str]:
         """Why this floor may be off by more than 2 cm or up by more than 1 deg (empty: none seen).
 
-        The limits are where the simulator's scenes went wrong; see docs/world-frame.md.
+        The floor's own uncertainty decides, not how noisy the feet are: many noisy samples
+        can pin a floor down, and a few quiet ones with one offset cannot. The other limits are
+        where the simulator's scenes went wrong; see docs/world-frame.md.
         """
         doubts = []
         if self.points < DOUBT_POINTS:
             doubts.append(f"only {self.points} resting-foot samples (< {DOUBT_POINTS})")
-        if self.residual_m > DOUBT_RESIDUAL:
+        if self.floor_error_m > DOUBT_FLOOR_ERROR:
             doubts.append(
-                f"the resting feet scatter {100 * self.residual_m:.1f} cm about their plane "
-                f"(> {100 * DOUBT_RESIDUAL:.0f} cm)"
+                f"the floor height is known to {100 * self.floor_error_m:.1f} cm (standard "
+                f"error over cameras and feet, > {100 * DOUBT_FLOOR_ERROR:.0f} cm)"
             )
         if self.source != "feet and torsos":
             doubts.append("up is the bodies' mean vertical: people lean")
@@ -153,6 +162,12 @@ def resting_feet(track: BodyTrack) -> tuple[np.ndarray, float] | None:
     The foot joint where the layout has one, else the ankle; a joint rests where it moves
     slower than :data:`RESTING_SPEED` over :data:`SPEED_BASELINE`.
     """
+    rest = _resting_sides(track)
+    return None if rest is None else (rest[0], rest[2])
+
+
+def _resting_sides(track: BodyTrack) -> tuple[np.ndarray, np.ndarray, float] | None:
+    """:func:`resting_feet` with each sample's side, ``(N,)`` 0 left and 1 right."""
     for kind, height in FOOT_JOINT_HEIGHT.items():
         joints = _joint(track, (f"{kind}Left", f"{kind}Right"))
         if len(joints) == 2 and len(track.times) >= 3:
@@ -160,7 +175,8 @@ def resting_feet(track: BodyTrack) -> tuple[np.ndarray, float] | None:
             resting = (speed_over_baseline(positions, track.times) < RESTING_SPEED) & (
                 track.weights[:, joints] > 0
             )
-            return positions[resting], height
+            sides = np.broadcast_to(np.arange(2), resting.shape)
+            return positions[resting], sides[resting], height
     return None
 
 
@@ -215,6 +231,8 @@ class _Seen:
     camera: str
     feet: np.ndarray
     """``(N, 3)`` resting feet: all on the floor."""
+    sides: np.ndarray
+    """``(N,)`` each foot's side: 0 left, 1 right."""
     torsos: list[np.ndarray]
     """Per track, ``(M, 3)`` torso centres: each person at their own height."""
 
@@ -254,20 +272,29 @@ def _gather(
     """
     seen, heights, verticals = [], [], []
     for camera, pose in poses.items():
-        feet, torsos = [], []
+        feet, sides, torsos = [], [], []
         for track in tracks.get(camera, []):
-            rest = resting_feet(track)
+            rest = _resting_sides(track)
             if rest is not None and len(rest[0]):
                 points = pose.apply(rest[0])
-                feet.append(points[np.isfinite(points).all(axis=1)])
-                heights.append(np.full(len(feet[-1]), rest[1]))
+                finite = np.isfinite(points).all(axis=1)
+                feet.append(points[finite])
+                sides.append(rest[1][finite])
+                heights.append(np.full(len(feet[-1]), rest[2]))
             centres = _torso_centres(track)
             if centres is not None and len(centres) >= 10:
                 torsos.append(pose.apply(centres))
             vertical = _body_vertical(track)
             if vertical is not None and len(vertical):
                 verticals.append(pose.rotate(vertical))
-        seen.append(_Seen(camera, np.concatenate(feet) if feet else np.zeros((0, 3)), torsos))
+        seen.append(
+            _Seen(
+                camera,
+                np.concatenate(feet) if feet else np.zeros((0, 3)),
+                np.concatenate(sides) if sides else np.zeros(0, dtype=np.int64),
+                torsos,
+            )
+        )
     return seen, np.concatenate(heights) if heights else np.zeros(0), verticals
 
 
@@ -296,7 +323,30 @@ def fit_floor(
     scatter = along - floor
     inliers = np.abs(scatter) < 3 * max(1.4826 * float(np.median(np.abs(scatter))), 0.005)
     residual = float(np.sqrt(np.mean(scatter[inliers] ** 2)))
-    return FloorFit(up, floor, residual, int(inliers.sum()), source, spread)
+    pairs = np.concatenate([2 * k + s.sides for k, s in enumerate(seen)])
+    error = _floor_error(along[inliers], pairs[inliers])
+    return FloorFit(up, floor, residual, int(inliers.sum()), source, spread, error)
+
+
+def _floor_error(heights: np.ndarray, pairs: np.ndarray) -> float:
+    """Standard error (m) of the floor height from feet ``heights`` grouped by camera and side.
+
+    The samples of one camera's one foot side are not independent: they share the SDK's fixed
+    offset of that joint (per camera and person, as large as its noise), the camera's pose
+    error, and noise correlated over a fraction of a second. So each pair of camera and side
+    gives one floor (its samples' median) and the floor's standard error is that of their
+    sample-weighted mean, counted from how far they scatter (the clustered standard error,
+    with its small-sample factor). Samples of several people in one pair stay together: a
+    person split into several tracks keeps one offset. NaN with fewer than two pairs.
+    """
+    labels, counts = np.unique(pairs, return_counts=True)
+    if len(labels) < 2:
+        return math.nan
+    floors = np.array([np.median(heights[pairs == label]) for label in labels])
+    weights = counts / counts.sum()
+    mean = float(weights @ floors)
+    variance = len(labels) / (len(labels) - 1) * float(weights**2 @ (floors - mean) ** 2)
+    return math.sqrt(variance)
 
 
 def _leave_one_out_spread(seen: list[_Seen], up: np.ndarray) -> float:
