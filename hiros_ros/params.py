@@ -64,7 +64,6 @@ RANGES: dict[str, tuple[float, float]] = {
         (
             "blend",
             "confidence_floor",
-            "flip_misread",
             "flip_prior",
             "flip_prior_back",
             "flipped_weight",

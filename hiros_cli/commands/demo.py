@@ -46,6 +46,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     """The four steps with timings, then the summary."""
     from hiros_core.outputs import check_output, only_holds, staged_output
+    from hiros_sim import sample_params
 
     console = Console()
     check_output(args.out, force=True, ours=lambda path: only_holds(path, DEMO_FILES),
@@ -54,7 +55,8 @@ def run(args: argparse.Namespace) -> int:
         out.mkdir()
         evaluation, summary, timings, report = _demo(args, out, console)
     report = args.out / report.relative_to(out)
-    _print_summary(console, evaluation, summary, timings, args.out, report)
+    seconds = args.duration or sample_params().duration
+    _print_summary(console, evaluation, summary, timings, args.out, report, seconds)
     return 0
 
 
@@ -105,7 +107,7 @@ def _demo(args: argparse.Namespace, out: Path, console: Console) -> tuple:
         summary.outputs, calibration, result.calibration, result.truth, result.camera_groups
     )
     facts = [
-        ("recording", "3 cameras, 3 people, 60 s, simulated from real motion capture"),
+        ("recording", f"{_scene(params.duration)}, simulated from real motion capture"),
         ("camera frames in / processed / dropped with a reason",
          f"{summary.frames_total} / {summary.processed} / {sum(summary.dropped.values())}"),
         ("pipeline speed (hiros run)", f"{summary.real_time_factor:.1f}x real time"),
@@ -113,6 +115,11 @@ def _demo(args: argparse.Namespace, out: Path, console: Console) -> tuple:
     report = write_report(evaluation, out / "report", "hiros demo: the bundled sample", facts)
     timings["evaluate"] = time.perf_counter() - start
     return evaluation, summary, timings, report
+
+
+def _scene(seconds: float) -> str:
+    """The demo's scene in words, with the length it was simulated for."""
+    return f"3 cameras, 3 people, {seconds:g} s"
 
 
 def _add_chain_rows(table: Table, evaluation: RunEvaluation) -> None:
@@ -133,8 +140,9 @@ def _print_summary(  # noqa: PLR0917 - the four results of the demo and where th
     timings: dict[str, float],
     out: Path,
     report: Path,
+    seconds: float,
 ) -> None:
-    table = Table(title="hiros demo: 3 cameras, 3 people, 60 s, simulated from real mocap")
+    table = Table(title=f"hiros demo: {_scene(seconds)}, simulated from real mocap")
     table.add_column("figure")
     table.add_column("value", justify="right")
     for camera, accuracy in evaluation.calibration.items():

@@ -25,6 +25,7 @@ def test_demo_writes_its_outputs_and_a_sane_summary(tmp_path, capsys):
     report = (out / "report" / "report.html").read_text()
     assert "<img" in report
 
+    assert "3 cameras, 3 people, 20 s" in printed  # the length asked for, in the title
     assert "dropped with a reason" in printed
     frames_in, dropped = map(int, re.search(r"reason\D*(\d+) / (\d+)", printed).groups())
     assert frames_in > 0
