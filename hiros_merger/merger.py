@@ -40,6 +40,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from functools import cache
 from typing import TypeVar, get_type_hints
 
 import numpy as np
@@ -158,39 +159,29 @@ class MergerParams:
     track_timeout: float = 1.0
 
 
-@dataclass(frozen=True)
-class _BodyAxes:
-    """A layout's joints for the fusion."""
+@cache
+def _body_layout(layout: Layout) -> BodyLayout:
+    """What the weights and the limbs need of a layout, as the kernels' arrays.
 
-    body: BodyLayout  # what the weights and the limbs need
-
-    @property
-    def groups(self) -> np.ndarray:
-        """``(J,)`` limb of each joint (``_limbs``)."""
-        return self.body.groups
-
-    @classmethod
-    def of(cls, layout: Layout) -> _BodyAxes:
-        """The layout's named body joints (``Layout.body``) as the kernels' arrays."""
-        joints = layout.body
-        left, right = np.array(joints.left), np.array(joints.right)
-        torso = np.array(joints.torso)
-        head = [joints.head] if joints.head else []
-        pointers = np.array([*joints.feet, *head], dtype=np.int64).reshape(-1, 2)
-        has_front = joints.neck >= 0 and bool((left >= 0).all() and (right >= 0).all())
-        body = BodyLayout(
-            root=joints.root,
-            neck=joints.neck,
-            left=left,
-            right=right,
-            torso=torso,
-            pointers=pointers,
-            has_front=has_front,
-            groups=_limbs(layout, torso),
-            link_parents=np.asarray(layout.link_parents, dtype=np.intp),
-            link_children=np.asarray(layout.link_children, dtype=np.intp),
-        )
-        return cls(body)
+    Its named body joints (``Layout.body``) and its limbs (:func:`_limbs`); built once per layout.
+    """
+    joints = layout.body
+    left, right = np.array(joints.left), np.array(joints.right)
+    torso = np.array(joints.torso)
+    head = [joints.head] if joints.head else []
+    pointers = np.array([*joints.feet, *head], dtype=np.int64).reshape(-1, 2)
+    return BodyLayout(
+        root=joints.root,
+        neck=joints.neck,
+        left=left,
+        right=right,
+        torso=torso,
+        pointers=pointers,
+        has_front=joints.neck >= 0 and bool((left >= 0).all() and (right >= 0).all()),
+        groups=_limbs(layout, torso),
+        link_parents=np.asarray(layout.link_parents, dtype=np.intp),
+        link_children=np.asarray(layout.link_children, dtype=np.intp),
+    )
 
 
 def _limbs(layout: Layout, torso: np.ndarray) -> np.ndarray:
@@ -213,16 +204,6 @@ def _limbs(layout: Layout, torso: np.ndarray) -> np.ndarray:
             start = parents[start]
         groups[j] = starts.setdefault(start, len(starts) + 1)
     return groups
-
-
-_AXES: dict[str, _BodyAxes] = {}
-
-
-def _axes(layout: Layout) -> _BodyAxes:
-    axes = _AXES.get(layout.name)
-    if axes is None:
-        axes = _AXES[layout.name] = _BodyAxes.of(layout)
-    return axes
 
 
 def _read(bundle: type[T], params: MergerParams, **given: object) -> T:
@@ -525,7 +506,7 @@ class Merger(Accounted):
         constants = self._constants.get(layout.name)
         if constants is None:
             settings = _fuse_settings(self.params)
-            constants = self._constants[layout.name] = (settings, _axes(layout).body)
+            constants = self._constants[layout.name] = (settings, _body_layout(layout))
         return constants
 
     def _stored_orientations(self, table: np.ndarray, n_joints: int) -> np.ndarray:

@@ -16,9 +16,9 @@ from merger_reference import reference_fuse
 from hiros_core.layouts import AZURE_KINECT
 from hiros_merger import kernels
 from hiros_merger.kernel_args import FuseSettings, Fusion, TrackDetections
-from hiros_merger.merger import MergerParams, _axes, _fuse_settings
+from hiros_merger.merger import MergerParams, _body_layout, _fuse_settings
 
-AXES = _axes(AZURE_KINECT)
+BODY = _body_layout(AZURE_KINECT)
 N_JOINTS = AZURE_KINECT.n_joints
 ARM = np.array([AZURE_KINECT.index(n) for n in ("ElbowRight", "WristRight", "HandRight")])
 
@@ -106,8 +106,8 @@ def test_fuse_equals_the_numpy_statement(
         settings_.robust._replace(iterations=iterations),
     )
     up = np.array([tilt, 0.0, 1.0]) / np.hypot(tilt, 1.0)  # NaN: the scene's up not known yet
-    got = kernels.fuse(detections, fuse_settings, AXES.body, up)
-    want = reference_fuse(detections, fuse_settings, AXES.body, up)
+    got = kernels.fuse(detections, fuse_settings, BODY, up)
+    want = reference_fuse(detections, fuse_settings, BODY, up)
     for name in Fusion._fields:
         np.testing.assert_allclose(
             getattr(got, name), getattr(want, name), rtol=1e-9, atol=1e-12, err_msg=name

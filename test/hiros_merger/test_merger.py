@@ -284,9 +284,9 @@ def test_up_is_the_world_z_or_else_the_people_s_vertical():
 
 
 def test_limbs_are_the_subtrees_off_the_torso():
-    from hiros_merger.merger import _axes
+    from hiros_merger.merger import _body_layout
 
-    groups = _axes(AZURE_KINECT).groups
+    groups = _body_layout(AZURE_KINECT).groups
     name = AZURE_KINECT.index
     assert groups[name("Pelvis")] == groups[name("Neck")] == 0
     arm = {groups[name(n)] for n in ("ClavicleLeft", "ShoulderLeft", "ElbowLeft", "ThumbLeft")}
