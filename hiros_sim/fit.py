@@ -92,7 +92,7 @@ import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -116,6 +116,7 @@ __all__ = [
     "read_kinect_csv",
     "simulated_errors",
     "skeleton_errors",
+    "take_scene",
 ]
 
 _DATA = DATA_DIR / "unipd_bpe_sample"
@@ -625,6 +626,25 @@ def fit_noise(bvh: str | Path = DEFAULT_BVH, csv: str | Path = DEFAULT_CSV) -> N
     )
 
 
+def take_scene(**changes: Any) -> SimParams:
+    """The real take's situation as simulator settings, with ``changes`` to other fields.
+
+    One camera 3.3 m from one person playing the take's own Xsens motion on the spot.
+    """
+    from hiros_sim.params import SimParams
+
+    scene = SimParams(
+        n_cameras=1,
+        setup="room",
+        n_people=1,
+        duration=40.0,
+        camera_radius=3.3,
+        walk_area=0.0,
+        bvh_files=(str(DEFAULT_BVH),),
+    )
+    return replace(scene, **changes)
+
+
 def simulated_errors(
     params: SimParams | None = None, *, facing_only: bool = False
 ) -> SkeletonErrors:
@@ -636,19 +656,10 @@ def simulated_errors(
     where the body faces the camera within 60°), is the take's situation: one camera 3.3 m
     from one person playing the take's own Xsens motion.
     """
-    from hiros_sim.params import SimParams
     from hiros_sim.simulate import simulate
 
     if params is None:
-        params = SimParams(
-            n_cameras=1,
-            setup="room",
-            n_people=1,
-            duration=40.0,
-            camera_radius=3.3,
-            walk_area=0.0,
-            bvh_files=(str(DEFAULT_BVH),),
-        )
+        params = take_scene()
         facing_only = True
     params = replace(
         params,

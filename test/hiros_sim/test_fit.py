@@ -8,12 +8,12 @@ from hiros_core.layouts import AZURE_KINECT
 from hiros_eval.body import limb_length_cv
 from hiros_sim import SimParams
 from hiros_sim.fit import (
-    DEFAULT_BVH,
     DEFAULT_CSV,
     fit_noise,
     read_kinect_csv,
     simulated_errors,
     skeleton_errors,
+    take_scene,
 )
 
 THUMBS = np.array([10, 17])
@@ -149,15 +149,7 @@ def test_vertical_scatter_of_resting_feet_and_pelvis():
 def test_simulated_planted_feet_are_quiet_like_the_real_take():
     """On the take's scene the simulated resting foot scatters vertically as the real one does
     (1.24 cm, ``test_noise_fit_is_finite_and_plausible``): well below the pelvis."""
-    take = SimParams(
-        n_cameras=1,
-        n_people=1,
-        duration=30.0,
-        camera_radius=3.3,
-        walk_area=0.0,
-        bvh_files=(str(DEFAULT_BVH),),
-        seed=2,
-    )
+    take = take_scene(duration=30.0, seed=2)
     foot, pelvis = simulated_errors(take, facing_only=True).vertical_scatter
     assert 0.009 < foot < 0.017
     assert foot < 0.5 * pelvis

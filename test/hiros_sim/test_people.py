@@ -8,9 +8,9 @@ import pytest
 from hiros_calib.tracks import extract_tracks
 from hiros_calib.world import FOOT_JOINT_HEIGHT
 from hiros_core.layouts import AZURE_KINECT
-from hiros_sim import SimParams, simulate
+from hiros_sim import simulate
 from hiros_sim.bvh import read_bvh
-from hiros_sim.fit import DEFAULT_BVH
+from hiros_sim.fit import take_scene
 from hiros_sim.params import default_bvh_files
 from hiros_sim.people import SDK_FOOT_HEIGHTS, prepare_clip
 
@@ -53,18 +53,7 @@ def test_the_simulated_sdk_rests_its_feet_as_the_real_take_does() -> None:
     # centimetres (8-14 cm per seed).
     heights = {"Foot": [], "Ankle": []}
     for seed in range(4):
-        scene = simulate(
-            SimParams(
-                n_cameras=1,
-                n_people=1,
-                duration=40.0,
-                camera_radius=3.3,
-                walk_area=0.0,
-                bvh_files=(str(DEFAULT_BVH),),
-                seed=seed,
-                joint_bias=0.0,
-            )
-        )
+        scene = simulate(take_scene(seed=seed, joint_bias=0.0))
         ((camera, groups),) = scene.camera_groups.items()
         pose = scene.calibration.camera(camera).extrinsics
         tracks = extract_tracks(groups, camera)
