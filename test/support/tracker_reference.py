@@ -1,0 +1,781 @@
+"""The tracker's kernels stated in numpy: the readable specification of ``hiros_tracker``'s maths.
+
+One function per compiled kernel the tracker calls (``hiros_tracker.kernels`` and the rigid
+moves of ``hiros_tracker.rigid``), written from the kernels' docstrings with whole-array
+formulas where they read best and plain loops where the maths is sequential (tracks changed in
+place one after another). The kernels' private helpers (``_sides_axis``, ``_reference_axis``,
+``_steadiness``, ``_follow_walk``, ``_facing_evidence``, ``_walking``, ``_update_up``,
+``_hit_one``, ``_rebase``, ``_solve_one``, ``_turn_quaternion``, ...) are restated here as
+functions of the same meaning and held to the kernels through their callers.
+``test/hiros_tracker/test_kernel_reference.py`` holds each kernel equal to this module on
+random inputs. Shapes: ``T`` tracks, ``D`` detections, ``U`` matched pairs, ``J`` joints,
+``K`` mirror parts, ``C`` cameras, ``R`` record slots.
+
+Where a function changes ``TrackFields`` in place, it does so like its kernel, so that a test
+can run both on copies of one state and compare every field.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from hiros_tracker.facing import DOUBT_LIMIT
+from hiros_tracker.kernel_args import (
+    FacingBody,
+    FacingPriors,
+    FacingView,
+    FrameRows,
+    GateFrame,
+    GateSettings,
+    GateTracks,
+    HeldSides,
+    HitLayout,
+    Hits,
+    HitSettings,
+    MatchSettings,
+    MirrorLayout,
+    SideLayout,
+    StackedRows,
+    TrackFields,
+    TrackPoses,
+    UpdateSettings,
+)
+from hiros_tracker.labels import (
+    CAMERA_GAP,
+    CAMERA_WEIGHT,
+    REVERSED_COS,
+    SIDE_MEMORY,
+    WALK_MEMORY,
+    WALK_SPEED,
+)
+from hiros_tracker.track_update import REBASE_NS
+
+INFEASIBLE = 1e9
+"""The cost of a gated-out pair (``association.INFEASIBLE``)."""
+DETERMINED = 1e-5
+"""A joint's slope is determined when its centred time spread ``sum (t - tc)^2`` (s²) is above."""
+
+
+def copy_fields(fields: TrackFields) -> TrackFields:
+    """A ``TrackFields`` of copies: the state one run changes in place, apart from another's."""
+    return TrackFields(*(np.copy(field) for field in fields))
+
+
+def _norm(vectors: np.ndarray) -> np.ndarray:
+    return np.sqrt(np.sum(vectors * vectors, axis=-1))
+
+
+def _unit_or_nan(vector: np.ndarray) -> np.ndarray:
+    """``vector / |vector|``; NaN for a zero (or NaN) vector (``facing._unit3``)."""
+    size = _norm(vector)
+    return vector / size if size != 0.0 else np.full(3, np.nan)
+
+
+def _flat(vector: np.ndarray, up: np.ndarray) -> np.ndarray:
+    """``vector`` less its component along the unit ``up`` (``facing._flat3``)."""
+    return vector - np.dot(vector, up) * up
+
+
+def _permutation(flips: np.ndarray, layout: MirrorLayout) -> np.ndarray:
+    """``(J,)`` joint order relabelling the parts flagged in ``flips`` ``(K,)`` (``_order``)."""
+    sided = layout.part >= 0
+    flipped = np.zeros(len(layout.part), dtype=bool)
+    flipped[sided] = flips[layout.part[sided]]
+    return np.where(flipped, layout.mirror, np.arange(len(layout.part)))
+
+
+# ------------------------------------------------------------------------------ association
+def reference_masked_positions(
+    markers: np.ndarray, present: np.ndarray, min_confidence: float
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
+    """``masked_positions``: positions kept where present and confident enough.
+
+    ``markers`` ``(D, J, 20)``: confidence in column 0, position in 1:4. A joint is kept when
+    present and not below ``min_confidence`` (a NaN confidence is not below; 0: no floor).
+    """
+    xyz = markers[..., 1:4]
+    finite = np.isfinite(xyz).all(axis=-1)
+    with np.errstate(invalid="ignore"):
+        unconfident = (min_confidence > 0) & (markers[..., 0] < min_confidence)
+    keep = present & ~unconfident
+    positions = np.where(keep[..., None], xyz, np.nan)
+    usable = (present & finite).any(axis=1)
+    kept = (keep & finite).sum(axis=1)
+    return positions, usable, kept, int((~usable).sum())
+
+
+def reference_match_costs(  # noqa: PLR0917 - the kernel's inputs
+    tracks: TrackPoses,
+    detections: np.ndarray,
+    stamp_ns: int,
+    weights: np.ndarray,
+    layout: MirrorLayout,
+    settings: MatchSettings,
+) -> tuple[np.ndarray, np.ndarray]:
+    """``match_costs``: ``(T, D)`` weighted mean joint distances, ``(T, D, K)`` parts mirrored."""
+    part, mirror, n_parts = layout.part, layout.mirror, layout.n_parts
+    dt = np.clip(
+        (stamp_ns - tracks.time_ns) * 1e-9, -settings.max_prediction, settings.max_prediction
+    )
+    predicted = tracks.positions + tracks.velocity[:, None, :] * dt[:, None, None]  # (T, J, 3)
+    given = _norm(predicted[:, None] - detections[None])  # (T, D, J)
+    mirrored = _norm(predicted[:, None] - detections[None][:, :, mirror])
+    flips = np.zeros((*given.shape[:2], n_parts), dtype=bool)
+    if settings.use_parts:
+        for k in range(n_parts):
+            in_part = part == k
+            mean_given = np.nansum(given[..., in_part], axis=2) / np.maximum(
+                np.isfinite(given[..., in_part]).sum(axis=2), 1
+            )
+            count_mirrored = np.isfinite(mirrored[..., in_part]).sum(axis=2)
+            mean_mirrored = np.nansum(mirrored[..., in_part], axis=2) / np.maximum(
+                count_mirrored, 1
+            )
+            flips[..., k] = (count_mirrored > 0) & (mean_mirrored + settings.margin < mean_given)
+    sided = part >= 0
+    take_mirrored = np.zeros(given.shape, dtype=bool)
+    take_mirrored[..., sided] = flips[..., part[sided]]
+    chosen = np.where(take_mirrored, mirrored, given)
+    finite = np.isfinite(chosen)
+    norm = (finite * weights).sum(axis=2)
+    total = np.where(finite, chosen * weights, 0.0).sum(axis=2)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        cost = np.where(norm > 0, total / norm, np.nan)
+    cost[finite.sum(axis=2) < settings.min_joints] = np.inf
+    return cost, flips
+
+
+def reference_gate_costs(
+    cost: np.ndarray, tracks: GateTracks, frame: GateFrame, settings: GateSettings
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``gate_costs``: the finished ``(T, D)`` costs, ``(T, D)`` feasible and ``(T,)`` levels."""
+    n = len(cost)  # the table's rows past the tracks' are not read
+    known = np.where(tracks.seen[:n, frame.camera], tracks.body_ids[:n, frame.camera], -1)
+    same = (frame.det_ids[None, :] == known[:, None]) & (frame.det_ids[None, :] >= 0)
+    elsewhere = ((known >= 0)[:, None] & (frame.det_ids[None, :] == known[:, None])).any(axis=1)
+    term = np.where(same, -1.0, elsewhere[:, None].astype(float))
+    if settings.bonus:
+        cost = cost + settings.bonus * term
+    unseen = np.maximum((frame.stamp_ns - tracks.last_hit_ns[:n]) * 1e-9, 0.0)
+    gate = settings.distance + settings.growth * unseen
+    with np.errstate(invalid="ignore"):
+        feasible = np.isfinite(cost) & (cost <= gate[:, None])
+    cost = np.where(feasible, cost, INFEASIBLE)
+    recent = tracks.last_hit_ns[:n] >= frame.recent_ns
+    levels = np.where(tracks.confirmed[:n], np.where(recent, 0, 1), 2)
+    return cost, feasible, levels
+
+
+def reference_frame_costs(  # noqa: PLR0917 - the kernel's inputs
+    tracks: TrackPoses,
+    detections: np.ndarray,
+    weights: np.ndarray,
+    layout: MirrorLayout,
+    match: MatchSettings,
+    gate_tracks: GateTracks,
+    frame: GateFrame,
+    gate: GateSettings,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """``frame_costs``: the costs at the frame's stamp, gated; flips, feasible pairs, levels."""
+    cost, flips = reference_match_costs(tracks, detections, frame.stamp_ns, weights, layout, match)
+    cost, feasible, levels = reference_gate_costs(cost, gate_tracks, frame, gate)
+    return cost, flips, feasible, levels
+
+
+def reference_frame_pairs(  # noqa: PLR0917 - the kernel's inputs
+    r: np.ndarray,
+    c: np.ndarray,
+    feasible: np.ndarray,
+    flips: np.ndarray,
+    kept: np.ndarray,
+    min_joints: int,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, int, int]:
+    """``frame_pairs``: each detection's track (-1: new), its detection, flips, new, dropped."""
+    matched = {int(d): int(t) for t, d in zip(r, c, strict=True) if feasible[t, d]}
+    rows, dets, pair_flips, new = [], [], [], 0
+    for d in range(len(kept)):
+        if d in matched:
+            rows.append(matched[d])
+            pair_flips.append(flips[matched[d], d])
+        elif kept[d] >= min_joints:
+            rows.append(-1)
+            pair_flips.append(np.zeros(flips.shape[2], dtype=bool))
+            new += 1
+        else:
+            continue
+        dets.append(d)
+    as_flips = np.array(pair_flips, dtype=bool).reshape(len(rows), flips.shape[2])
+    dropped = len(kept) - len(rows)
+    return np.array(rows, dtype=np.int64), np.array(dets, dtype=np.int64), as_flips, new, dropped
+
+
+# --------------------------------------------------------------------------------- labels
+def sides_axis(pose: np.ndarray, left: np.ndarray, right: np.ndarray) -> np.ndarray:
+    """``(3,)`` a pose's left-right axis: its ``left`` joints less its ``right`` ones, summed."""
+    return (pose[left] - pose[right]).sum(axis=0)
+
+
+def _cosine_or(a: np.ndarray, b: np.ndarray, otherwise: float) -> float:
+    """The cosine of two vectors, ``otherwise`` where either is zero (or NaN)."""
+    scale = np.sqrt(np.sum(a * a) * np.sum(b * b))
+    return float(np.sum(a * b) / scale) if scale > 0.0 else otherwise
+
+
+def reference_axis(held: HeldSides, r: int) -> np.ndarray:
+    """``(3,)`` what the detections of track ``r`` are held to (``_reference_axis``).
+
+    The unit held axis (the pose's while none is held) plus ``CAMERA_WEIGHT`` times the unit
+    axis of the frame's camera's last detection of the track, when at most ``CAMERA_GAP`` old.
+    """
+    axis = held.axes[r]
+    if not axis.any():
+        axis = sides_axis(held.tracks[r], held.left, held.right)
+    size = _norm(axis)
+    reference = axis / size if size > 0.0 else axis.copy()
+    if held.camera < held.camera_axes.shape[1]:
+        last = held.camera_axes[r, held.camera]
+        recent = (held.stamp_ns - held.camera_ns[r, held.camera]) * 1e-9 <= CAMERA_GAP
+        if _norm(last) > 0.0 and recent:
+            reference = reference + CAMERA_WEIGHT * last / _norm(last)
+    return reference
+
+
+def sides_cosine(pose: np.ndarray, reference: np.ndarray, held: HeldSides) -> float:
+    """Cosine of a pose's left-right axis with ``reference``; NaN where a joint is missing."""
+    return _cosine_or(sides_axis(pose, held.left, held.right), reference, np.nan)
+
+
+def _canonical_one(  # noqa: PLR0917 - one pair's detection, flips and context
+    detection: np.ndarray,
+    flips: np.ndarray,
+    layout: MirrorLayout,
+    align: bool,
+    sides: SideLayout,
+    held: HeldSides,
+    row: int,
+) -> tuple[np.ndarray, np.ndarray]:
+    """One matched detection ``(J, 3)`` put in its track's labelling, and the flips used."""
+    flips = flips.copy()
+    has_sides = len(held.left) > 0
+    if align and has_sides and len(sides.shoulders) == 2:  # the arms follow the torso
+        along = sides_cosine(detection, reference_axis(held, row), held)
+        if abs(along) > REVERSED_COS:
+            flips[layout.part[sides.shoulders[0]]] = along < 0.0
+    pose = detection[_permutation(flips, layout)]
+    if align and len(sides.shoulders) == 2 and len(sides.pairs):  # pairs to the shoulders
+        shoulders = pose[sides.shoulders[0]] - pose[sides.shoulders[1]]
+        toggle = np.zeros_like(flips)
+        for (a, b), k in zip(sides.pairs, sides.pair_parts, strict=True):
+            pair = pose[a] - pose[b]
+            scale = np.sqrt(np.sum(pair * pair) * np.sum(shoulders * shoulders))
+            if np.dot(pair, shoulders) < -0.5 * scale:
+                toggle[k] ^= True
+        flips ^= toggle
+        pose = detection[_permutation(flips, layout)]
+    reversed_ = align and has_sides  # the whole body's sides held to the track's
+    if reversed_ and sides_cosine(pose, reference_axis(held, row), held) < -REVERSED_COS:
+        flips = ~flips
+        pose = detection[_permutation(flips, layout)]
+    return pose, flips
+
+
+def reference_canonical_poses(  # noqa: PLR0917 - the kernel's inputs
+    positions: np.ndarray,
+    rows: np.ndarray,
+    flips: np.ndarray,
+    layout: MirrorLayout,
+    align: bool,
+    sides: SideLayout,
+    held: HeldSides,
+) -> tuple[np.ndarray, np.ndarray]:
+    """``canonical_poses``: ``(U, J, 3)`` detections ``rows`` in their tracks' labelling, flips."""
+    n_parts = flips.shape[1]
+    canonical = np.empty((len(rows), positions.shape[1], 3))
+    used = np.empty((len(rows), n_parts), dtype=bool)
+    for u, d in enumerate(rows):
+        canonical[u], used[u] = _canonical_one(
+            positions[d], flips[u], layout, align, sides, held, held.track_rows[u]
+        )
+    return canonical, used
+
+
+def follow_walk(axis: np.ndarray, velocity: np.ndarray, up: np.ndarray, elapsed: float) -> None:
+    """``_follow_walk``: ``axis`` pulled towards ``|axis| unit(up x v)`` when walking, in place."""
+    normal = up[:3]
+    flat = _flat(velocity, normal)
+    speed = _norm(flat)
+    if not speed > WALK_SPEED:
+        return
+    keep = np.exp(-elapsed / WALK_MEMORY)
+    facing_left = np.cross(normal, flat) / speed
+    axis[:] = keep * axis + (1.0 - keep) * _norm(axis) * facing_left
+
+
+def _steadiness(held: HeldSides, r: int, axis: np.ndarray, camera: int, stamp_ns: int) -> float:
+    """How much a detection's axis counts: its cosine (>= 0) with its camera's recent last one."""
+    if camera >= held.camera_axes.shape[1]:
+        return 1.0
+    last = held.camera_axes[r, camera]
+    if (stamp_ns - held.camera_ns[r, camera]) * 1e-9 > CAMERA_GAP or not last.any():
+        return 1.0
+    return max(_cosine_or(axis, last, 0.0), 0.0)
+
+
+def reference_hold_axes(
+    held: HeldSides, canonical: np.ndarray, last_hit_ns: np.ndarray, view: FacingView
+) -> None:
+    """``hold_axes``: each detection's left-right axis folded into its track's, in place."""
+    upright = view.up[3] != 0.0
+    for u, r in enumerate(held.track_rows):
+        axis = sides_axis(canonical[u], held.left, held.right)
+        if not np.isfinite(axis).all():
+            continue
+        given = held.camera_ns[r][held.camera_ns[r] > 0]
+        last_fold = given.max() if len(given) else last_hit_ns[r]
+        elapsed = max(view.stamp_ns - last_fold, 0) * 1e-9
+        keep = 0.0
+        if held.axes[r].any():
+            steady = _steadiness(held, r, axis, view.camera, view.stamp_ns)
+            keep = np.exp(-elapsed * steady / SIDE_MEMORY)
+            if upright:
+                follow_walk(held.axes[r], held.velocity[r], view.up, elapsed)
+        held.axes[r] = keep * held.axes[r] + (1.0 - keep) * axis
+        if view.camera < held.camera_axes.shape[1]:
+            held.camera_axes[r, view.camera] = axis
+            held.camera_ns[r, view.camera] = view.stamp_ns
+
+
+def live_records(tracks: TrackFields, r: int) -> np.ndarray:
+    """Slots of track ``r``'s record ring that hold its window's detections, oldest first."""
+    slots = tracks.record_ns.shape[1]
+    return (tracks.record_start[r] + np.arange(tracks.record_count[r])) % slots
+
+
+def reference_relabel(tracks: TrackFields, r: int, permutation: np.ndarray) -> None:
+    """``relabel``: joint ``j`` of track ``r`` takes joint ``permutation[j]``'s state."""
+    tracks.positions[r] = tracks.positions[r][permutation]
+    tracks.velocities[r] = tracks.velocities[r][permutation]
+    tracks.sums[r] = tracks.sums[r][:, permutation]
+    live = live_records(tracks, r)
+    tracks.record_terms[r, live] = tracks.record_terms[r, live][:, permutation]
+
+
+def reference_label_rows(  # noqa: PLR0917 - the kernel's inputs
+    markers: np.ndarray,
+    present: np.ndarray,
+    links: np.ndarray,
+    link_present: np.ndarray,
+    flips: np.ndarray,
+    layout: MirrorLayout,
+    track_velocities: np.ndarray,
+) -> None:
+    """``label_rows``: one detection's rows relabelled, missing velocities its track's."""
+    order = _permutation(flips, layout)
+    for field in (markers, present, links, link_present):
+        field[: len(order)] = field[order]
+    unknown = present & ~np.isfinite(markers[:, 8:11]).all(axis=1)
+    markers[unknown, 8:11] = track_velocities[unknown]
+
+
+def reference_label_frame(  # noqa: PLR0917 - the kernel's inputs
+    stacked: StackedRows,
+    index: np.ndarray,
+    flips: np.ndarray,
+    layout: MirrorLayout,
+    velocities: np.ndarray,
+    rows: np.ndarray,
+    confirmed: np.ndarray,
+) -> None:
+    """``label_frame``: ``label_rows`` on stacked row ``index[u]`` for each confirmed track."""
+    for u, r in enumerate(rows):
+        if confirmed[r]:
+            d = index[u]
+            reference_label_rows(
+                stacked.markers[d],
+                stacked.present[d],
+                stacked.links[d],
+                stacked.link_present[d],
+                flips[u],
+                layout,
+                velocities[r],
+            )
+
+
+# --------------------------------------------------------------------------------- facing
+def update_up(
+    up: np.ndarray, positions: np.ndarray, rows: np.ndarray, body: FacingBody
+) -> np.ndarray:
+    """``_update_up``: the world's up (state ``up`` ``(4,)`` in place), NaN before any trunk."""
+    trunks = np.array(
+        [_unit_or_nan(positions[r, body.neck] - positions[r, body.root]) for r in rows]
+    )
+    trunks = trunks.reshape(-1, 3)[np.isfinite(trunks.reshape(-1, 3)).all(axis=1)]
+    if len(trunks):
+        mean = trunks.sum(axis=0) / len(trunks)
+        up[:3] = mean if up[3] == 0.0 else up[:3] + 0.01 * (mean - up[:3])
+        up[:3] /= _norm(up[:3])
+        up[3] = 1.0
+    return up[:3].copy() if up[3] != 0.0 else np.full(3, np.nan)
+
+
+def walking(velocity: np.ndarray, front: np.ndarray, up: np.ndarray, priors: FacingPriors) -> float:
+    """``_walking``: ``±walking_evidence`` for a walk along/against ``front``, else 0 (NaN)."""
+    flat = _flat(velocity, up)
+    speed = _norm(flat)
+    if not speed > priors.walking_speed:
+        return 0.0
+    along = np.dot(flat, front) / max(speed, 1e-9)
+    if along > 0:
+        return priors.walking_evidence
+    if along < 0:
+        return -priors.walking_evidence
+    return along
+
+
+def _view_evidence(  # noqa: PLR0917 - one detection's comparison and where it is seen from
+    flipped: bool,
+    front: np.ndarray,
+    root: np.ndarray,
+    up: np.ndarray,
+    view: FacingView,
+    priors: FacingPriors,
+) -> float:
+    """Log-odds that the track is right given whether its detection looks flipped.
+
+    Each hypothesis (front ``f`` right, ``-f`` mirrored) takes the flip prior of the view the
+    camera would have (``flip_prior_back`` when seen from the back, cos < -0.5); without a
+    camera position, ``±log((1 - p) / p)``.
+    """
+    p, p_back = priors.flip_prior, priors.flip_prior_back
+    if not view.has_camera:
+        return (-1.0 if flipped else 1.0) * np.log((1.0 - p) / p)
+    to_camera = _unit_or_nan(_flat(view.camera_position - root, up))
+    cosine = np.dot(front, to_camera)
+    prior_right = p_back if cosine < -0.5 else p
+    prior_wrong = p_back if -cosine < -0.5 else p
+    likely_right = prior_right if flipped else 1.0 - prior_right
+    likely_wrong = 1.0 - prior_wrong if flipped else prior_wrong
+    return np.log(likely_right / likely_wrong)
+
+
+def facing_evidence(  # noqa: PLR0917 - the kernel's inputs
+    tracks: TrackFields,
+    rows: np.ndarray,
+    canonical: np.ndarray,
+    up: np.ndarray,
+    view: FacingView,
+    body: FacingBody,
+    priors: FacingPriors,
+) -> tuple[np.ndarray, np.ndarray]:
+    """``_facing_evidence``: ``(U,)`` log-odds each detection gives, ``(U,)`` doubt steps.
+
+    A front or forward that cannot be computed (a missing joint, an unknown up) makes every
+    comparison with it false: the detection then reads as not flipped, as in the kernel.
+    """
+    evidence = np.zeros(len(rows))
+    doubt_step = np.zeros(len(rows))
+    for u, r in enumerate(rows):
+        pose = tracks.positions[r]
+        across = pose[body.left].sum(axis=0) - pose[body.right].sum(axis=0)
+        front = _unit_or_nan(np.cross(across, up))
+        forward = np.zeros(3)
+        for a, b in body.pointers:
+            pointer = _unit_or_nan(_flat(canonical[u, b] - canonical[u, a], up))
+            forward += np.where(np.isfinite(pointer), pointer, 0.0)
+        flipped = bool(np.dot(_unit_or_nan(forward), front) < 0)
+        value = _view_evidence(flipped, front, pose[body.root], up, view, priors)
+        walk = walking(tracks.velocity[r], front, up, priors)
+        if walk < 0.0 and np.isfinite(value):
+            doubt_step[u] = -value
+        value += walk
+        evidence[u] = value if np.isfinite(value) else 0.0
+    return evidence, doubt_step
+
+
+def reference_turn_facing(  # noqa: PLR0917 - the kernel's inputs
+    tracks: TrackFields,
+    rows: np.ndarray,
+    canonical: np.ndarray,
+    view: FacingView,
+    body: FacingBody,
+    priors: FacingPriors,
+) -> np.ndarray:
+    """``turn_facing``: the tracks' facing log-odds weighed, reversed ones relabelled (in place)."""
+    up = update_up(view.up, tracks.positions, rows, body)
+    evidence, doubt_step = facing_evidence(tracks, rows, canonical, up, view, body, priors)
+    turned = np.zeros(len(rows), dtype=bool)
+    for u, r in enumerate(rows):
+        elapsed = max(view.stamp_ns - tracks.facing_ns[r], 0) * 1e-9
+        tracks.facing[r] = tracks.facing[r] * np.exp(-elapsed / priors.facing_memory) + evidence[u]
+        tracks.facing_ns[r] = view.stamp_ns
+        step = doubt_step[u]
+        tracks.doubt[r] = max(tracks.doubt[r] + step, 0.0) if step != 0.0 else 0.0
+        if tracks.doubt[r] > DOUBT_LIMIT:
+            tracks.facing[r] = min(tracks.facing[r], -priors.facing_threshold - 1.0)
+        if tracks.facing[r] < -priors.facing_threshold:
+            reference_relabel(tracks, r, body.mirror)
+            tracks.sides[r] = -tracks.sides[r]
+            tracks.camera_sides[r] = -tracks.camera_sides[r]
+            tracks.facing[r] = -tracks.facing[r]
+            tracks.doubt[r] = 0.0
+            turned[u] = True
+    return turned
+
+
+# --------------------------------------------------------------------------- track update
+def fit_terms(pose: np.ndarray, t: float) -> np.ndarray:
+    """``(J, 9)`` one detection's least-squares terms n, t, t², p, t·p; 0 where unmeasured."""
+    measured = np.isfinite(pose).all(axis=1)
+    terms = np.zeros((len(pose), 9))
+    terms[measured, 0] = 1.0
+    terms[measured, 1] = t
+    terms[measured, 2] = t * t
+    terms[measured, 3:6] = pose[measured]
+    terms[measured, 6:9] = pose[measured] * t
+    return terms
+
+
+def smoothed_pose(  # noqa: PLR0917 - one track's state and its detection
+    position: np.ndarray,
+    velocity: np.ndarray,
+    time_ns: int,
+    detection: np.ndarray,
+    stamp_ns: int,
+    alpha: float,
+    max_prediction: float,
+) -> np.ndarray:
+    """``(J, 3)`` a track's pose predicted to its newest time and moved ``alpha`` to its detection.
+
+    An unmeasured joint (any coordinate NaN) keeps the prediction; a value that is not finite
+    takes the detection's coordinate.
+    """
+    dt = np.clip((max(time_ns, stamp_ns) - time_ns) * 1e-9, -max_prediction, max_prediction)
+    predicted = position + velocity * dt
+    measured = np.isfinite(detection).all(axis=1, keepdims=True)
+    value = np.where(measured, predicted + alpha * (detection - predicted), predicted)
+    return np.where(np.isfinite(value), value, detection)
+
+
+def window_velocities(
+    stamps: np.ndarray, cameras: np.ndarray, poses: np.ndarray, weights: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The velocity fit over a track's window: one slope per joint, one intercept per camera.
+
+    ``stamps`` ``(N,)`` ns, ``cameras`` ``(N,)``, ``poses`` ``(N, J, 3)`` (NaN: unmeasured).
+    The slope of joint ``j`` is ``sum_c sum_i (t_i - tc)(p_i - pc) / sum_c sum_i (t_i - tc)^2``
+    (``tc``, ``pc``: camera ``c``'s means of the measured records), 0 where that denominator
+    is not above ``DETERMINED``; the body velocity is the ``weights`` mean of the determined
+    numerators over their denominators' ``weights`` mean. Returns the ``(J, 3)`` slopes,
+    ``(J,)`` the denominators and the ``(3,)`` body velocity.
+    """
+    n_joints = poses.shape[1]
+    t = (stamps - stamps[0]) * 1e-9 if len(stamps) else stamps * 1e-9
+    sxx = np.zeros(n_joints)
+    sxy = np.zeros((n_joints, 3))
+    for camera in np.unique(cameras):
+        for j in range(n_joints):
+            mine = (cameras == camera) & np.isfinite(poses[:, j]).all(axis=1)
+            if not mine.any():
+                continue
+            dt = t[mine] - t[mine].mean()
+            sxx[j] += (dt**2).sum()
+            sxy[j] += (dt[:, None] * (poses[mine, j] - poses[mine, j].mean(axis=0))).sum(axis=0)
+    determined = sxx > DETERMINED
+    slopes = np.where(determined[:, None], sxy / np.where(determined, sxx, 1.0)[:, None], 0.0)
+    pooled = (sxx * weights)[determined].sum()
+    body = (sxy * weights[:, None])[determined].sum(axis=0) / max(pooled, 1e-12)
+    return slopes, sxx, body
+
+
+def _record_poses(tracks: TrackFields, r: int, live: np.ndarray) -> np.ndarray:
+    """``(N, J, 3)`` the poses of track ``r``'s records ``live``, NaN where unmeasured."""
+    terms = tracks.record_terms[r, live]
+    return np.where(terms[..., :1] > 0, terms[..., 3:6], np.nan)
+
+
+def _take_hit(tracks: TrackFields, u: int, hits: Hits, settings: UpdateSettings) -> None:
+    """Hit ``u``'s track: its pose, counters and record window after its detection."""
+    r, detection = hits.rows[u], hits.canonical[u]
+    alpha = settings.smoothing if tracks.hits[r] else 1.0
+    tracks.positions[r] = smoothed_pose(
+        tracks.positions[r],
+        tracks.velocity[r],
+        tracks.time_ns[r],
+        detection,
+        hits.stamp_ns,
+        alpha,
+        settings.max_prediction,
+    )
+    tracks.time_ns[r] = max(tracks.time_ns[r], hits.stamp_ns)
+    tracks.last_hit_ns[r] = max(tracks.last_hit_ns[r], hits.stamp_ns)
+    tracks.hits[r] += 1
+    tracks.body_ids[r, hits.camera] = hits.det_ids[u]
+    tracks.seen[r, hits.camera] = True
+    tracks.n_cameras[r] = max(tracks.n_cameras[r], hits.camera + 1)
+    slots = tracks.record_ns.shape[1]
+    slot = (tracks.record_start[r] + tracks.record_count[r]) % slots
+    tracks.record_ns[r, slot] = hits.stamp_ns
+    tracks.record_camera[r, slot] = hits.camera
+    tracks.record_terms[r, slot] = fit_terms(detection, (hits.stamp_ns - tracks.epoch_ns[r]) * 1e-9)
+    tracks.record_count[r] += 1
+    while (
+        tracks.record_count[r]
+        and tracks.record_ns[r, tracks.record_start[r]] < hits.stamp_ns - settings.window_ns
+    ):
+        tracks.record_start[r] = (tracks.record_start[r] + 1) % slots
+        tracks.record_count[r] -= 1
+    live = live_records(tracks, r)
+    if hits.stamp_ns - tracks.epoch_ns[r] > REBASE_NS:  # a new time origin, for precision
+        tracks.epoch_ns[r] = hits.stamp_ns
+        for slot, pose in zip(live, _record_poses(tracks, r, live), strict=True):
+            t = (tracks.record_ns[r, slot] - hits.stamp_ns) * 1e-9
+            tracks.record_terms[r, slot] = fit_terms(pose, t)
+    tracks.sums[r] = 0.0
+    for slot in live:
+        tracks.sums[r, tracks.record_camera[r, slot]] += tracks.record_terms[r, slot]
+
+
+def reference_fold_hits(tracks: TrackFields, hits: Hits, settings: UpdateSettings) -> bool:
+    """``fold_hits``: each hit track's pose smoothed, window moved and velocities refitted.
+
+    The running sums are restated as the sums of the window's records' terms, and the fit is
+    made from the records' poses (``window_velocities``); a track keeps its velocities when
+    none of its joints is determined. Returns whether a hit track's record ring is full.
+    """
+    for u in range(len(hits.rows)):
+        _take_hit(tracks, u, hits, settings)
+    full = False
+    for r in hits.rows:
+        live = live_records(tracks, r)
+        poses = _record_poses(tracks, r, live)
+        slopes, sxx, body = window_velocities(
+            tracks.record_ns[r, live], tracks.record_camera[r, live], poses, settings.weights
+        )
+        if (sxx > DETERMINED).any():
+            tracks.velocities[r] = slopes
+            tracks.velocity[r] = body
+        full |= tracks.record_count[r] == tracks.record_ns.shape[1]
+    return bool(full)
+
+
+def reference_live_tracks(  # noqa: PLR0917 - the kernel's inputs
+    last_hit_ns: np.ndarray,
+    confirmed: np.ndarray,
+    n_tracks: int,
+    now_ns: int,
+    track_timeout: float,
+    tentative_timeout: float,
+) -> tuple[int, np.ndarray]:
+    """``live_tracks``: how many of the first ``n_tracks`` were hit within their timeout, which."""
+    timeout = np.where(confirmed[:n_tracks], track_timeout, tentative_timeout)
+    keep = (now_ns - last_hit_ns[:n_tracks]) * 1e-9 <= timeout
+    return int(keep.sum()), keep
+
+
+# ------------------------------------------------------------------------------------ hit
+def reference_hit_frame(  # noqa: PLR0917 - the kernel's inputs
+    tracks: TrackFields,
+    frame: FrameRows,
+    pairs: tuple[np.ndarray, np.ndarray, np.ndarray],
+    view: FacingView,
+    layout: HitLayout,
+    settings: HitSettings,
+) -> tuple[np.ndarray, bool, np.ndarray, int, np.ndarray, bool]:
+    """``hit_frame``: canonical poses, held axes, fold, facing, then labels, in that order."""
+    rows, dets, flips = pairs
+    held = HeldSides(
+        tracks=tracks.positions,
+        axes=tracks.sides,
+        velocity=tracks.velocity,
+        track_rows=rows,
+        left=layout.body.left,
+        right=layout.body.right,
+        camera_axes=tracks.camera_sides,
+        camera_ns=tracks.camera_sides_ns,
+        camera=view.camera,
+        stamp_ns=view.stamp_ns,
+    )
+    canonical, flips = reference_canonical_poses(
+        frame.positions, dets, flips, layout.mirror, settings.align, layout.sides, held
+    )
+    if settings.align and len(layout.body.left):
+        reference_hold_axes(held, canonical, tracks.last_hit_ns, view)
+    hits = Hits(rows, canonical, frame.det_ids[dets], view.camera, view.stamp_ns)
+    full = reference_fold_hits(tracks, hits, settings.update)
+    turned = np.zeros(len(rows), dtype=bool)
+    if settings.weigh:
+        turned = reference_turn_facing(tracks, rows, canonical, view, layout.body, settings.priors)
+    flips[turned] = ~flips[turned]
+    labelled = bool(settings.label and tracks.confirmed[rows].all())
+    if labelled:
+        labels = (layout.mirror, tracks.velocities, rows, tracks.confirmed)
+        reference_label_frame(frame.stacked, frame.index[dets], flips, *labels)
+    return flips, full, turned, int(turned.sum()), tracks.ids[rows], labelled
+
+
+# ---------------------------------------------------------------------------------- rigid
+def hamilton(q: np.ndarray, p: np.ndarray) -> np.ndarray:
+    """The Hamilton product ``q ⊗ p`` of quaternions stored x, y, z, w."""
+    qv, qw, pv, pw = q[:3], q[3], p[:3], p[3]
+    return np.array([*(qw * pv + pw * qv + np.cross(qv, pv)), qw * pw - np.dot(qv, pv)])
+
+
+def reference_move_rows(
+    rows: np.ndarray, rotation: np.ndarray, translation: np.ndarray, turn: np.ndarray
+) -> None:
+    """``move_rows``: marker/link rows ``(N, 20)`` moved by ``R``, ``t`` and quaternion ``turn``.
+
+    Position (1:4) ``R p + t``; orientation (4:8) normalised, then ``turn ⊗ q``; the twist and
+    acceleration vectors (8:11, 11:14, 14:17, 17:20) ``R v``. NaN spreads over a field, as the
+    matrix products spread it; a zero quaternion becomes NaN.
+    """
+    rows[:, 1:4] = rows[:, 1:4] @ rotation.T + translation
+    for start in (8, 11, 14, 17):
+        rows[:, start : start + 3] = rows[:, start : start + 3] @ rotation.T
+    _turn(rows[:, 4:8], turn)
+
+
+def _turn(quaternions: np.ndarray, turn: np.ndarray) -> None:
+    """Quaternions ``(N, 4)`` normalised and turned by ``turn ⊗ q``, in place (NaN spreads)."""
+    with np.errstate(invalid="ignore", divide="ignore"):
+        unit = quaternions / _norm(quaternions)[:, None]
+    for i, q in enumerate(unit):
+        quaternions[i] = hamilton(turn, q) if np.isfinite(q).all() else np.nan
+
+
+def reference_move_frame(  # noqa: PLR0917 - the kernel's inputs
+    markers: np.ndarray,
+    links: np.ndarray,
+    boxes: np.ndarray,
+    rotation: np.ndarray,
+    translation: np.ndarray,
+    turn: np.ndarray,
+) -> None:
+    """``move_frame``: a frame's marker and link rows ``(D, N, 20)`` and boxes, in place."""
+    for rows in (*markers, *links):
+        reference_move_rows(rows, rotation, translation, turn)
+    reference_move_boxes(boxes, rotation, translation, turn)
+
+
+def reference_moved_frame(  # noqa: PLR0917 - the kernel's inputs
+    markers: np.ndarray,
+    present: np.ndarray,
+    links: np.ndarray,
+    link_present: np.ndarray,
+    boxes: np.ndarray,
+    rotation: np.ndarray,
+    translation: np.ndarray,
+    turn: np.ndarray,
+) -> tuple[np.ndarray, ...]:
+    """``moved_frame``: ``reference_move_frame`` on copies of the five fields, in their order."""
+    out = tuple(np.copy(field) for field in (markers, present, links, link_present, boxes))
+    reference_move_frame(out[0], out[2], out[4], rotation, translation, turn)
+    return out
+
+
+def reference_move_boxes(
+    boxes: np.ndarray, rotation: np.ndarray, translation: np.ndarray, turn: np.ndarray
+) -> None:
+    """``move_boxes``: boxes ``(N, 22)``, centre (0:3) ``R p + t``, orientation (3:7) turned."""
+    boxes[:, 0:3] = boxes[:, 0:3] @ rotation.T + translation
+    _turn(boxes[:, 3:7], turn)
