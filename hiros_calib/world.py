@@ -28,7 +28,7 @@ How well this does on the simulator, and what was tried: docs/world-frame.md.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
@@ -109,6 +109,9 @@ class FloorFit:
     floor_error_m: float = math.nan
     """Standard error of ``floor_height`` (m, :func:`_floor_error`); NaN where it cannot be
     told (the feet of fewer than two camera and foot pairs)."""
+    doubtful_poses: tuple[str, ...] = ()
+    """Cameras whose pose the calibration flags as doubtful (:func:`align_to_floor`): their
+    samples went into up and the floor through that pose."""
 
     def quality(self) -> dict[str, Any]:
         """The figures for the calibration file."""
@@ -142,6 +145,11 @@ class FloorFit:
             doubts.append(
                 f"the floor height is known to {100 * self.floor_error_m:.1f} cm (standard "
                 f"error over cameras and feet, > {100 * DOUBT_FLOOR_ERROR:.0f} cm)"
+            )
+        if self.doubtful_poses:
+            doubts.append(
+                f"up and the floor rest on the pose of {', '.join(self.doubtful_poses)}, which "
+                "the calibration flags as doubtful"
             )
         if self.source != "feet and torsos":
             doubts.append("up is the bodies' mean vertical: people lean")
@@ -468,7 +476,9 @@ def align_to_floor(calibration: Calibration, floor: FloorFit) -> None:
     """Re-express every camera's pose in the floor's world (in place), figures included.
 
     Before, the world is the reference camera's frame; after, z is up, the floor is z = 0 and
-    x is the reference camera's view projected on the floor.
+    x is the reference camera's view projected on the floor. A camera the calibration flags
+    (:func:`~hiros_calib.quality.flag_cameras`, run before) makes the floor doubtful too: its
+    samples reach up through its pose, and a pose tilted by a degree tilts up with it.
     """
     up = floor.up
     view = np.array([0.0, 0.0, 1.0]) - up[2] * up  # the optical z axis, on the floor
@@ -482,8 +492,9 @@ def align_to_floor(calibration: Calibration, floor: FloorFit) -> None:
     # (re-orthonormalised: x, y and up are orthogonal up to rounding)
     rotation = Rotation.from_matrix(rows)
     place_in_world(calibration, RigidTransform(rotation, -rotation.apply(below)))
+    flagged = tuple(name for name, cam in calibration.cameras.items() if cam.flagged)
     reference = calibration.cameras[calibration.reference]
-    reference.quality.update(floor.quality())
+    reference.quality.update(replace(floor, doubtful_poses=flagged).quality())
 
 
 def place_in_world(calibration: Calibration, world_from_reference: RigidTransform) -> None:

@@ -234,6 +234,23 @@ def test_aligning_to_a_floor_puts_the_reference_camera_above_the_origin() -> Non
     assert cam.quality["floor_tilt_deg"] == pytest.approx(0.0, abs=1e-6)
 
 
+def test_a_floor_through_a_flagged_pose_is_doubtful() -> None:
+    # up and the floor come through every camera's pose: one the calibration flags makes
+    # them doubtful, with the camera named; without a flag the same floor is trusted
+    floor = FloorFit(np.array([0.0, -1.0, 0.0]), -1.5, 0.01, 1000, "feet and torsos", 0.2, 0.003)
+    for flag in ("", "the pose of k02 is poorly determined"):
+        calibration = Calibration(
+            "k01", cameras={n: CameraCalibration(f"{n}_depth") for n in ("k01", "k02", "k03")}
+        )
+        calibration.cameras["k02"].flagged = flag
+        align_to_floor(calibration, floor)
+        doubtful = calibration.cameras["k01"].quality["floor_doubtful"]
+        if flag:
+            assert "rest on the pose of k02, which the calibration flags" in doubtful
+        else:
+            assert doubtful == ""
+
+
 def test_compare_world_measures_a_known_tilt_and_height() -> None:
     truth = Calibration("k01", cameras={"k01": CameraCalibration("k01_depth")})
     truth.cameras["k01"].translation = np.array([0.0, 0.0, 1.5])
