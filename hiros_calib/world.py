@@ -5,13 +5,12 @@ frame has y down and z forward and is tilted as the camera happens to be. People
 floor, so they tell where it is:
 
 - **Up.** Things that stay at one height as people walk lie on planes parallel to the
-  floor: the places their feet rest (a foot joint that hardly moves), all on the floor itself
-  but each camera's left and right foot joint at its own offset from it, and each person's
-  torso (the mean of the spine joints), at that person's own height. Up is the tilt that
-  levels them all at once (a Cauchy-reweighted least-squares fit of the two tilt angles, each
-  group of feet and each torso with its own height). A group tells the tilt only along the
-  directions it spreads over: one person walking to and fro on one line says nothing about the
-  tilt across it. Where the groups together do not spread in two directions (gestures on the
+  floor: the places their feet rest (a foot joint that hardly moves), all on the floor itself,
+  and each person's torso (the mean of the spine joints), at that person's own height. Up is
+  the tilt that levels them all at once (a Cauchy-reweighted least-squares fit of the two tilt
+  angles, each torso with its own height). A group tells the tilt only along the directions
+  it spreads over: one person walking to and fro on one line says nothing about the tilt
+  across it. Where the groups together do not spread in two directions (gestures on the
   spot), the body's mean vertical (pelvis to neck, averaged over the frames) is used instead,
   kept perpendicular to the direction the resting feet do spread along.
 - **The floor.** The resting feet's median height along up, less the height of the foot
@@ -266,15 +265,8 @@ class _Source:
 
 
 def _sources(seen: list[_Seen]) -> list[_Source]:
-    """The resting feet (a group per camera and foot side) and torso centres (a group a track).
-
-    The feet are all on the floor, yet the SDK offsets each foot joint by its own fixed amount
-    per camera and person (as much as its noise). Left and right feet rest on either side of
-    a walking line, so two offsets that differ by a few centimetres tilt one plane through
-    both by degrees across it; each group at its own height cannot. The floor's height is
-    found later, from all of them together.
-    """
-    feet = _Source.of([s.feet[s.sides == side] for s in seen for side in (0, 1)])
+    """The cameras' resting feet (one group: one floor) and torso centres (a group a track)."""
+    feet = _Source.of([np.concatenate([s.feet for s in seen])])
     torsos = _Source.of([t for s in seen for t in s.torsos])
     return [source for source in (feet, torsos) if source is not None]
 
