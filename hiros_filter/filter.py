@@ -433,10 +433,8 @@ class Filter(Accounted):
         else:
             self._step_rows(tracks, rows, stamps, markers, present)
             links, link_present = link_rows(markers, present, tracks.layout)
-        return output_skeletons(
-            skeletons, [s.id for s in skeletons],
-            SkeletonRows(markers, present, links, link_present, stack.input_boxes(indices)),
-        )  # fmt: skip
+        filtered = SkeletonRows(markers, present, links, link_present, stack.input_boxes(indices))
+        return output_skeletons(skeletons, [s.id for s in skeletons], filtered)
 
     def _step_compiled(
         self,

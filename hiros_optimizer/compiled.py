@@ -361,9 +361,7 @@ def _fit_person(tree, fit, measured, weights, lengths, prior, fallback, vectors,
                 value += prior_weight * q[k]
             targets[j, k] = value / total[j] if total[j] > 0 else 0.0
     _initial(parents, order, targets, total, lengths, fallback, vectors, positions)
-    _sweeps(
-        parents, order, level_starts, targets, total, lengths, vectors, positions, sweeps
-    )  # fmt: skip
+    _sweeps(parents, order, level_starts, targets, total, lengths, vectors, positions, sweeps)
     _gauss_newton(parents, order, targets, total, lengths, vectors, positions, refinements)
 
 

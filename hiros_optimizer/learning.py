@@ -29,9 +29,15 @@ __all__ = ["LIMB_JOINTS", "PersonProgress", "WindowStatistics", "limb_links", "w
 _MAD_TO_SD = 1.4826  # MAD of a normal distribution times this is its standard deviation
 
 LIMB_JOINTS = (
-    "ElbowLeft", "WristLeft", "ElbowRight", "WristRight",
-    "KneeLeft", "AnkleLeft", "KneeRight", "AnkleRight",
-)  # fmt: skip
+    "ElbowLeft",
+    "WristLeft",
+    "ElbowRight",
+    "WristRight",
+    "KneeLeft",
+    "AnkleLeft",
+    "KneeRight",
+    "AnkleRight",
+)
 """Child joints of the limb links a person's acceptance waits for (upper arm, forearm, thigh,
 shank on each side; Azure Kinect and Kinect v2 names)."""
 

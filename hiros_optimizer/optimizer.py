@@ -238,9 +238,14 @@ class Optimizer(Accounted):
         self._memories: dict[str, Memory] = {}
         params = self.params
         self._settings = FitSettings(
-            params.confidence_floor, OUTLIER_THRESHOLD, OUTLIER_DISTANCE,
-            params.prior_weight, params.track_timeout, SWEEPS, REFINEMENTS,
-        )  # fmt: skip
+            confidence_floor=params.confidence_floor,
+            outlier_threshold=OUTLIER_THRESHOLD,
+            outlier_distance=OUTLIER_DISTANCE,
+            prior_weight=params.prior_weight,
+            track_timeout=params.track_timeout,
+            sweeps=SWEEPS,
+            refinements=REFINEMENTS,
+        )
         self.new_calibrations: list[int] = []
         """Track ids with links learnt by the last :meth:`update` (the node exports on these)."""
         self.new_overdue: list[int] = []
@@ -466,10 +471,9 @@ class Optimizer(Accounted):
         learning = [item for item in items if item.track.learning]
         if learning:
             self._check(memory, learning)
-        made = output_skeletons(
-            [item.skeleton for item in items], [item.track_id for item in items],
-            SkeletonRows(markers, present, links, link_present, stack.input_boxes(indices)),
-        )  # fmt: skip
+        output = SkeletonRows(markers, present, links, link_present, stack.input_boxes(indices))
+        ids = [item.track_id for item in items]
+        made = output_skeletons([item.skeleton for item in items], ids, output)
         for item, result in zip(items, made, strict=True):
             results[item.index] = result
 
