@@ -186,7 +186,8 @@ def settle_lag(
     ``repin(lag)`` re-estimates the pair's offset in the lobe of another candidate lag. The
     motion is ambiguous when the runner-up lag correlates ``max_ambiguity`` as well as the
     best or more; the poses decide when one lag's fit residual is ``MIN_LAG_MARGIN`` times
-    smaller than every other's.
+    smaller than every other's, and only among every lag the motion supports (an ambiguous
+    pair with more alike lags than ``MAX_CANDIDATES`` is refused).
     """
     if not pair.ok or len(pair.candidates) == 0:
         return pair
@@ -205,6 +206,11 @@ def settle_lag(
     best = by_fit[0]
     margin = _margin(fits, best)
     chosen, flag = 0, ""
+    if ambiguous and pair.quality.get("candidates_left_out", 0):
+        # a motion repeating at more lags than the poses check: the true lag may be one they
+        # never saw, and among a looped walk's repetitions the skeletons can fit a wrong lag
+        # better than the true one (docs/calibration-robustness.md, session 17)
+        return _undecided(pair, fits, max_ambiguity, min_lag_margin)
     if margin >= min_lag_margin:
         if best == 0 or ambiguous:
             chosen = best
@@ -313,10 +319,16 @@ def _undecided(
         if lead is not None
         else ""
     )
+    left_out = int(pair.quality.get("candidates_left_out", 0))
+    judged = (
+        f"and {left_out} more lags correlate as well: the motion repeats too often for the "
+        "skeletons to tell its repetitions apart"
+        if left_out
+        else f"and the skeletons fit none of them {min_lag_margin:.2f}x better than the others"
+    )
     reason = (
         f"the lag is ambiguous: the motion repeats, so lags {listed} correlate alike "
-        f"(within {max_ambiguity:.0%}){windows}, and the skeletons fit none of them "
-        f"{min_lag_margin:.2f}x better than the others. Record a stretch of motion that "
+        f"(within {max_ambiguity:.0%}){windows}, {judged}. Record a stretch of motion that "
         "does not repeat (walk across the room, turn, move each arm differently), or give "
         "--max-offset to leave the other lags out"
     )

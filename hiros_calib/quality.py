@@ -18,6 +18,7 @@ Two questions a calibration must answer before anyone uses it:
 
 from __future__ import annotations
 
+from collections import Counter
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -129,6 +130,41 @@ def _check_clocks(
             )
             for name in (pair.camera_a, pair.camera_b):
                 reasons[name].append(text)
+    _check_unconfirmed_choices(cameras, sync_pairs, reasons)
+
+
+def _check_unconfirmed_choices(
+    cameras: dict[str, CameraCalibration],
+    sync_pairs: Sequence[PairOffset],
+    reasons: dict[str, list[str]],
+) -> None:
+    """A reason for a camera whose clock rests on one lag the skeletons chose among alike lags.
+
+    Where the motion repeats, the skeletons pick the lag among its repetitions, and they can
+    fit a wrong repetition better than the true lag (a camera seeing the same side of the
+    people at the wrong repetition as the other camera does at the true one). A second pair,
+    closing a loop, confirms the choice; a camera linked by that one pair alone is doubtful.
+    """
+    usable = [p for p in sync_pairs if p.ok and p.camera_a in cameras and p.camera_b in cameras]
+    links = Counter(name for p in usable for name in (p.camera_a, p.camera_b))
+    for pair in usable:
+        if not _chosen_by_skeletons(pair):
+            continue
+        text = (
+            f"the {pair.camera_a}-{pair.camera_b} lag {pair.offset:+.3f} s was chosen by the "
+            "skeletons among lags the motion supports alike (runner-up "
+            f"{pair.quality.get('lag_fit_runner_up_lag', '?')} s, fit margin "
+            f"{pair.quality.get('lag_fit_margin', '?')}x), and no other camera pair confirms it"
+        )
+        for name in (pair.camera_a, pair.camera_b):
+            if links[name] == 1:
+                reasons[name].append(text)
+
+
+def _chosen_by_skeletons(pair: PairOffset) -> bool:
+    """Whether the pair's lag is the skeletons' choice among alike lags (not the log times')."""
+    prior_used = str(pair.quality.get("arrival_prior", "")).startswith("used")
+    return pair.quality.get("lag_decided_by") == "poses" and not prior_used
 
 
 def _check_poses(

@@ -153,7 +153,7 @@ def _estimate(
                 tracks_a, tracks_b, params, _lobe(float(lags[0, 0])),
                 camera_a=camera_a, camera_b=camera_b, work=work,
             )  # fmt: skip
-            pinned.candidates = lags
+            pinned.candidates = lags[: max(2, MAX_CANDIDATES)]
             pinned.quality.update(_lag_quality(lags))
             return pinned
     result = _finish(
@@ -167,7 +167,7 @@ def _estimate(
         work=work,
         centre=chosen,
     )
-    result.candidates = lags
+    result.candidates = lags[: max(2, MAX_CANDIDATES)]
     result.quality.update(_lag_quality(lags))
     return result
 
@@ -242,7 +242,7 @@ def _candidate_lags(
     rows = np.array([(lags[k], pooled[k]) for k in peaks]).reshape(-1, 2)
     keep = rows[:, 1] >= CANDIDATE_RATIO * rows[0, 1]
     keep[: min(2, len(rows))] = True
-    return rows[keep][: max(2, MAX_CANDIDATES)]
+    return rows[keep]
 
 
 def _local_maxima(values: np.ndarray, separation: int) -> list[int]:
@@ -254,8 +254,16 @@ def _local_maxima(values: np.ndarray, separation: int) -> list[int]:
 
 
 def _lag_quality(lags: np.ndarray) -> dict[str, Any]:
-    """The candidates' figures for the pair's quality: the runner-up and its margin."""
-    quality: dict[str, Any] = {"candidates": len(lags), "arrival_prior": "none"}
+    """The candidates' figures for the pair's quality: the runner-up and its margin.
+
+    ``candidates_left_out`` counts the alike lags beyond ``MAX_CANDIDATES``, which the pair's
+    ``candidates`` (the lags the poses check) leave out.
+    """
+    quality: dict[str, Any] = {
+        "candidates": min(len(lags), max(2, MAX_CANDIDATES)),
+        "candidates_left_out": max(0, len(lags) - max(2, MAX_CANDIDATES)),
+        "arrival_prior": "none",
+    }
     if len(lags) > 1:
         quality["runner_up_lag"] = round(float(lags[1, 0]), 3)
         quality["runner_up_ratio"] = round(float(lags[1, 1] / lags[0, 1]), 3)

@@ -10,6 +10,7 @@ from hiros_calib.extrinsics import PairPose
 from hiros_calib.quality import arrival_offsets_from_delays, flag_cameras
 from hiros_calib.sync import PairOffset, close_loops, overrule_weak_pairs
 from hiros_core.calibration import Calibration, CameraCalibration
+from hiros_core.errors import CalibrationError
 from hiros_eval.calibration import compare_calibration
 from hiros_sim import simulate
 from hiros_sim.presets import preset_params
@@ -106,6 +107,31 @@ def test_a_clock_loop_that_does_not_close_flags_its_cameras():
     pairs[2] = _pair("k02", "k03", -0.7)
     flag_cameras(closing, pairs, [])
     assert closing.flagged == {}
+
+
+def test_a_clock_resting_on_one_lag_the_skeletons_chose_is_flagged():
+    # the motion repeats, so k01-k02's lag is the skeletons' choice among alike lags; they can
+    # prefer a wrong repetition, so only a loop through a second pair makes it trustworthy
+    def cameras():
+        return Calibration("k01", cameras={
+            "k01": _camera(), "k02": _camera(0.5), "k03": _camera(-0.2),
+        })  # fmt: skip
+
+    chosen = _pair("k01", "k02", 0.5)
+    chosen.quality.update(lag_decided_by="poses", lag_fit_runner_up_lag=8.8, lag_fit_margin=1.2)
+    by_motion = _pair("k01", "k03", -0.2)
+    by_motion.quality["lag_decided_by"] = "motion"
+    alone = cameras()
+    flag_cameras(alone, [chosen, by_motion], [])
+    assert set(alone.flagged) == {"k02"}
+    assert "no other camera pair confirms it" in alone.flagged["k02"]
+    looped = cameras()
+    flag_cameras(looped, [chosen, by_motion, _pair("k02", "k03", -0.7)], [])
+    assert looped.flagged == {}
+    by_log_times = cameras()
+    chosen.quality["arrival_prior"] = "used"
+    flag_cameras(by_log_times, [chosen, by_motion], [])
+    assert by_log_times.flagged == {}
 
 
 def _timed(a: str, b: str, lag: float, correlation: float, overlap: float) -> PairOffset:
@@ -213,12 +239,25 @@ def test_repeated_motion_whose_lag_the_poses_decide():
     # one person waving for 25 s, each camera logged by its own host: no usable log times,
     # the motion correlates alike one repetition away (runner-up at 0.62 of the best), and
     # 25 s are too few windows for the window-by-window comparison
-    pair, accuracy = _repeated_waving(duration=25.0)
+    pair, accuracy, estimate = _repeated_waving(duration=25.0)
     assert pair.quality["motion_runner_up_ratio"] >= 0.5  # the motion alone cannot decide
     assert pair.quality["motion_window_t"] < 4.0
     assert pair.quality["lag_decided_by"] == "poses"
     assert pair.quality["lag_fit_margin"] >= 1.15
     assert accuracy.time_error_ms < 10.0
+    # right, but with two cameras no loop confirms the skeletons' choice: written, flagged
+    assert "no other camera pair confirms it" in estimate.flagged["k02"]
+
+
+def test_a_looped_walk_with_more_alike_lags_than_are_checked_is_refused():
+    """The skeletons choose only among every lag the motion supports. A walk looped over
+    40 s, each camera logged by its own host, correlates alike at more lags than the pair
+    checks: the true lag may be one the skeletons never see, so the pair is refused."""
+    scene = simulate(preset_params("host-clocks", seed=1, duration=40.0, n_cameras=2))
+    calibrator = Calibrator(CalibratorParams(reference="k01"))
+    with pytest.raises(CalibrationError, match="more lags correlate as well") as refusal:
+        calibrator.calibrate(scene.camera_groups, arrival_ns=scene.receive_ns)
+    assert "the lag is ambiguous" in str(refusal.value)  # counted as undecidable
 
 
 @pytest.mark.slow
@@ -227,12 +266,13 @@ def test_repeated_motion_whose_lag_the_windows_decide():
         pytest.skip("the Bandai-Namco clips (../shared/data) are not available")
     # the same waving for 30 s: alike over the whole recording, but every 5 s window
     # correlates better at the true lag than one repetition away
-    pair, accuracy = _repeated_waving(duration=30.0)
+    pair, accuracy, estimate = _repeated_waving(duration=30.0)
     assert pair.quality["motion_runner_up_ratio"] >= 0.5
     assert pair.quality["motion_window_t"] >= 4.0
     assert pair.quality["lag_decided_by"] == "motion"
     assert pair.quality["lag_fit_margin"] >= 1.15  # and the poses agree
     assert accuracy.time_error_ms < 10.0
+    assert estimate.flagged == {}  # the motion decided: nothing for a loop to confirm
 
 
 def _repeated_waving(duration: float):
@@ -243,4 +283,4 @@ def _repeated_waving(duration: float):
     estimate = calibrator.calibrate(scene.camera_groups, arrival_ns=scene.receive_ns)
     (pair,) = calibrator.result.sync_pairs
     (accuracy,) = compare_calibration(estimate, scene.calibration).values()
-    return pair, accuracy
+    return pair, accuracy, estimate
