@@ -9,9 +9,12 @@ Every lag the data allow is searched (--max-offset narrows it). The recording's 
 arrival (log) times, when they were logged on one receiver's clock, choose among the lags the
 motion supports; log times that are each camera's own clock (one recording host per camera),
 or that the motion contradicts, are ignored, and the summary says so. People repeating one
-motion correlate nearly as well one repetition away: the poses then decide, since only at the
-true lag do both cameras' skeletons fit one rigid transform. When neither can decide, the
-pair is refused with the candidate lags listed.
+motion correlate nearly as well one repetition away: the poses then decide among a few such
+lags, since at the true lag both cameras' skeletons should fit one rigid transform best. When
+neither can decide, or the motion repeats at more lags than the poses check (a walk looped
+for the whole recording), the pair is refused with the candidate lags listed; give
+--max-offset when the clocks are known to be close. A lag the poses chose is trusted only
+where a third camera closes a loop through it: with two cameras the camera is flagged.
 
 Every camera's quality figures expose a wrong result: the rigid-fit residual at the chosen lag
 against the best other lag, and with three or more cameras how far the solved clocks and poses
