@@ -27,25 +27,17 @@ _NS = 1e-9
 class _Lost(NamedTuple):
     """A confirmed track whom every camera lost: what re-identifies the person returning.
 
-    ``positions`` ``(J, 3)`` its pose when last seen (``last_hit_ns``), ``velocity`` ``(3,)``
-    its body's velocity then, ``limbs``/``counts`` ``(J,)`` its link lengths
-    (``TrackTable.limbs``), ``row`` its row while it is still live (else -1).
+    ``positions`` ``(J, 3)`` its pose when last seen (``last_hit_ns``), ``limbs``/``counts``
+    ``(J,)`` its link lengths (``TrackTable.limbs``), ``row`` its row while it is still live
+    (else -1).
     """
 
     track_id: int
     last_hit_ns: int
     positions: np.ndarray
-    velocity: np.ndarray
     limbs: np.ndarray
     counts: np.ndarray
     row: int = -1
-
-    @classmethod
-    def of(cls, table: TrackTable, k: int, row: int = -1) -> _Lost:
-        """Track row ``k`` of ``table`` as a lost track (``row``: its row if still live)."""
-        return cls(int(table.ids[k]), int(table.last_hit_ns[k]), table.positions[k].copy(),
-                   table.velocity[k].copy(), table.limbs[k].copy(), table.limb_count[k].copy(),
-                   row)  # fmt: skip
 
 
 SHAPE_TOLERANCE = 0.1
@@ -85,7 +77,6 @@ class TrackLifecycle:
     _table: TrackTable | None
     _doomed: list[int]
     _lost: list[_Lost]
-    _up: np.ndarray
 
     def _confirm(self, table: TrackTable, row: int, info: _LayoutInfo, time_ns: int) -> None:
         """Confirm a tentative track seen enough, unless it duplicates a confirmed one.
@@ -146,9 +137,7 @@ class TrackLifecycle:
         motion model missed) comes back as a new track. It re-takes the id of a lost track
         when that track was last seen within ``reid_timeout`` before the new one was born
         (never seen beside it), within ``reid_distance`` of where the new one is (root joint)
-        and with the same body shape (``_same_shape``); of several, the nearest. Where the
-        lost track is is where it would be had it walked on (``_walked_on``): someone who
-        walked out of the view is not the person stepping in behind where they left. A lost track
+        and with the same body shape (``_same_shape``); of several, the nearest. A lost track
         is a confirmed one still live but unseen since the new one was born (it is removed)
         or one that expired (``_expire`` keeps it in ``_lost``).
         """
@@ -159,15 +148,16 @@ class TrackLifecycle:
         earliest = born - round(params.reid_timeout * 1e9)
         here = _centre(table.positions[row], info.frame.root)
         live = [
-            _Lost.of(table, k, k)
+            _Lost(int(table.ids[k]), int(table.last_hit_ns[k]), table.positions[k].copy(),
+                  table.limbs[k].copy(), table.limb_count[k].copy(), k)
             for k in np.flatnonzero(table.confirmed[: table.n]).tolist()
             if k != row and earliest <= table.last_hit_ns[k] < born and k not in self._doomed
-        ]
+        ]  # fmt: skip
         best, nearest = None, params.reid_distance
         for lost in [*live, *self._lost]:
             if not earliest <= lost.last_hit_ns < born:
                 continue
-            distance = float(np.linalg.norm(self._walked_on(lost, born, info.frame.root) - here))
+            distance = float(np.linalg.norm(_centre(lost.positions, info.frame.root) - here))
             if distance <= nearest and _same_shape(lost, table.limbs[row], table.limb_count[row]):
                 best, nearest = lost, distance
         if best is None:
@@ -177,20 +167,6 @@ class TrackLifecycle:
             self._doomed.append(best.row)
         else:
             self._lost.remove(best)
-
-    def _walked_on(self, lost: _Lost, born_ns: int, root: int) -> np.ndarray:
-        """``(3,)`` where a lost track's root would be at ``born_ns`` had it walked on.
-
-        Its last root moved by its velocity across the world's up (once that is known: a
-        detection half out of the view drags the root down, not along the floor) for the
-        time since it was last seen, at most ``max_prediction`` as in the association.
-        """
-        velocity = lost.velocity
-        if self._up[3]:
-            up = self._up[:3]
-            velocity = velocity - float(velocity @ up) * up
-        gap = min(max((born_ns - lost.last_hit_ns) * _NS, 0.0), self.params.max_prediction)
-        return _centre(lost.positions, root) + velocity * gap
 
     def _remove_doomed(self) -> None:
         """Remove the duplicate tracks ``_confirm`` found and the tracks re-identified."""
@@ -218,5 +194,9 @@ class TrackLifecycle:
         if count < table.n:
             if params.reid_timeout > 0:
                 gone = np.flatnonzero(~keep & table.confirmed[: table.n]).tolist()
-                self._lost.extend(_Lost.of(table, k) for k in gone)
+                self._lost.extend(
+                    _Lost(int(table.ids[k]), int(table.last_hit_ns[k]), table.positions[k].copy(),
+                          table.limbs[k].copy(), table.limb_count[k].copy())
+                    for k in gone
+                )  # fmt: skip
             table.keep(keep)

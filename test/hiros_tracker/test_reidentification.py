@@ -87,18 +87,3 @@ def test_a_cameras_displaced_view_of_a_person_it_follows_is_no_new_track(scenes)
     assert tracker.drops["duplicate of a confirmed track"] > 0
     ids, _ = run(lambda camera, t, person: 7 if camera == "k01" and 1.0 < t < 4.0 else 1)
     assert len(ids) == 2, "under a new body id it is another body as far as anyone can tell"
-
-
-def test_someone_stepping_in_behind_a_person_who_walked_out_is_someone_else(scenes):
-    def swap_in(camera, t, person, pose):
-        if person == 0 and t > 2.0:
-            return None  # person 0 walks out of every view at x = 0.9 m, at 1.2 m/s ...
-        if person == 1 and t < 2.7:
-            return None  # ... and 0.7 s later person 1 steps in 1.3 m behind, where 0 came from
-        return pose
-
-    people = [scenes.straight((-1.5, 0.0), (1.2, 0.0)), scenes.straight((-0.4, 0.3), (0.0, 0.0))]
-    scene = scenes.render(people, duration=4.0, modify=swap_in)
-    ids, _ = _ids_per_person(scenes, scene, TrackerParams())
-    assert ids[0] == {0}
-    assert ids[1] == {1}, "had person 0 walked on, they would be 2.1 m away"
