@@ -141,7 +141,13 @@ REMOVED_PARAMETERS: dict[str, dict[str, str]] = {
         "refinements": "hiros_optimizer fixes it as the constant REFINEMENTS",
         **{
             name: f"hiros_optimizer fixes it as the constant {name.upper()}"
-            for name in ("min_link_presence", "outlier_threshold", "outlier_distance")
+            for name in (
+                "min_link_presence",
+                "outlier_threshold",
+                "outlier_distance",
+                "prior_weight",
+                "confidence_floor",
+            )
         },
     },
     "filter": {
@@ -149,8 +155,9 @@ REMOVED_PARAMETERS: dict[str, dict[str, str]] = {
         "rate_tolerance": "hiros_filter fixes it as the constant RATE_TOLERANCE",
         **{
             name: f"hiros_filter fixes it as the constant {name.upper()}"
-            for name in ("max_noise_scale", "max_gap", "track_timeout")
+            for name in ("max_noise_scale", "max_gap", "track_timeout", "butterworth_order")
         },
+        "sample_frequency": "the filter always estimates the sampling rate from the stamps",
     },
     "visualizer": {
         "label_height": "hiros_visualizer fixes it as the constant LABEL_HEIGHT (markers.py)",
@@ -298,7 +305,7 @@ def build_params(params_type: type[T], values: dict[str, Any], prefix: str = "")
             kwargs[f.name] = build_params(hints[f.name], values, f"{name}.")
         elif name in values:
             kwargs[f.name] = _coerce(values[name], hints[f.name], name)
-            _check_number(kwargs[f.name], f.default, name)
+            _check_number(kwargs[f.name], name)
     try:
         return params_type(**kwargs)
     except (TypeError, ValueError) as exc:  # the dataclass's own checks
@@ -306,20 +313,19 @@ def build_params(params_type: type[T], values: dict[str, Any], prefix: str = "")
         raise ConfigError(msg) from exc
 
 
-def _check_number(value: Any, default: Any, name: str) -> None:
-    """A number parameter must be finite, and not negative unless its default is.
+def _check_number(value: Any, name: str) -> None:
+    """A number parameter must be finite and not negative.
 
-    Every stage's durations, distances, rates, weights and counts are 0 or more; the few
-    whose default is negative use it as a sentinel ("measure it": ``filter.sample_frequency``).
-    A NaN would pass every ``<`` test as False and silently switch a check off.
+    Every stage's durations, distances, rates, weights and counts are 0 or more (none uses a
+    negative sentinel: the filter's sampling rate, once one, is always estimated). A NaN would
+    pass every ``<`` test as False and silently switch a check off.
     """
     if isinstance(value, bool) or not isinstance(value, (int, float)):
         return
     if not math.isfinite(value):
         msg = f"parameter {name}: {value!r} is not a finite number"
         raise ConfigError(msg)
-    negative_default = isinstance(default, (int, float)) and default < 0
-    if value < 0 and not negative_default:
+    if value < 0:
         msg = f"parameter {name}: {value!r} is negative (it must be 0 or more)"
         raise ConfigError(msg)
 

@@ -3,13 +3,12 @@
 Per track id and per joint, three causal estimators run side by side
 (:mod:`hiros_filter.estimators`), all tracks of a frame in one batch:
 
-- a Butterworth low-pass (``butterworth_order``, ``cutoff_frequency``; Hi-ROS's filter) on every
-  coordinate. Its coefficients assume a constant sampling rate, so the rate is
-  ``sample_frequency`` or, when that is <= 0, estimated from the stamps (median interval of the
-  recent frames); when the estimate moves by more than ``RATE_TOLERANCE`` the filter is
-  re-designed and restarted at rest on its last output. A late frame (dt ≈ k sampling periods)
-  is resampled: the k - 1 missing samples are interpolated linearly before it, so the filter
-  keeps its time base;
+- a Butterworth low-pass (order ``BUTTERWORTH_ORDER``, ``cutoff_frequency``; Hi-ROS's filter) on
+  every coordinate. Its coefficients assume a constant sampling rate, so the rate is estimated
+  from the stamps (median interval of the recent frames); when the estimate moves by more than
+  ``RATE_TOLERANCE`` the filter is re-designed and restarted at rest on its last output. A late
+  frame (dt ≈ k sampling periods) is resampled: the k - 1 missing samples are interpolated
+  linearly before it, so the filter keeps its time base;
 - a constant-acceleration Kalman filter (continuous white jerk, any dt) that gives the
   velocities and accelerations, and the positions when ``filter`` is ``kalman``. Its process
   noise adapts per joint to the normalised innovation (Bar-Shalom's continuous noise-level
@@ -50,6 +49,7 @@ from hiros_filter.kernel_args import (
 from hiros_filter.lengths import LengthKeeper
 
 __all__ = [
+    "BUTTERWORTH_ORDER",
     "MAX_GAP",
     "MAX_NOISE_SCALE",
     "RATE_TOLERANCE",
@@ -61,6 +61,10 @@ __all__ = [
 _FILTERS = ("butterworth", "kalman")
 _RATE_WINDOW = 64  # recent frame intervals the sampling rate is estimated from
 _NEVER = np.iinfo(np.int64).min // 2  # "joint never seen" stamp, far in the past
+
+BUTTERWORTH_ORDER = 2
+"""Order of the Butterworth low-pass (Hi-ROS's): its lag and smoothing are set by
+``cutoff_frequency``."""
 
 RATE_TOLERANCE = 0.15
 """Relative change of the estimated sampling rate that re-designs the Butterworth low-pass.
@@ -92,9 +96,7 @@ class FilterParams:
     Attributes:
         filter: which estimate gives the positions: ``kalman`` (default: a few ms of lag) or
             ``butterworth`` (Hi-ROS's choice; a 2nd-order 6 Hz low-pass lags ~37 ms).
-        butterworth_order: order of the low-pass.
         cutoff_frequency: Hz, -3 dB point of the low-pass.
-        sample_frequency: Hz of the input; <= 0 estimates it from the stamps.
         jerk_spectral_density: Kalman process noise, m^2/s^5 (higher: follows faster, smooths less).
         measurement_noise: Kalman position noise, metres (standard deviation).
         orientation_cutoff_frequency: Hz of the orientation smoothing.
@@ -105,9 +107,7 @@ class FilterParams:
     """
 
     filter: str = "kalman"
-    butterworth_order: int = 2
     cutoff_frequency: float = 6.0
-    sample_frequency: float = -1.0
     jerk_spectral_density: float = 300.0
     measurement_noise: float = 0.01
     orientation_cutoff_frequency: float = 6.0
@@ -117,8 +117,8 @@ class FilterParams:
         if self.filter not in _FILTERS:
             msg = f"filter must be one of {_FILTERS}, got {self.filter!r}"
             raise ConfigError(msg)
-        if self.butterworth_order < 1 or self.cutoff_frequency <= 0:
-            msg = "butterworth_order must be >= 1 and cutoff_frequency > 0 Hz"
+        if self.cutoff_frequency <= 0:
+            msg = "cutoff_frequency must be > 0 Hz"
             raise ConfigError(msg)
         if min(self.jerk_spectral_density, self.measurement_noise) <= 0:
             msg = "jerk_spectral_density and measurement_noise must be > 0"
@@ -289,9 +289,7 @@ class Filter(Accounted):
 
     @property
     def sample_frequency(self) -> float | None:
-        """Hz the low-pass is designed for: the parameter, else the estimate (None: no data)."""
-        if self.params.sample_frequency > 0:
-            return self.params.sample_frequency
+        """Hz the low-pass is designed for, estimated from the stamps (None: no data yet)."""
         if not self._intervals:
             return None
         return 1.0 / float(np.median(self._intervals))
@@ -557,7 +555,7 @@ class Filter(Accounted):
             abs(tracks.low_pass.sample_frequency - rate) > RATE_TOLERANCE * rate
         ):
             tracks.low_pass = ButterworthBank(
-                self.params.butterworth_order,
+                BUTTERWORTH_ORDER,
                 self.params.cutoff_frequency,
                 rate,
                 (len(tracks.time_ns), channels),

@@ -11,8 +11,6 @@ __all__ = ["LIVE", "FilterNodeParams", "main"]
 
 LIVE = (
     "cutoff_frequency",
-    "butterworth_order",
-    "sample_frequency",
     "jerk_spectral_density",
     "measurement_noise",
     "orientation_cutoff_frequency",

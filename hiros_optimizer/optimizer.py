@@ -19,7 +19,7 @@ whose measured length is off by more than ``OUTLIER_THRESHOLD`` (relative, Hi-RO
 down-weighted by ``(OUTLIER_DISTANCE / d)^2`` when it lies ``d > OUTLIER_DISTANCE`` from the
 motion prediction (last output + velocity × dt). Requiring both keeps fast but consistent
 motion (a whole arm swinging 25 cm in a frame) at full weight, and tells which end of a broken
-link jumped. A small prior towards the prediction (``prior_weight``) keeps unmeasured or
+link jumped. A small prior towards the prediction (``PRIOR_WEIGHT``) keeps unmeasured or
 rejected joints where the motion puts them.
 
 Person calibrations can be restarted (:meth:`Optimizer.calibrate`), moved to another id
@@ -44,9 +44,11 @@ from hiros_optimizer.learning import PersonProgress, limb_links, window_statisti
 from hiros_optimizer.memory import FitSettings, Memory
 
 __all__ = [
+    "CONFIDENCE_FLOOR",
     "MIN_LINK_PRESENCE",
     "OUTLIER_DISTANCE",
     "OUTLIER_THRESHOLD",
+    "PRIOR_WEIGHT",
     "REFINEMENTS",
     "SWEEPS",
     "Optimizer",
@@ -74,6 +76,15 @@ OUTLIER_DISTANCE = 0.15
 ``(OUTLIER_DISTANCE / d)^2``: a whole arm swinging 25 cm in a frame is motion, not an outlier,
 as long as its lengths hold."""
 
+PRIOR_WEIGHT = 0.01
+"""Weight of the motion prediction in the fit, relative to a joint confidence of 1: a small
+pull that keeps an unmeasured or weakly measured joint moving with its track, too small to
+override a measurement (0.05 measured no different: docs/ros-citizen.md)."""
+
+CONFIDENCE_FLOOR = 0.1
+"""Least weight of a present joint in the fit: the SDK's "none" confidence (0) still carries a
+usable estimate, far better than extrapolation."""
+
 
 @dataclass
 class OptimizerParams:
@@ -88,9 +99,6 @@ class OptimizerParams:
             on constrained) when its robust CV over those frames is below this.
         acceptance_timeout: seconds from a track's first frame within which its limb links
             should be learnt; a person not accepted by then is reported with the reason.
-        prior_weight: weight of the motion prediction relative to a joint confidence of 1.
-        confidence_floor: least weight of a present joint in the fit: the SDK's "none"
-            confidence (0) still carries a usable estimate, far better than extrapolation.
         track_timeout: seconds unseen after which a track's prediction is forgotten (its
             calibration is kept).
         export_calibration: node only: write the person calibrations on each new one.
@@ -102,8 +110,6 @@ class OptimizerParams:
     number_of_frames_for_calibration: int = 60
     max_calibration_coefficient_of_variation: float = 0.2
     acceptance_timeout: float = 5.0
-    prior_weight: float = 0.01
-    confidence_floor: float = 0.1
     track_timeout: float = 1.0
     export_calibration: bool = False
     load_calibration: bool = False
@@ -118,9 +124,6 @@ class OptimizerParams:
             raise ConfigError(msg)
         if not self.acceptance_timeout > 0:
             msg = "acceptance_timeout must be greater than 0 seconds"
-            raise ConfigError(msg)
-        if min(self.prior_weight, self.confidence_floor) < 0:
-            msg = "prior_weight and confidence_floor must be 0 or more"
             raise ConfigError(msg)
 
 
@@ -238,10 +241,10 @@ class Optimizer(Accounted):
         self._memories: dict[str, Memory] = {}
         params = self.params
         self._settings = FitSettings(
-            confidence_floor=params.confidence_floor,
+            confidence_floor=CONFIDENCE_FLOOR,
             outlier_threshold=OUTLIER_THRESHOLD,
             outlier_distance=OUTLIER_DISTANCE,
-            prior_weight=params.prior_weight,
+            prior_weight=PRIOR_WEIGHT,
             track_timeout=params.track_timeout,
             sweeps=SWEEPS,
             refinements=REFINEMENTS,

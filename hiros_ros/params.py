@@ -79,7 +79,6 @@ RANGES: dict[str, tuple[float, float]] = {
     # counts of at least one
     **dict.fromkeys(
         (
-            "butterworth_order",
             "confidence_levels",
             "id_stride",
             "min_cameras",
@@ -88,7 +87,6 @@ RANGES: dict[str, tuple[float, float]] = {
         (1, _INT_MAX),
     ),
     "number_of_frames_for_calibration": (3, _INT_MAX),
-    "sample_frequency": (-math.inf, math.inf),  # <= 0: estimated from the stamps
 }
 """Range of a numeric parameter by (leaf) name; one not listed may be any value >= 0."""
 

@@ -99,17 +99,39 @@ def test_an_old_pipeline_file_loads_without_the_stages_removed_parameters(tmp_pa
 
 
 def test_a_name_one_node_retired_stays_another_node_s_parameter(tmp_path: Path) -> None:
-    """max_jump and confidence_floor became constants of the merger only: the tracker and the
-    optimizer keep their own, from the same file."""
+    """max_jump became a constant of the merger only, track_timeout of the filter only: the
+    tracker and the optimizer keep their own, from the same file."""
     path = tmp_path / "pipeline.yaml"
     path.write_text(
         "pipeline:\n  ros__parameters:\n"
-        "    merger: {max_jump: 2.0, confidence_floor: 0.1}\n"
-        "    tracker: {max_jump: 2.0}\n    optimizer: {confidence_floor: 0.2}\n"
+        "    merger: {max_jump: 2.0}\n    filter: {track_timeout: 3.0}\n"
+        "    tracker: {max_jump: 2.0}\n    optimizer: {track_timeout: 2.0}\n"
     )
     with pytest.warns(RemovedParameterWarning) as caught:
         values = load_config_defaults("pipeline", path)
-    assert values == {"tracker.max_jump": 2.0, "optimizer.confidence_floor": 0.2}
+    assert values == {"tracker.max_jump": 2.0, "optimizer.track_timeout": 2.0}
     messages = sorted(str(w.message).split(": parameter ")[1] for w in caught)
-    assert [m.split()[0] for m in messages] == ["merger.confidence_floor", "merger.max_jump"]
+    assert [m.split()[0] for m in messages] == ["filter.track_timeout", "merger.max_jump"]
     assert "constant MAX_JUMP" in messages[1]
+
+
+@pytest.mark.parametrize(
+    ("node", "values", "constant"),
+    [
+        ("optimizer", {"prior_weight": 0.05, "confidence_floor": 0.2}, "PRIOR_WEIGHT"),
+        ("filter", {"butterworth_order": 4, "sample_frequency": 30.0}, "BUTTERWORTH_ORDER"),
+    ],
+)
+def test_a_node_file_setting_its_retired_weights_loads_with_a_warning_each(
+    tmp_path: Path, node: str, values: dict[str, float], constant: str
+) -> None:
+    """Each node's own file (not only the pipeline's) still loads with what it retired."""
+    path = tmp_path / f"{node}.yaml"
+    settings = "".join(f"    {name}: {value}\n" for name, value in values.items())
+    path.write_text(f"{node}:\n  ros__parameters:\n{settings}    input_qos: reliable\n")
+    with pytest.warns(RemovedParameterWarning) as caught:
+        loaded = load_config_defaults(node, path)
+    assert loaded == {"input_qos": "reliable"}
+    messages = [str(w.message) for w in caught]
+    assert len(messages) == len(values)
+    assert any(f"constant {constant}" in m for m in messages)

@@ -113,5 +113,5 @@ def test_case14_load_pipeline_params(tmp_path: Path) -> None:
     params.write_text("pipeline:\n  ros__parameters:\n    tracker:\n      max_delay: .nan\n")
     with pytest.raises(ConfigError, match=r"params.yaml: parameter tracker.max_delay: nan"):
         load_pipeline_params(params)
-    params.write_text("pipeline:\n  ros__parameters:\n    filter:\n      sample_frequency: -1\n")
-    assert load_pipeline_params(params).filter.sample_frequency == -1
+    params.write_text("pipeline:\n  ros__parameters:\n    filter:\n      cutoff_frequency: 4\n")
+    assert load_pipeline_params(params).filter.cutoff_frequency == 4.0

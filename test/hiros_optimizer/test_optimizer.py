@@ -220,8 +220,6 @@ def test_params_are_checked():
     with pytest.raises(ConfigError):
         OptimizerParams(number_of_frames_for_calibration=1)
     with pytest.raises(ConfigError):
-        OptimizerParams(prior_weight=-0.1)
-    with pytest.raises(ConfigError):
         OptimizerParams(acceptance_timeout=0.0)
 
 

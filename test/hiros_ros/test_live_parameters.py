@@ -33,7 +33,7 @@ def test_the_stage_nodes_hand_changes_to_their_stages(ros_context) -> None:
         assert pipeline.pipeline.merger.params.depth_gain == 0.5
         assert pipeline.pipeline.filter.params.measurement_noise == 0.02
         assert pipeline.pipeline.tracker.params.min_hits == 3
-        refused = set_one(pipeline, "optimizer.prior_weight", 0.5)  # built once: read-only
+        refused = set_one(pipeline, "optimizer.track_timeout", 0.5)  # built once: read-only
         assert not refused.successful
         assert "read-only" in refused.reason
         assert not set_one(tracker, "cameras", ["k09"]).successful
