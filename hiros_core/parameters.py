@@ -108,6 +108,11 @@ _MERGER_REMOVED = {
             ("outlier_cutoff", "OUTLIER_CUTOFF"),
             ("limb_cutoff", "LIMB_CUTOFF"),
             ("max_jump", "MAX_JUMP"),
+            ("depth_gain", "DEPTH_GAIN"),
+            ("oblique_gain", "OBLIQUE_GAIN"),
+            ("flipped_weight", "FLIPPED_WEIGHT"),
+            ("occlusion_radius", "OCCLUSION_RADIUS"),
+            ("outlier_scale", "OUTLIER_SCALE"),
         )
     },
 }

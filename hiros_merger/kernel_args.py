@@ -81,7 +81,7 @@ class BodyLayout(NamedTuple):
 
 
 class WeightSettings(NamedTuple):
-    """The reliability weights' parameters (``MergerParams``' fields of the same names)."""
+    """The reliability weights' settings (``MergerParams``' fields, ``merger.py``'s constants)."""
 
     max_extrapolation: float
     confidence_floor: float

@@ -16,15 +16,15 @@ Reliability of joint ``j`` of the detection of camera ``c`` (after Colombel et a
 weight each camera by confidence, distance and view; the product form is ours)::
 
     w = conf^CONFIDENCE_POWER            SDK confidence (occluded joints come as LOW)
-        × (1 + depth_gain · depth)^-2    depth noise grows ~linearly with distance (variance ²)
+        × (1 + DEPTH_GAIN · depth)^-2    depth noise grows ~linearly with distance (variance ²)
         × view(cos θ)                     θ: angle between the body's front and the camera
-        × flipped                         ``flipped_weight`` if the detection's feet and nose
+        × flipped                         ``FLIPPED_WEIGHT`` if the detection's feet and nose
                                           point backwards (a front/back flip), which is first
                                           reflected back through its frontal plane
         × occlusion                       another person's torso on the camera's ray
         × staleness                       1 / (1 + (Δt / STALENESS_SCALE)²)
 
-then the robust mean multiplies by a Cauchy weight ``1 / (1 + (r / outlier_scale)²)`` of each
+then the robust mean multiplies by a Cauchy weight ``1 / (1 + (r / OUTLIER_SCALE)²)`` of each
 joint's distance ``r`` to the current estimate (0 beyond ``OUTLIER_CUTOFF``), starting from the
 weighted median, so that one camera's flipped limb or swapped leg does not pull the result.
 ``r`` is the mean over the joint's limb in that detection: a camera's limb
@@ -71,11 +71,16 @@ from hiros_merger.latest import LatestDetections
 __all__ = [
     "CONFIDENCE_FLOOR",
     "CONFIDENCE_POWER",
+    "DEPTH_GAIN",
+    "FLIPPED_WEIGHT",
     "LIMB_CUTOFF",
     "MAX_JUMP",
+    "OBLIQUE_GAIN",
+    "OCCLUSION_RADIUS",
     "OCCLUSION_WEIGHT",
     "OTHER_FRAME",
     "OUTLIER_CUTOFF",
+    "OUTLIER_SCALE",
     "ROBUST_ITERATIONS",
     "STALENESS_SCALE",
     "Merger",
@@ -100,8 +105,30 @@ CONFIDENCE_FLOOR = 0.05
 STALENESS_SCALE = 0.05
 """Seconds; a detection of age Δt weighs ``1 / (1 + (Δt / STALENESS_SCALE)²)``: a frame older
 than the others (one 30 Hz period and more) counts for less than a fresh one."""
+DEPTH_GAIN = 0.33
+"""Per metre; a joint's depth weight is ``(1 + DEPTH_GAIN · depth)^-2``: a body-tracking SDK's
+noise grows about linearly with the distance, its variance with the square."""
+OBLIQUE_GAIN = 1.0
+"""The view weight is ``1 / (1 + OBLIQUE_GAIN · |sin θ|)²``, θ the angle between the body's
+front and the direction to the camera: a body seen from the side has its limbs along the
+camera's noisy depth axis, while the back view is as precise as the front (flips have
+``FLIPPED_WEIGHT``); down to 1/4 exactly at the side."""
+FLIPPED_WEIGHT = 0.5
+"""Weight factor of a detection whose feet and nose point backwards against the body's front:
+a front/back flip the tracker relabelled but whose limbs are still reflected through the
+frontal plane. It is reflected back through the plane through its pelvis (normal: the front
+of the track's detections, across the scene's up, ``Merger.up``), and weighs this much: the
+plane is itself an estimate."""
+OCCLUSION_RADIUS = 0.2
+"""Metres; a joint whose camera ray passes this close to another person's torso, in front of
+the joint, is occluded (about a torso's half width)."""
 OCCLUSION_WEIGHT = 0.5
-"""Weight factor of a joint behind another person's torso (``occlusion_radius``)."""
+"""Weight factor of a joint behind another person's torso (``OCCLUSION_RADIUS``)."""
+OUTLIER_SCALE = 0.4
+"""Metres; Cauchy scale of the robust mean. The robust mean weighs each camera's limb whole,
+by its mean joint distance to the estimate: an SDK's errors are coherent along a limb, and
+joints taken from different cameras' versions of one limb bend it (angle spikes) even when
+each camera has the angle right."""
 ROBUST_ITERATIONS = 3
 """Reweighting iterations of the robust mean, from the weighted median (a numerical choice)."""
 OUTLIER_CUTOFF = 0.4
@@ -128,22 +155,6 @@ class MergerParams:
         output_rate: Hz; 0 outputs on each input at its newest stamp.
         max_extrapolation: seconds; each detection is brought to the output time with its
             joint velocities, over this much time at most (0 turns extrapolation off).
-        depth_gain: per metre; the depth weight is ``(1 + depth_gain · depth)^-2``.
-        oblique_gain: the view weight is ``1 / (1 + oblique_gain · |sin θ|)²``, θ the angle
-            between the body's front and the direction to the camera: a body seen from the
-            side has its limbs along the camera's noisy depth axis, while the back view is as
-            precise as the front (flips have ``flipped_weight``). 0 turns it off.
-        flipped_weight: weight factor of a detection whose feet and nose point backwards
-            against the body's front: a front/back flip the tracker relabelled but whose limbs
-            are still reflected through the frontal plane. It is reflected back through the
-            plane through its pelvis (normal: the front of the track's detections, across the
-            scene's up, ``Merger.up``), and weighs this much: the plane is itself an estimate.
-        occlusion_radius: metres; a joint whose camera ray passes this close to another
-            person's torso, in front of the joint, is occluded (0 turns the check off).
-        outlier_scale: metres; Cauchy scale of the robust mean. The robust mean weighs each
-            camera's limb whole, by its mean joint distance to the estimate: an SDK's errors
-            are coherent along a limb, and joints taken from different cameras' versions of
-            one limb bend it (angle spikes) even when each camera has the angle right.
         track_timeout: seconds; a track unseen this long is forgotten.
 
     """
@@ -151,11 +162,6 @@ class MergerParams:
     window: float = 0.1
     output_rate: float = 0.0
     max_extrapolation: float = 0.1
-    depth_gain: float = 0.33
-    oblique_gain: float = 1.0
-    flipped_weight: float = 0.5
-    occlusion_radius: float = 0.2
-    outlier_scale: float = 0.4
     track_timeout: float = 1.0
 
 
@@ -224,12 +230,17 @@ def _fuse_settings(params: MergerParams) -> FuseSettings:
         confidence_power=CONFIDENCE_POWER,
         confidence_floor=CONFIDENCE_FLOOR,
         staleness_scale=STALENESS_SCALE,
+        depth_gain=DEPTH_GAIN,
+        flipped_weight=FLIPPED_WEIGHT,
+        oblique_gain=OBLIQUE_GAIN,
+        occlusion_radius=OCCLUSION_RADIUS,
         occlusion_weight=OCCLUSION_WEIGHT,
     )
     robust = _read(
         RobustSettings,
         params,
         iterations=ROBUST_ITERATIONS,
+        outlier_scale=OUTLIER_SCALE,
         outlier_cutoff=OUTLIER_CUTOFF,
         limb_cutoff=LIMB_CUTOFF,
     )

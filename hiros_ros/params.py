@@ -66,7 +66,6 @@ RANGES: dict[str, tuple[float, float]] = {
             "confidence_floor",
             "flip_prior",
             "flip_prior_back",
-            "flipped_weight",
             "joint_weight_decay",
             "max_ambiguity",
             "min_calibrated_fraction",

@@ -120,6 +120,8 @@ def test_a_name_one_node_retired_stays_another_node_s_parameter(tmp_path: Path) 
     [
         ("optimizer", {"prior_weight": 0.05, "confidence_floor": 0.2}, "PRIOR_WEIGHT"),
         ("filter", {"butterworth_order": 4, "sample_frequency": 30.0}, "BUTTERWORTH_ORDER"),
+        ("merger", {"depth_gain": 0.0, "oblique_gain": 0.0, "outlier_scale": 1.0}, "DEPTH_GAIN"),
+        ("merger", {"flipped_weight": 1.0, "occlusion_radius": 0.0}, "OCCLUSION_RADIUS"),
     ],
 )
 def test_a_node_file_setting_its_retired_weights_loads_with_a_warning_each(

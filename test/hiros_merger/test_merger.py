@@ -6,11 +6,23 @@ from hiros_core.calibration import Calibration, CameraCalibration
 from hiros_core.layouts import AZURE_KINECT
 from hiros_core.model import Skeleton, SkeletonGroup
 from hiros_merger import Merger, MergerParams
-from hiros_merger.merger import OTHER_FRAME
+from hiros_merger import merger as merger_module
+from hiros_merger.merger import FLIPPED_WEIGHT, OTHER_FRAME
 
 J = AZURE_KINECT.n_joints
 T0 = 1_000_000_000_000  # ns
 WRIST = AZURE_KINECT.index("WristLeft")
+
+
+@pytest.fixture
+def constants(monkeypatch):
+    """Set the merger's fusion constants (``DEPTH_GAIN=0.0``, ...) for one test."""
+
+    def set_them(**values: float) -> None:
+        for name, value in values.items():
+            monkeypatch.setattr(merger_module, name, value)
+
+    return set_them
 
 
 def _person(rng=None) -> np.ndarray:
@@ -101,21 +113,23 @@ def test_detections_at_different_stamps_are_brought_to_the_output_time():
     assert np.abs(stale.positions[:, 0] - (pose[:, 0] + 0.03)).max() > 0.005
 
 
-def test_confident_camera_outweighs_an_unsure_one():
+def test_confident_camera_outweighs_an_unsure_one(constants):
+    constants(OUTLIER_SCALE=10.0)
     pose = _person()
     sure = _detection(pose, "k01", confidence=2 / 3)
     unsure = _detection(pose + np.array([0.0, 0.0, 0.1]), "k02", confidence=1 / 3)
-    merged = Merger(MergerParams(outlier_scale=10.0)).update(_group([sure, unsure]))
+    merged = Merger().update(_group([sure, unsure]))
     offset = merged.skeletons[0].positions[:, 2] - pose[:, 2]
     np.testing.assert_allclose(offset, 0.1 * (1 / 9) / (4 / 9 + 1 / 9), atol=1e-5)
 
 
-def test_camera_behind_the_person_counts_as_much_as_one_in_front():
+def test_camera_behind_the_person_counts_as_much_as_one_in_front(constants):
     """The back view is as precise as the front: only side views weigh less (the random
     pose's front is skewed a little, so the two cameras' side factors differ by < 2 %)."""
+    constants(OUTLIER_SCALE=10.0, DEPTH_GAIN=0.0)
     pose = _person()  # faces +x
     calibration = _calibration({"k01": (4.0, 0.0, 1.5), "k02": (-4.0, 0.0, 1.5)})
-    params = MergerParams(outlier_scale=10.0, depth_gain=0.0)
+    params = MergerParams()
     front = _detection(pose, "k01")
     back = _detection(pose + np.array([0.0, 0.0, 0.1]), "k02")
     merged = Merger(params, calibration).update(_group([front, back])).skeletons[0]
@@ -124,27 +138,28 @@ def test_camera_behind_the_person_counts_as_much_as_one_in_front():
     assert np.median(merged.positions[:, 2] - pose[:, 2]) == pytest.approx(0.05, abs=0.005)
 
 
-def test_camera_seeing_the_side_counts_less():
-    """``oblique_gain`` 1: a camera at the person's side weighs less than one in front (down
+def test_camera_seeing_the_side_counts_less(constants):
+    """``OBLIQUE_GAIN`` 1: a camera at the person's side weighs less than one in front (down
     to (1 + 1)^-2 = 1/4 exactly at the side; the random pose's front is skewed a little)."""
+    constants(OUTLIER_SCALE=100.0, DEPTH_GAIN=0.0)
     pose = _person()  # faces +x
     calibration = _calibration({"k01": (4.0, 0.0, 1.0), "k02": (0.0, 4.0, 1.0)})
-    params = MergerParams(outlier_scale=100.0, depth_gain=0.0)
     front = _detection(pose, "k01")
     side = _detection(pose + np.array([0.0, 0.0, 0.1]), "k02")
-    merged = Merger(params, calibration).update(_group([front, side])).skeletons[0]
+    merged = Merger(MergerParams(), calibration).update(_group([front, side])).skeletons[0]
     offset = np.median(merged.positions[:, 2] - pose[:, 2])
     assert 0.0 < offset < 0.045
-    params.oblique_gain = 0.0
-    merged = Merger(params, calibration).update(_group([front, side])).skeletons[0]
+    constants(OBLIQUE_GAIN=0.0)
+    merged = Merger(MergerParams(), calibration).update(_group([front, side])).skeletons[0]
     assert np.median(merged.positions[:, 2] - pose[:, 2]) == pytest.approx(0.05, abs=1e-6)
 
 
-def test_occluded_joints_count_less():
+def test_occluded_joints_count_less(constants):
+    constants(OUTLIER_SCALE=10.0, DEPTH_GAIN=0.0, OBLIQUE_GAIN=0.0)
     pose = _person()
     other = pose + np.array([2.0, 0.0, 0.0])  # a second person between k01 and the first one
     calibration = _calibration({"k01": (4.0, 0.0, 1.5), "k02": (0.0, 4.0, 1.5)})
-    params = MergerParams(outlier_scale=10.0, depth_gain=0.0, oblique_gain=0.0)
+    params = MergerParams()
     through = _detection(pose + np.array([0.0, 0.0, 0.1]), "k01")
     clear = _detection(pose, "k02")
     group = _group(
@@ -153,20 +168,14 @@ def test_occluded_joints_count_less():
     merged = Merger(params, calibration).update(group).skeletons[0]
     torso = AZURE_KINECT.index("SpineChest")
     assert merged.positions[torso, 2] - pose[torso, 2] < 0.05 - 1e-3
-    free = Merger(
-        MergerParams(
-            outlier_scale=10.0,
-            depth_gain=0.0,
-            occlusion_radius=0.0,
-            oblique_gain=0.0,
-        ),
-        calibration,
-    )
+    constants(OCCLUSION_RADIUS=0.0)
+    free = Merger(params, calibration)
     same = free.update(group).skeletons[0]
     assert same.positions[torso, 2] - pose[torso, 2] == pytest.approx(0.05)
 
 
-def test_orientations_are_the_weighted_mean_on_so3():
+def test_orientations_are_the_weighted_mean_on_so3(constants):
+    constants(OUTLIER_SCALE=10.0)
     rng = np.random.default_rng(4)
     pose = _person()
     rotations = [Rotation.random(J, random_state=i) for i in range(3)]
@@ -178,7 +187,7 @@ def test_orientations_are_the_weighted_mean_on_so3():
         )
         skeleton.orientations[:] = rotation.as_quat()
         skeletons.append(skeleton)
-    merged = Merger(MergerParams(outlier_scale=10.0)).update(_group(skeletons)).skeletons[0]
+    merged = Merger().update(_group(skeletons)).skeletons[0]
     weights = np.array(confidences) ** 2
     for joint in (0, 7, 20):
         stacked = Rotation.concatenate([r[joint] for r in rotations])
@@ -238,7 +247,7 @@ def _pointing_forward(pose: np.ndarray) -> np.ndarray:
     return pose
 
 
-def test_a_front_back_flipped_view_is_reflected_back():
+def test_a_front_back_flipped_view_is_reflected_back(constants):
     """A flip (the SDK's body reflected through the frontal plane; the tracker has put its
     labels back) is reflected back through the plane through its own pelvis, so it adds its
     view instead of bending the person: the arms and legs it swung backwards come forward."""
@@ -246,24 +255,25 @@ def test_a_front_back_flipped_view_is_reflected_back():
     flipped = pose.copy()
     flipped[:, 0] = 2 * pose[0, 0] - pose[:, 0]  # reflected through the frontal plane
     flipped += np.array([0.0, 0.0, 0.05])  # its own error, which it keeps
-    params = MergerParams(outlier_scale=10.0)
-    merger = Merger(params)
+    constants(OUTLIER_SCALE=10.0)
+    merger = Merger()
     merger.update(_group([_detection(pose, "k01")]))  # the people's vertical: z
     np.testing.assert_allclose(merger.up, [0.0, 0.0, 1.0])
     later = T0 + 33_000_000
     group = _group([_detection(v, c, t_ns=later) for v, c in ((pose, "k01"), (flipped, "k02"))])
     merged = merger.update(group).skeletons[0]
-    weight = params.flipped_weight  # (of the reflected view, against 1 for k01's)
+    weight = FLIPPED_WEIGHT  # (of the reflected view, against 1 for k01's)
     np.testing.assert_allclose(merged.positions[:, :2], pose[:, :2], atol=1e-9)
     shifted = pose[:, 2] + 0.05 * weight / (1 + weight)
     np.testing.assert_allclose(merged.positions[:, 2], shifted, atol=1e-6)
 
 
-def test_a_view_pointing_forward_is_not_reflected():
+def test_a_view_pointing_forward_is_not_reflected(constants):
     """Two views a few centimetres apart, feet and nose forward: fused as they are."""
+    constants(OUTLIER_SCALE=10.0)
     pose = _pointing_forward(_person())
     other = pose + np.array([0.03, -0.02, 0.01])
-    merger = Merger(MergerParams(outlier_scale=10.0))
+    merger = Merger()
     merged = merger.update(_group([_detection(pose, "k01"), _detection(other, "k02")]))
     np.testing.assert_allclose(merged.skeletons[0].positions, (pose + other) / 2, atol=1e-9)
 

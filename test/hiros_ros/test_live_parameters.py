@@ -25,12 +25,12 @@ def test_the_stage_nodes_hand_changes_to_their_stages(ros_context) -> None:
     try:
         assert set_one(tracker, "gate_distance", 0.8).successful
         assert tracker.tracker.params.gate_distance == 0.8
-        assert set_one(merger, "oblique_gain", 0.5).successful
-        assert merger.stage.params.oblique_gain == 0.5
-        assert set_one(pipeline, "merger.depth_gain", 0.5).successful
+        assert set_one(merger, "max_extrapolation", 0.05).successful
+        assert merger.stage.params.max_extrapolation == 0.05
+        assert set_one(pipeline, "merger.track_timeout", 0.5).successful
         assert set_one(pipeline, "filter.measurement_noise", 0.02).successful
         assert set_one(pipeline, "tracker.min_hits", 3).successful
-        assert pipeline.pipeline.merger.params.depth_gain == 0.5
+        assert pipeline.pipeline.merger.params.track_timeout == 0.5
         assert pipeline.pipeline.filter.params.measurement_noise == 0.02
         assert pipeline.pipeline.tracker.params.min_hits == 3
         refused = set_one(pipeline, "optimizer.track_timeout", 0.5)  # built once: read-only
