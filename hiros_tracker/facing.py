@@ -149,7 +149,8 @@ def _facing_evidence(  # noqa: PLR0917 - one loop over the frame's pairs
             ay += sy if math.isfinite(sy) else 0.0
             az += sz if math.isfinite(sz) else 0.0
         ax, ay, az = _unit3(ax, ay, az)
-        flipped = ax * fx + ay * fy + az * fz < 0
+        agreement = ax * fx + ay * fy + az * fz
+        flipped = agreement < 0
         if has_camera:
             cx, cy, cz = _flat3(
                 camera[0] - positions[r, root, 0],
@@ -166,6 +167,8 @@ def _facing_evidence(  # noqa: PLR0917 - one loop over the frame's pairs
             value = _independent_evidence(flipped, prior_right, prior_wrong)
         else:  # no camera pose: a flipped-looking detection is simply evidence against
             value = (-1.0 if flipped else 1.0) * math.log((1.0 - flip_prior) / flip_prior)
+        if not math.isfinite(agreement):  # no forward pointer seen, or no front: no evidence
+            value = 0.0
         walk = _walking(velocity[r], (fx, fy, fz), up, walking_speed, walking_evidence)
         if walk < 0.0 and math.isfinite(value):  # walking backwards by its sides
             doubt_step[u] = -value

@@ -27,6 +27,7 @@ import hiros_tracker
 from hiros_core.layouts import AZURE_KINECT
 from hiros_tracker import kernels
 from hiros_tracker.correction import _left_product
+from hiros_tracker.facing import _facing_evidence
 from hiros_tracker.kernel_args import (
     FacingPriors,
     FacingView,
@@ -469,6 +470,29 @@ def test_turn_facing(seed: int, up_known: bool, has_camera: bool) -> None:
     turned = kernels.turn_facing(fields, rows, positions[dets], view, BODY, priors)
     want = ref.reference_turn_facing(mine, rows, positions[dets], my_view, BODY, priors)
     _assert_same((turned, view.up, fields), (want, my_view.up, mine))
+
+
+def test_a_detection_without_its_forward_pointers_gives_no_facing_evidence() -> None:
+    """No foot or nose seen: the detection cannot look flipped or not, so it adds nothing
+    (it used to read as 'not flipped' and add full evidence that the sides were right)."""
+    rng = np.random.default_rng(7)
+    scene = _scene(rng, 1, 1)
+    positions = _frame(rng, scene, 0, missing=0.0)
+    pointed = np.unique(BODY.pointers)
+    blind = positions.copy()
+    blind[:, pointed[pointed != BODY.root]] = np.nan
+    rows = np.zeros(1, dtype=np.int64)
+    up = np.array([0.0, 0.0, 1.0])
+    still = _priors(rng)._replace(walking_evidence=0.0)
+    for has_camera in (False, True):
+        view = _view(rng, scene, True, has_camera)
+        fields = scene.table.hit_fields()
+        seen, _ = _facing_evidence(fields, rows, positions, up, view, BODY, still)
+        unseen, _ = _facing_evidence(fields, rows, blind, up, view, BODY, still)
+        assert seen[0] != 0.0
+        assert unseen[0] == 0.0
+        want, _ = ref.facing_evidence(ref.copy_fields(fields), rows, blind, up, view, BODY, still)
+        assert want[0] == 0.0
 
 
 # --------------------------------------------------------------------------- track update

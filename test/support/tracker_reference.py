@@ -469,8 +469,8 @@ def facing_evidence(  # noqa: PLR0917 - the kernel's inputs
 ) -> tuple[np.ndarray, np.ndarray]:
     """``_facing_evidence``: ``(U,)`` log-odds each detection gives, ``(U,)`` doubt steps.
 
-    A front or forward that cannot be computed (a missing joint, an unknown up) makes every
-    comparison with it false: the detection then reads as not flipped, as in the kernel.
+    A front or forward that cannot be computed (no forward pointer seen, an unknown up) gives
+    no view evidence: the detection cannot look flipped or not.
     """
     evidence = np.zeros(len(rows))
     doubt_step = np.zeros(len(rows))
@@ -482,8 +482,10 @@ def facing_evidence(  # noqa: PLR0917 - the kernel's inputs
         for a, b in body.pointers:
             pointer = _unit_or_nan(_flat(canonical[u, b] - canonical[u, a], up))
             forward += np.where(np.isfinite(pointer), pointer, 0.0)
-        flipped = bool(np.dot(_unit_or_nan(forward), front) < 0)
-        value = _view_evidence(flipped, front, pose[body.root], up, view, priors)
+        agreement = np.dot(_unit_or_nan(forward), front)
+        value = _view_evidence(bool(agreement < 0), front, pose[body.root], up, view, priors)
+        if not np.isfinite(agreement):
+            value = 0.0
         walk = walking(tracks.velocity[r], front, up, priors)
         if walk < 0.0 and np.isfinite(value):
             doubt_step[u] = -value
