@@ -18,6 +18,7 @@ from typing import NamedTuple
 
 import numpy as np
 import tracker_reference as ref
+import tracker_reference_association as association_ref
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from numba.core.dispatcher import Dispatcher
@@ -235,7 +236,7 @@ def test_masked_positions(seed: int, min_confidence: float) -> None:
     markers[rng.random(n_det) < 0.3, :, 2] = np.nan  # a detection with no finite joint
     present = rng.random((n_det, N_JOINTS)) < 0.8
     got = kernels.masked_positions(markers, present, min_confidence)
-    _assert_same(got, ref.reference_masked_positions(markers, present, min_confidence))
+    _assert_same(got, association_ref.reference_masked_positions(markers, present, min_confidence))
 
 
 @EXAMPLES
@@ -255,7 +256,9 @@ def test_match_costs(seed: int, use_parts: bool) -> None:
     match = MatchSettings(0.2, use_parts, int(rng.integers(1, 20)), float(rng.random() * 0.1))
     stamp = 300_000_000
     got = kernels.match_costs(tracks, detections, stamp, WEIGHTS, PARTS.arrays, match)
-    want = ref.reference_match_costs(tracks, detections, stamp, WEIGHTS, PARTS.arrays, match)
+    want = association_ref.reference_match_costs(
+        tracks, detections, stamp, WEIGHTS, PARTS.arrays, match
+    )
     _assert_same(got, want)
 
 
@@ -282,7 +285,7 @@ def test_gate_costs(seed: int, bonus: float) -> None:
     rng = np.random.default_rng(seed)
     cost, tracks, frame = _gate_input(rng)
     gate = GateSettings(bonus, 0.8, 2.0)
-    want = ref.reference_gate_costs(cost, tracks, frame, gate)
+    want = association_ref.reference_gate_costs(cost, tracks, frame, gate)
     feasible, levels = kernels.gate_costs(cost, tracks, frame, gate)  # finishes cost in place
     _assert_same((cost, feasible, levels), want)
 
@@ -304,7 +307,7 @@ def test_frame_costs(seed: int) -> None:
     got = kernels.frame_costs(
         tracks, detections, WEIGHTS, PARTS.arrays, match, gate_tracks, frame, gate
     )
-    want = ref.reference_frame_costs(
+    want = association_ref.reference_frame_costs(
         tracks, detections, WEIGHTS, PARTS.arrays, match, gate_tracks, frame, gate
     )
     _assert_same(got, want)
@@ -322,7 +325,7 @@ def test_frame_pairs(seed: int) -> None:
     flips = rng.random((n_tracks, n_det, PARTS.count)) < 0.3
     kept = rng.integers(0, N_JOINTS, n_det)
     got = kernels.frame_pairs(r, c, feasible, flips, kept, 10)
-    _assert_same(got, ref.reference_frame_pairs(r, c, feasible, flips, kept, 10))
+    _assert_same(got, association_ref.reference_frame_pairs(r, c, feasible, flips, kept, 10))
 
 
 @EXAMPLES
@@ -666,14 +669,16 @@ def _public_kernels() -> list[str]:
 
 
 def test_every_kernel_has_a_reference() -> None:
-    """Each public kernel of the package is stated in the reference module (by its name).
+    """Each public kernel of the package is stated in the reference modules (by its name).
 
     The private helpers are stated there under names of their own, held through their callers.
     """
     kernels_found = _public_kernels()
     assert {"fold_hits", "hit_frame", "move_rows", "turn_facing"} <= set(kernels_found)
     missing = [
-        name for name in kernels_found if not callable(getattr(ref, f"reference_{name}", None))
+        name
+        for name in kernels_found
+        if not any(callable(getattr(m, f"reference_{name}", None)) for m in (ref, association_ref))
     ]
     assert not missing
-    assert ref.INFEASIBLE == kernels.INFEASIBLE
+    assert association_ref.INFEASIBLE == kernels.INFEASIBLE

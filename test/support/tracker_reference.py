@@ -1,7 +1,8 @@
 """The tracker's kernels stated in numpy: the readable specification of ``hiros_tracker``'s maths.
 
 One function per compiled kernel the tracker calls (``hiros_tracker.kernels`` and the rigid
-moves of ``hiros_tracker.rigid``), written from the kernels' docstrings with whole-array
+moves of ``hiros_tracker.rigid``; the association's are in ``tracker_reference_association``),
+written from the kernels' docstrings with whole-array
 formulas where they read best and plain loops where the maths is sequential (tracks changed in
 place one after another). The kernels' private helpers (``_sides_axis``, ``_reference_axis``,
 ``_steadiness``, ``_follow_walk``, ``_facing_evidence``, ``_walking``, ``_update_up``,
@@ -18,6 +19,7 @@ can run both on copies of one state and compare every field.
 from __future__ import annotations
 
 import numpy as np
+from tracker_reference_association import vector_norm
 
 from hiros_tracker.facing import DOUBT_LIMIT
 from hiros_tracker.kernel_args import (
@@ -25,19 +27,14 @@ from hiros_tracker.kernel_args import (
     FacingPriors,
     FacingView,
     FrameRows,
-    GateFrame,
-    GateSettings,
-    GateTracks,
     HeldSides,
     HitLayout,
     Hits,
     HitSettings,
-    MatchSettings,
     MirrorLayout,
     SideLayout,
     StackedRows,
     TrackFields,
-    TrackPoses,
     UpdateSettings,
 )
 from hiros_tracker.labels import (
@@ -50,8 +47,6 @@ from hiros_tracker.labels import (
 )
 from hiros_tracker.track_update import REBASE_NS
 
-INFEASIBLE = 1e9
-"""The cost of a gated-out pair (``association.INFEASIBLE``)."""
 DETERMINED = 1e-5
 """A joint's slope is determined when its centred time spread ``sum (t - tc)^2`` (s²) is above."""
 
@@ -61,13 +56,9 @@ def copy_fields(fields: TrackFields) -> TrackFields:
     return TrackFields(*(np.copy(field) for field in fields))
 
 
-def _norm(vectors: np.ndarray) -> np.ndarray:
-    return np.sqrt(np.sum(vectors * vectors, axis=-1))
-
-
 def _unit_or_nan(vector: np.ndarray) -> np.ndarray:
     """``vector / |vector|``; NaN for a zero (or NaN) vector (``facing._unit3``)."""
-    size = _norm(vector)
+    size = vector_norm(vector)
     return vector / size if size != 0.0 else np.full(3, np.nan)
 
 
@@ -82,131 +73,6 @@ def _permutation(flips: np.ndarray, layout: MirrorLayout) -> np.ndarray:
     flipped = np.zeros(len(layout.part), dtype=bool)
     flipped[sided] = flips[layout.part[sided]]
     return np.where(flipped, layout.mirror, np.arange(len(layout.part)))
-
-
-# ------------------------------------------------------------------------------ association
-def reference_masked_positions(
-    markers: np.ndarray, present: np.ndarray, min_confidence: float
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
-    """``masked_positions``: positions kept where present and confident enough.
-
-    ``markers`` ``(D, J, 20)``: confidence in column 0, position in 1:4. A joint is kept when
-    present and not below ``min_confidence`` (a NaN confidence is not below; 0: no floor).
-    """
-    xyz = markers[..., 1:4]
-    finite = np.isfinite(xyz).all(axis=-1)
-    with np.errstate(invalid="ignore"):
-        unconfident = (min_confidence > 0) & (markers[..., 0] < min_confidence)
-    keep = present & ~unconfident
-    positions = np.where(keep[..., None], xyz, np.nan)
-    usable = (present & finite).any(axis=1)
-    kept = (keep & finite).sum(axis=1)
-    return positions, usable, kept, int((~usable).sum())
-
-
-def reference_match_costs(  # noqa: PLR0917 - the kernel's inputs
-    tracks: TrackPoses,
-    detections: np.ndarray,
-    stamp_ns: int,
-    weights: np.ndarray,
-    layout: MirrorLayout,
-    settings: MatchSettings,
-) -> tuple[np.ndarray, np.ndarray]:
-    """``match_costs``: ``(T, D)`` weighted mean joint distances, ``(T, D, K)`` parts mirrored."""
-    part, mirror, n_parts = layout.part, layout.mirror, layout.n_parts
-    dt = np.clip(
-        (stamp_ns - tracks.time_ns) * 1e-9, -settings.max_prediction, settings.max_prediction
-    )
-    predicted = tracks.positions + tracks.velocity[:, None, :] * dt[:, None, None]  # (T, J, 3)
-    given = _norm(predicted[:, None] - detections[None])  # (T, D, J)
-    mirrored = _norm(predicted[:, None] - detections[None][:, :, mirror])
-    flips = np.zeros((*given.shape[:2], n_parts), dtype=bool)
-    if settings.use_parts:
-        for k in range(n_parts):
-            in_part = part == k
-            mean_given = np.nansum(given[..., in_part], axis=2) / np.maximum(
-                np.isfinite(given[..., in_part]).sum(axis=2), 1
-            )
-            count_mirrored = np.isfinite(mirrored[..., in_part]).sum(axis=2)
-            mean_mirrored = np.nansum(mirrored[..., in_part], axis=2) / np.maximum(
-                count_mirrored, 1
-            )
-            flips[..., k] = (count_mirrored > 0) & (mean_mirrored + settings.margin < mean_given)
-    sided = part >= 0
-    take_mirrored = np.zeros(given.shape, dtype=bool)
-    take_mirrored[..., sided] = flips[..., part[sided]]
-    chosen = np.where(take_mirrored, mirrored, given)
-    finite = np.isfinite(chosen)
-    norm = (finite * weights).sum(axis=2)
-    total = np.where(finite, chosen * weights, 0.0).sum(axis=2)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        cost = np.where(norm > 0, total / norm, np.nan)
-    cost[finite.sum(axis=2) < settings.min_joints] = np.inf
-    return cost, flips
-
-
-def reference_gate_costs(
-    cost: np.ndarray, tracks: GateTracks, frame: GateFrame, settings: GateSettings
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """``gate_costs``: the finished ``(T, D)`` costs, ``(T, D)`` feasible and ``(T,)`` levels."""
-    n = len(cost)  # the table's rows past the tracks' are not read
-    known = np.where(tracks.seen[:n, frame.camera], tracks.body_ids[:n, frame.camera], -1)
-    same = (frame.det_ids[None, :] == known[:, None]) & (frame.det_ids[None, :] >= 0)
-    elsewhere = ((known >= 0)[:, None] & (frame.det_ids[None, :] == known[:, None])).any(axis=1)
-    term = np.where(same, -1.0, elsewhere[:, None].astype(float))
-    if settings.bonus:
-        cost = cost + settings.bonus * term
-    unseen = np.maximum((frame.stamp_ns - tracks.last_hit_ns[:n]) * 1e-9, 0.0)
-    gate = settings.distance + settings.growth * unseen
-    with np.errstate(invalid="ignore"):
-        feasible = np.isfinite(cost) & (cost <= gate[:, None])
-    cost = np.where(feasible, cost, INFEASIBLE)
-    recent = tracks.last_hit_ns[:n] >= frame.recent_ns
-    levels = np.where(tracks.confirmed[:n], np.where(recent, 0, 1), 2)
-    return cost, feasible, levels
-
-
-def reference_frame_costs(  # noqa: PLR0917 - the kernel's inputs
-    tracks: TrackPoses,
-    detections: np.ndarray,
-    weights: np.ndarray,
-    layout: MirrorLayout,
-    match: MatchSettings,
-    gate_tracks: GateTracks,
-    frame: GateFrame,
-    gate: GateSettings,
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """``frame_costs``: the costs at the frame's stamp, gated; flips, feasible pairs, levels."""
-    cost, flips = reference_match_costs(tracks, detections, frame.stamp_ns, weights, layout, match)
-    cost, feasible, levels = reference_gate_costs(cost, gate_tracks, frame, gate)
-    return cost, flips, feasible, levels
-
-
-def reference_frame_pairs(  # noqa: PLR0917 - the kernel's inputs
-    r: np.ndarray,
-    c: np.ndarray,
-    feasible: np.ndarray,
-    flips: np.ndarray,
-    kept: np.ndarray,
-    min_joints: int,
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, int, int]:
-    """``frame_pairs``: each detection's track (-1: new), its detection, flips, new, dropped."""
-    matched = {int(d): int(t) for t, d in zip(r, c, strict=True) if feasible[t, d]}
-    rows, dets, pair_flips, new = [], [], [], 0
-    for d in range(len(kept)):
-        if d in matched:
-            rows.append(matched[d])
-            pair_flips.append(flips[matched[d], d])
-        elif kept[d] >= min_joints:
-            rows.append(-1)
-            pair_flips.append(np.zeros(flips.shape[2], dtype=bool))
-            new += 1
-        else:
-            continue
-        dets.append(d)
-    as_flips = np.array(pair_flips, dtype=bool).reshape(len(rows), flips.shape[2])
-    dropped = len(kept) - len(rows)
-    return np.array(rows, dtype=np.int64), np.array(dets, dtype=np.int64), as_flips, new, dropped
 
 
 # --------------------------------------------------------------------------------- labels
@@ -230,13 +96,13 @@ def reference_axis(held: HeldSides, r: int) -> np.ndarray:
     axis = held.axes[r]
     if not axis.any():
         axis = sides_axis(held.tracks[r], held.left, held.right)
-    size = _norm(axis)
+    size = vector_norm(axis)
     reference = axis / size if size > 0.0 else axis.copy()
     if held.camera < held.camera_axes.shape[1]:
         last = held.camera_axes[r, held.camera]
         recent = (held.stamp_ns - held.camera_ns[r, held.camera]) * 1e-9 <= CAMERA_GAP
-        if _norm(last) > 0.0 and recent:
-            reference = reference + CAMERA_WEIGHT * last / _norm(last)
+        if vector_norm(last) > 0.0 and recent:
+            reference = reference + CAMERA_WEIGHT * last / vector_norm(last)
     return reference
 
 
@@ -303,12 +169,12 @@ def follow_walk(axis: np.ndarray, velocity: np.ndarray, up: np.ndarray, elapsed:
     """``_follow_walk``: ``axis`` pulled towards ``|axis| unit(up x v)`` when walking, in place."""
     normal = up[:3]
     flat = _flat(velocity, normal)
-    speed = _norm(flat)
+    speed = vector_norm(flat)
     if not speed > WALK_SPEED:
         return
     keep = np.exp(-elapsed / WALK_MEMORY)
     facing_left = np.cross(normal, flat) / speed
-    axis[:] = keep * axis + (1.0 - keep) * _norm(axis) * facing_left
+    axis[:] = keep * axis + (1.0 - keep) * vector_norm(axis) * facing_left
 
 
 def _steadiness(held: HeldSides, r: int, axis: np.ndarray, camera: int, stamp_ns: int) -> float:
@@ -413,7 +279,7 @@ def update_up(
     if len(trunks):
         mean = trunks.sum(axis=0) / len(trunks)
         up[:3] = mean if up[3] == 0.0 else up[:3] + 0.01 * (mean - up[:3])
-        up[:3] /= _norm(up[:3])
+        up[:3] /= vector_norm(up[:3])
         up[3] = 1.0
     return up[:3].copy() if up[3] != 0.0 else np.full(3, np.nan)
 
@@ -421,7 +287,7 @@ def update_up(
 def walking(velocity: np.ndarray, front: np.ndarray, up: np.ndarray, priors: FacingPriors) -> float:
     """``_walking``: ``±walking_evidence`` for a walk along/against ``front``, else 0 (NaN)."""
     flat = _flat(velocity, up)
-    speed = _norm(flat)
+    speed = vector_norm(flat)
     if not speed > priors.walking_speed:
         return 0.0
     along = np.dot(flat, front) / max(speed, 1e-9)
@@ -740,7 +606,7 @@ def reference_move_rows(
 def _turn(quaternions: np.ndarray, turn: np.ndarray) -> None:
     """Quaternions ``(N, 4)`` normalised and turned by ``turn ⊗ q``, in place (NaN spreads)."""
     with np.errstate(invalid="ignore", divide="ignore"):
-        unit = quaternions / _norm(quaternions)[:, None]
+        unit = quaternions / vector_norm(quaternions)[:, None]
     for i, q in enumerate(unit):
         quaternions[i] = hamilton(turn, q) if np.isfinite(q).all() else np.nan
 
