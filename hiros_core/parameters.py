@@ -57,6 +57,7 @@ _CALIB_CONSTANTS = (
     "offset_shrinkage",
     "association_frames",
     "min_drift_span",
+    "min_overlap",
     "max_drift",
     "max_signature_mismatch",
     "min_common_time",

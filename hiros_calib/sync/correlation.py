@@ -17,7 +17,7 @@ from scipy.fft import irfft, next_fast_len
 
 from hiros_calib.signature import PoseSignature
 from hiros_calib.sync.clock import fisher_significance
-from hiros_calib.sync.params import GRID_STEP, MIN_MOTION, SyncParams
+from hiros_calib.sync.params import GRID_STEP, MIN_MOTION, MIN_OVERLAP, SyncParams
 
 if TYPE_CHECKING:
     from hiros_calib.sync.work import TrackWork
@@ -136,7 +136,7 @@ def _peak(
     r = curve.correlation()
     lags = (curve.first + np.arange(len(r))) * step
     overlap = curve.count * step
-    valid = (overlap >= params.min_overlap) & np.isfinite(r)
+    valid = (overlap >= MIN_OVERLAP) & np.isfinite(r)
     if search is not None:
         valid &= (lags >= search[0]) & (lags <= search[1])
     if valid.sum() < 5:

@@ -24,6 +24,7 @@ from hiros_calib.sync.params import (
     GRID_STEP,
     MAX_CANDIDATES,
     MIN_MOTION,
+    MIN_OVERLAP,
     MIN_PRIOR_SIGNIFICANCE,
     MIN_REPEATED_PEAK,
     MIN_SHARPNESS,
@@ -124,7 +125,7 @@ def _estimate(
         return refused_pair(
             camera_a,
             camera_b,
-            f"no body is seen by both cameras for {params.min_overlap:.1f} s at any lag"
+            f"no body is seen by both cameras for {MIN_OVERLAP:.1f} s at any lag"
             + (f" in {search[0]:+.2f}..{search[1]:+.2f} s" if search else ""),
         )
     good = [c for c in candidates if _clear(c, params, windowed=windowed)]
@@ -196,12 +197,12 @@ def _refuse_unusable(
         )
     span_a = max(s.times[-1] - s.times[0] for s in moving_a)
     span_b = max(s.times[-1] - s.times[0] for s in moving_b)
-    if min(span_a, span_b) < params.min_overlap:
+    if min(span_a, span_b) < MIN_OVERLAP:
         return refused_pair(
             camera_a,
             camera_b,
             f"too short: the longest moving track lasts {min(span_a, span_b):.1f} s, "
-            f"{params.min_overlap:.1f} s are needed",
+            f"{MIN_OVERLAP:.1f} s are needed",
         )
     return None
 
@@ -231,7 +232,7 @@ def _candidate_lags(
     step = GRID_STEP
     first, pooled, overlap = _pooled_curve(used, step)
     lags = (first + np.arange(len(pooled))) * step
-    valid = (overlap >= params.min_overlap) & np.isfinite(pooled)
+    valid = (overlap >= MIN_OVERLAP) & np.isfinite(pooled)
     if search is not None:
         valid &= (lags >= search[0] - 1e-9) & (lags <= search[1] + 1e-9)
     significance = np.where(valid, fisher_significance(pooled, overlap), -np.inf)

@@ -22,6 +22,7 @@ __all__ = [
     "MIN_DRIFT_SPAN",
     "MIN_LAG_MARGIN",
     "MIN_MOTION",
+    "MIN_OVERLAP",
     "MIN_PRIOR_SIGNIFICANCE",
     "MIN_REPEATED_PEAK",
     "MIN_SHARPNESS",
@@ -53,6 +54,10 @@ PRIOR_CONTRADICTION: float = 1.5
 ``prior_window`` is this many times more significant (Fisher z of the correlation times
 the square root of the overlap) than the best lag within it; the search then takes every
 lag and the pair's quality says ``arrival_prior: contradicted``."""
+
+MIN_OVERLAP: float = 3.0
+"""Seconds two tracks must overlap at a lag for that lag to count: a correlation over less is
+more often chance than motion (a body pair's significance also grows with the overlap)."""
 
 MIN_MOTION: float = 0.01
 """A track whose smoothed signature moves less than this (m) is a still body: skipped."""
@@ -107,8 +112,6 @@ class SyncParams:
     within this window is checked against the best lag anywhere (see ``PRIOR_CONTRADICTION``),
     so a prior the motion contradicts is noticed and ignored, never silently obeyed.
     """
-    min_overlap: float = 3.0
-    """Seconds two tracks must overlap at a lag for that lag to count."""
     min_peak: float = 0.05
     """Lowest peak correlation of a usable body pair (noisy SDK joints correlate weakly;
     the sharpness is the stronger test)."""

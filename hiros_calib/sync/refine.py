@@ -19,7 +19,7 @@ from scipy.optimize import minimize_scalar
 
 from hiros_calib.signature import PoseSignature
 from hiros_calib.sync.correlation import resample
-from hiros_calib.sync.params import GRID_STEP, MAX_DRIFT, SyncParams
+from hiros_calib.sync.params import GRID_STEP, MAX_DRIFT, MIN_OVERLAP, SyncParams
 
 __all__ = ["RefinePair", "Spline", "lag_windows", "refine", "window_edges"]
 
@@ -159,7 +159,7 @@ def lag_windows(tau: float, pairs: list[RefinePair], params: SyncParams) -> np.n
     rows = []
     for lo, hi in edges:
         overlap = sum(p.overlap(tau, (lo, hi)) for p in pairs)
-        if overlap < min(params.min_overlap, 0.5 * (hi - lo)):
+        if overlap < min(MIN_OVERLAP, 0.5 * (hi - lo)):
             continue
         value, corr = refine(tau, half_width, pairs, (lo, hi))
         if corr < params.min_peak:

@@ -122,18 +122,21 @@ def test_a_name_one_node_retired_stays_another_node_s_parameter(tmp_path: Path) 
         ("filter", {"butterworth_order": 4, "sample_frequency": 30.0}, "BUTTERWORTH_ORDER"),
         ("merger", {"depth_gain": 0.0, "oblique_gain": 0.0, "outlier_scale": 1.0}, "DEPTH_GAIN"),
         ("merger", {"flipped_weight": 1.0, "occlusion_radius": 0.0}, "OCCLUSION_RADIUS"),
+        ("calib", {"min_overlap": 5.0}, "MIN_OVERLAP"),
     ],
 )
 def test_a_node_file_setting_its_retired_weights_loads_with_a_warning_each(
     tmp_path: Path, node: str, values: dict[str, float], constant: str
 ) -> None:
-    """Each node's own file (not only the pipeline's) still loads with what it retired."""
+    """Each node's own file (not only the pipeline's) still loads with what it retired, and
+    keeps a setting that stays (the merger's and calib's window)."""
     path = tmp_path / f"{node}.yaml"
     settings = "".join(f"    {name}: {value}\n" for name, value in values.items())
-    path.write_text(f"{node}:\n  ros__parameters:\n{settings}    input_qos: reliable\n")
+    kept = {"optimizer": "track_timeout", "filter": "cutoff_frequency"}.get(node, "window")
+    path.write_text(f"{node}:\n  ros__parameters:\n{settings}    {kept}: 2.0\n")
     with pytest.warns(RemovedParameterWarning) as caught:
         loaded = load_config_defaults(node, path)
-    assert loaded == {"input_qos": "reliable"}
+    assert loaded == {kept: 2.0}
     messages = [str(w.message) for w in caught]
     assert len(messages) == len(values)
     assert any(f"constant {constant}" in m for m in messages)
