@@ -59,7 +59,7 @@ def test_describe_set_refuse_get_and_the_topic_tools(ros_processes) -> None:
         ("cutoff_frequency", "-5"): "out of range",
         ("filter", "nonsense"): "read-only parameter: filter",
         ("input_topic", "/elsewhere"): "read-only parameter: input_topic",
-        ("cutoff_frequency", "0"): "cutoff_frequency > 0",
+        ("cutoff_frequency", "0"): "cutoff_frequency must be > 0",
     }
     for (name, value), reason in refusals.items():
         refused = hiros(env, "param", "set", "/filter", name, value)
