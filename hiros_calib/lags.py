@@ -11,8 +11,10 @@ For every candidate lag this fits a rigid transform to the same-instant joints (
 RANSAC fit, no per-joint offsets; two-fold cross-validated over alternating 2 s blocks, so a
 lag with little common data gains nothing from over-fitting) and measures the *lag fit
 residual*: per frame the mean distance of the joints after the fit (left and right as the
-SDKs gave them or swapped, whichever fits), then the median over the frames of camera a that
-every candidate shares. The decision:
+SDKs gave them or swapped, whichever fits), then per person (a track of camera a) the median
+over the frames of theirs that every candidate shares, and the mean over the people, so that
+everyone counts: one repetition of one person's walk off, that person fits, the others do
+not. The decision:
 
 - the lag the motion prefers and the one the poses prefer agree: taken;
 - the motion cannot decide (the runner-up correlates ``max_ambiguity`` as well or more
@@ -30,6 +32,7 @@ evidence that the lag is right (``lag_fit_residual_m``, ``lag_fit_runner_up_m``)
 from __future__ import annotations
 
 import math
+from collections import defaultdict
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
@@ -49,7 +52,20 @@ from hiros_calib.sync import CONTEST_DECISIVE_T, CameraClock, PairOffset
 from hiros_calib.tracks import BodyTrack
 from hiros_core.geometry import RigidTransform
 
-__all__ = ["LagFit", "compare_fits", "fit_at_lag", "settle_lag", "split_half_spread"]
+__all__ = [
+    "MIN_FIT_COVERAGE",
+    "LagFit",
+    "compare_fits",
+    "fit_at_lag",
+    "settle_lag",
+    "split_half_spread",
+]
+
+
+MIN_FIT_COVERAGE = 0.5
+"""A lag's skeletons must match at least this fraction of the frames that the best-matched
+lag's do for its fit to count (as :mod:`~hiros_calib.sync` keeps a candidate lag only if
+its overlap is half the best's)."""
 
 
 @dataclass
@@ -155,20 +171,46 @@ def _frame_residuals(c: Correspondences, transform: RigidTransform) -> np.ndarra
 
 
 def compare_fits(fits: list[LagFit], min_frames: int = 30) -> None:
-    """Set each fit's residual over the frames of camera a that every fit shares.
+    """Set each fit's residual: the mean over the people it matched of their median residual.
 
-    A lag that pairs camera a's moving stretches with b's still ones, or overlaps less, would
-    otherwise be judged on other frames than its rivals. When fewer than ``min_frames`` are
-    shared, each fit is judged on its own frames.
+    Each person (a track of camera a) counts alike, however long they were seen: at a lag one
+    repetition off, the person whose motion repeats with that period fits as well as at the
+    true lag, while everyone else is metres off (docs/calibration-robustness.md, session 18);
+    a median over all frames would hide them behind the majority. A person's median is taken
+    over the frames of theirs that every fit shares, so that a lag which pairs camera a's
+    moving stretches with b's still ones, or overlaps less, is not judged on other frames
+    than its rivals; a person with fewer than ``min_frames`` shared frames is judged on their
+    own frames, and one with fewer than ``min_frames`` in all is left out. A lag whose
+    skeletons match fewer than ``MIN_FIT_COVERAGE`` of the frames the best-matched lag does
+    (a lag near the recording's length, where the cameras overlap a few seconds) rests on too
+    little data to rival the others: its residual is inf.
     """
     matched = [f for f in fits if f.frames]
     shared = set.intersection(*(set(f.frames) for f in matched)) if matched else set()
+    most = max((len(f.frames) for f in fits), default=0)
     for fit in fits:
-        if not fit.frames:
-            fit.residual_m = math.inf
+        if len(fit.frames) < MIN_FIT_COVERAGE * most:
+            fit.residual_m = math.inf  # too little data to rival the others
             continue
-        keys = shared if len(shared) >= min_frames else fit.frames.keys()
-        fit.residual_m = float(np.median([fit.frames[k] for k in keys]))
+        fit.residual_m = _person_mean(fit.frames, shared, min_frames)
+
+
+def _person_mean(
+    frames: dict[tuple[int, int], float], shared: set[tuple[int, int]], min_frames: int
+) -> float:
+    """Mean over the tracks of their median frame residual (inf: no track seen enough)."""
+    own: dict[int, list[float]] = defaultdict(list)
+    common: dict[int, list[float]] = defaultdict(list)
+    for key, residual in frames.items():
+        own[key[0]].append(residual)
+        if key in shared:
+            common[key[0]].append(residual)
+    medians = [
+        float(np.median(common[track] if len(common[track]) >= min_frames else residuals))
+        for track, residuals in own.items()
+        if len(residuals) >= min_frames
+    ]
+    return float(np.mean(medians)) if medians else math.inf
 
 
 def settle_lag(

@@ -75,7 +75,7 @@ CANDIDATE_RATIO: float = 0.6
 """Local maxima of the pooled correlation at least this fraction of the peak are the
 pair's candidate lags, for the poses to check."""
 
-MAX_CANDIDATES: int = 4
+MAX_CANDIDATES: int = 12
 """At most this many candidate lags per camera pair (best first)."""
 
 MIN_LAG_MARGIN: float = 1.15

@@ -12,7 +12,6 @@ from hiros_calib.sync import (
     synchronise,
 )
 from hiros_calib.tracks import extract_tracks
-from hiros_core.errors import CalibrationError
 from hiros_core.layouts import AZURE_KINECT
 from hiros_sim import SimParams, simulate
 
@@ -129,12 +128,15 @@ def test_unlinked_camera_is_refused_with_the_pair_reason():
     assert "no body is seen by both cameras" in clocks["c2"].reason
 
 
-def test_a_repeated_walk_is_refused_as_ambiguous_unless_the_lag_is_pinned():
-    # the simulator's person walks one clip back and forth: every repetition correlates
-    # about as well as the true lag, which only the arrival times tell apart
+def test_a_repeated_walk_is_flagged_unless_the_lag_is_pinned():
+    # the simulator's person walks one clip back and forth, exactly: every repetition
+    # correlates about as well as the true lag, and half a loop later the walk back, seen
+    # from the other side, fits the skeletons about as well too. Only the arrival times tell
+    # the lags apart; without them the skeletons' choice (here the wrong repetition, 8.3 s
+    # off and turned 180 deg) is flagged, since no second camera pair can confirm it
     recording = simulate(SimParams(n_cameras=2, n_people=1, duration=30.0, seed=2))
-    with pytest.raises(CalibrationError, match="the lag is ambiguous"):
-        Calibrator(CalibratorParams(reference="k01")).calibrate(recording.camera_groups)
+    alone = Calibrator(CalibratorParams(reference="k01")).calibrate(recording.camera_groups)
+    assert "no other camera pair confirms it" in alone.flagged["k02"]
     truth = recording.calibration.cameras["k02"].time_offset
     calibrator = Calibrator(CalibratorParams(reference="k01"))
     estimate = calibrator.calibrate(recording.camera_groups, arrival_ns=recording.receive_ns)

@@ -2,13 +2,17 @@
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pytest
 
 from hiros_calib import Calibrator, CalibratorParams, LiveCalibrator, LiveCalibratorParams
 from hiros_calib.extrinsics import PairPose
+from hiros_calib.lags import LagFit, compare_fits
 from hiros_calib.quality import arrival_offsets_from_delays, flag_cameras
 from hiros_calib.sync import PairOffset, close_loops, overrule_weak_pairs
+from hiros_calib.sync import pair as pair_module
 from hiros_core.calibration import Calibration, CameraCalibration
 from hiros_core.errors import CalibrationError
 from hiros_eval.calibration import compare_calibration
@@ -249,15 +253,56 @@ def test_repeated_motion_whose_lag_the_poses_decide():
     assert "no other camera pair confirms it" in estimate.flagged["k02"]
 
 
-def test_a_looped_walk_with_more_alike_lags_than_are_checked_is_refused():
+def test_a_looped_walk_with_more_alike_lags_than_are_checked_is_refused(monkeypatch):
     """The skeletons choose only among every lag the motion supports. A walk looped over
     40 s, each camera logged by its own host, correlates alike at more lags than the pair
-    checks: the true lag may be one the skeletons never see, so the pair is refused."""
+    checks (here at most two): the true lag may be one the skeletons never see, so the pair
+    is refused."""
+    monkeypatch.setattr(pair_module, "MAX_CANDIDATES", 2)
     scene = simulate(preset_params("host-clocks", seed=1, duration=40.0, n_cameras=2))
     calibrator = Calibrator(CalibratorParams(reference="k01"))
     with pytest.raises(CalibrationError, match="more lags correlate as well") as refusal:
         calibrator.calibrate(scene.camera_groups, arrival_ns=scene.receive_ns)
     assert "the lag is ambiguous" in str(refusal.value)  # counted as undecidable
+
+
+def test_every_person_counts_in_the_fit_of_a_lag():
+    """One repetition off, the person whose walk repeats with that period fits as well as at
+    the true lag; the other person is a metre off. Each person counts alike, so the true lag
+    wins, though the first person holds most of the frames."""
+    rng = np.random.default_rng(0)
+    walker = {(0, k): 0.10 + 0.01 * rng.random() for k in range(300)}
+    other_at_truth = {(1, k): 0.12 + 0.01 * rng.random() for k in range(100)}
+    other_off = {(1, k): 1.0 + 0.1 * rng.random() for k in range(100)}
+    truth = LagFit(1.0, 0.4, frames={**walker, **other_at_truth})
+    repetition = LagFit(9.3, 0.4, frames={**walker, **other_off})
+    compare_fits([truth, repetition])
+    assert truth.residual_m == pytest.approx(0.5 * (0.105 + 0.125), abs=0.005)
+    assert repetition.residual_m > 4 * truth.residual_m
+    brief = LagFit(17.6, 0.4, frames={(2, k): 0.01 for k in range(10)})  # too few frames
+    compare_fits([brief])
+    assert brief.residual_m == math.inf
+    # near the recording's length the cameras overlap a few seconds: a quarter of the frames,
+    # however well they fit, cannot rival the true lag
+    edge = LagFit(49.0, 0.5, frames={(0, k): 0.05 for k in range(100)})
+    compare_fits([truth, edge])
+    assert edge.residual_m == math.inf
+    assert math.isfinite(truth.residual_m)
+
+
+def test_a_looped_walk_of_two_people_is_timed_by_the_poses():
+    """Two people walk loops of 8.3 s and 10.4 s, each camera logged by its own host: the
+    motion correlates alike at every repetition of the first walk, and the second person's
+    poses single out the true lag on all three pairs, which the loops confirm."""
+    scene = simulate(preset_params("host-clocks", seed=1, duration=60.0))
+    calibrator = Calibrator(CalibratorParams(reference="k01"))
+    estimate = calibrator.calibrate(scene.camera_groups, arrival_ns=scene.receive_ns)
+    decided = [p.quality.get("lag_decided_by") for p in calibrator.result.sync_pairs]
+    assert decided.count("poses") >= 2
+    assert estimate.flagged == {}
+    for accuracy in compare_calibration(estimate, scene.calibration).values():
+        assert accuracy.time_error_ms < 10.0
+        assert accuracy.rotation_error_deg < 2.0
 
 
 @pytest.mark.slow
