@@ -174,14 +174,14 @@ def _check_poses(
     reasons: dict[str, list[str]],
 ) -> None:
     """Each pair's pose against the solved poses, and how well the data pin both down."""
-    for pose in pose_pairs:
-        if not (pose.ok and pose.camera_a in cameras and pose.camera_b in cameras):
-            continue
+    usable = [p for p in pose_pairs if p.ok and p.camera_a in cameras and p.camera_b in cameras]
+    links = Counter(name for p in usable for name in (p.camera_a, p.camera_b))
+    for pose in usable:
         solved = cameras[pose.camera_a].extrinsics.inverse() @ cameras[pose.camera_b].extrinsics
         angle, distance = relative_error(pose.transform, solved)
         _keep_largest(cameras, pose, "loop_rotation_deg", round(angle, 3))
         _keep_largest(cameras, pose, "loop_translation_cm", round(100 * distance, 2))
-        _uncertainty(cameras, pose, tolerances, reasons)
+        _uncertainty(cameras, pose, tolerances, reasons, links)
         if angle > tolerances.rotation_deg or distance > tolerances.translation_m:
             text = (
                 f"the poses miss the {pose.camera_a}-{pose.camera_b} pair's own pose by "
@@ -193,7 +193,7 @@ def _check_poses(
     for name, camera in cameras.items():
         _final_pose_spread(name, camera, tolerances, reasons[name])
         if not reasons[name]:
-            _combined_rotation(name, camera, tolerances, reasons[name])
+            _combined_rotation(name, camera, tolerances, reasons[name], one_pair=links[name] <= 1)
 
 
 def _uncertainty(
@@ -201,8 +201,15 @@ def _uncertainty(
     pose: PairPose,
     tolerances: LoopTolerances,
     reasons: dict[str, list[str]],
+    links: Counter[str],
 ) -> None:
-    """The pair pose's split-half uncertainty on both cameras; a reason when it is too large."""
+    """The pair pose's split-half uncertainty on both cameras; a reason when it is too large.
+
+    The reason goes to a camera whose pose rests on this pair alone (``links``: the pose
+    pairs of each camera). A camera with other pairs has its pose solved on all of them; how
+    well that pose is pinned down is the split halves of the joint solve
+    (:func:`_final_pose_spread`), not of one pair.
+    """
     if "split_half_deg" not in pose.quality:
         return
     angle = 0.5 * pose.quality["split_half_deg"]
@@ -217,7 +224,8 @@ def _uncertainty(
             "the spot)"
         )
         for name in (pose.camera_a, pose.camera_b):
-            reasons[name].append(text)
+            if links[name] == 1:
+                reasons[name].append(text)
 
 
 def _final_pose_spread(
@@ -263,7 +271,12 @@ def _lag_figures(cameras: dict[str, CameraCalibration], pair: PairOffset) -> Non
 
 
 def _combined_rotation(
-    name: str, camera: CameraCalibration, tolerances: LoopTolerances, reasons: list[str]
+    name: str,
+    camera: CameraCalibration,
+    tolerances: LoopTolerances,
+    reasons: list[str],
+    *,
+    one_pair: bool,
 ) -> None:
     """A reason when the rotation checks, each within tolerance, together are not.
 
@@ -271,11 +284,13 @@ def _combined_rotation(
     three separate signs of how far the rotation is pinned down. Each may stay below its
     tolerance while all three are sizeable, as with one person gesturing on the spot before
     two cameras; their root sum of squares is then taken as the rotation's uncertainty and
-    compared with ``rotation_deg``.
+    compared with ``rotation_deg``. The pairs' halves count only for a camera whose pose
+    rests on ``one_pair``: a pose solved on several pairs has its own halves.
     """
+    keys = ("pose_uncertainty_deg", "pose_split_deg", "loop_rotation_deg")
     parts = [
-        max(_number(camera.quality.get(key, 0.0)), 0.0)
-        for key in ("pose_uncertainty_deg", "pose_split_deg", "loop_rotation_deg")
+        max(_number(camera.quality.get(key, 0.0)), 0.0) if one_pair or k else 0.0
+        for k, key in enumerate(keys)
     ]
     combined = float(np.sqrt(np.sum(np.square(parts))))
     camera.quality["pose_combined_deg"] = round(combined, 3)

@@ -193,6 +193,28 @@ def test_a_final_pose_that_moves_between_the_halves_flags_its_camera():
     assert steady.flagged == {}
 
 
+def test_a_loose_pair_flags_only_a_camera_whose_pose_rests_on_it_alone():
+    """A pair whose two halves give poses 3.4 deg and 18.6 cm apart (a noisier SDK) is all
+    the pose of a camera linked by that pair alone; a camera with other pairs is solved on
+    all of them, and its own split halves say how well (here: steady)."""
+    loose = {"split_half_deg": 3.4, "split_half_cm": 18.6}
+    steady = {"split_half_deg": 0.4, "split_half_cm": 3.0}
+    three = Calibration("k01", cameras={"k01": _camera(), "k02": _camera(), "k03": _camera()})
+    three.cameras["k02"].quality["pose_split_deg"] = 1.2  # with the pair's 1.7: 2.1 deg
+    pairs = [
+        PairPose("k01", "k02", "ok", quality=dict(loose)),
+        PairPose("k01", "k03", "ok", quality=dict(steady)),
+        PairPose("k02", "k03", "ok", quality=dict(steady)),
+    ]
+    flag_cameras(three, [], pairs)
+    assert three.flagged == {}
+    assert three.cameras["k02"].quality["pose_uncertainty_deg"] == pytest.approx(1.7)
+    assert three.cameras["k02"].quality["pose_combined_deg"] == pytest.approx(1.2)
+    two = Calibration("k01", cameras={"k01": _camera(), "k02": _camera()})
+    flag_cameras(two, [], [PairPose("k01", "k02", "ok", quality=dict(loose))])
+    assert "the k01-k02 pose is poorly determined" in two.flagged["k02"]
+
+
 def test_rotation_checks_each_within_tolerance_but_not_together_flag_the_camera():
     # one person gesturing before two cameras: every check is below its own tolerance
     doubtful = Calibration("k01", cameras={"k01": _camera(), "k02": _camera()})
