@@ -28,6 +28,7 @@ from hiros_calib.sync.params import (
     MIN_PRIOR_SIGNIFICANCE,
     MIN_REPEATED_PEAK,
     MIN_SHARPNESS,
+    MIN_VOTERS,
     PRIOR_CONTRADICTION,
     SyncParams,
 )
@@ -60,7 +61,8 @@ def estimate_pair_offset(
     work = work if work is not None else TrackWork(params)
     names = {"camera_a": camera_a, "camera_b": camera_b}
     if around is not None:
-        return _estimate(tracks_a, tracks_b, params, _lobe(around), work=work, **names)
+        lobe = _lobe(around)
+        return _estimate(tracks_a, tracks_b, params, lobe, work=work, one_lobe=True, **names)
     anywhere = (-params.max_offset, params.max_offset) if params.max_offset > 0 else None
     free = _estimate(tracks_a, tracks_b, params, anywhere, work=work, **names)
     if prior is None:
@@ -108,11 +110,13 @@ def _estimate(
     camera_b: str,
     work: TrackWork,
     windowed: bool = False,
+    one_lobe: bool = False,
 ) -> PairOffset:
     """The lag within ``search`` (s; None: every lag), with its candidates.
 
     ``windowed``: ``search`` is the arrival-time prior's window, where a body pair's peak is
-    usable on its significance alone (``MIN_PRIOR_SIGNIFICANCE``).
+    usable on its significance alone (``MIN_PRIOR_SIGNIFICANCE``). ``one_lobe``: ``search``
+    is one candidate lag's lobe (:func:`_lobe`).
     """
     sig_a, sig_b = work.signatures(tracks_a), work.signatures(tracks_b)
     refusal = _refuse_unusable(
@@ -141,18 +145,18 @@ def _estimate(
             sharpness=best_any.sharpness,
             pairs_considered=len(candidates),
         )
-    used = _consensus(good)
+    used = _consensus(good, one_lobe=one_lobe)
     lags = _candidate_lags(used, params, search)
     chosen = round(lags[0, 0] / GRID_STEP)
     tolerance = max(1, round(CONSENSUS_TOLERANCE / GRID_STEP))
     if abs(chosen - used[0].lag_index) > tolerance:
         # the prior chose another of the lags the motion supports: redo the consensus there
         near = [c for c in good if abs(c.lag_index - chosen) <= tolerance]
-        used = _consensus(near) if near else []
+        used = _consensus(near, one_lobe=True) if near else []
         if not used:
             pinned = _estimate(
                 tracks_a, tracks_b, params, _lobe(float(lags[0, 0])),
-                camera_a=camera_a, camera_b=camera_b, work=work,
+                camera_a=camera_a, camera_b=camera_b, work=work, one_lobe=True,
             )  # fmt: skip
             pinned.candidates = lags[: max(2, MAX_CANDIDATES)]
             pinned.quality.update(_lag_quality(lags))
@@ -271,15 +275,27 @@ def _lag_quality(lags: np.ndarray) -> dict[str, Any]:
     return quality
 
 
-def _consensus(good: list[Candidate]) -> list[Candidate]:
-    """The body pairs agreeing with the lag the sharpest pairs vote for."""
+def _consensus(good: list[Candidate], *, one_lobe: bool = False) -> list[Candidate]:
+    """The body pairs agreeing with the lag the sharpest pairs vote for.
+
+    The sharpest ``BEST_FRACTION``, and at least ``MIN_VOTERS``, vote; each vote weighs the
+    pair's score times its overlap. The pairs within ``CONSENSUS_TOLERANCE`` of the sharpest
+    voter of the winning lag agree with it. Within ``one_lobe`` of the correlation (the
+    search pinned to one candidate lag), which holds no other repetition of the motion, the
+    sharpest pair alone may decide, as Eichler's 10 % does: a vote there would only move the
+    lag between the pairs' noisy peaks.
+    """
     tolerance = max(1, round(CONSENSUS_TOLERANCE / GRID_STEP))
     ranked = sorted(good, key=lambda c: c.score, reverse=True)
-    voters = ranked[: max(1, math.ceil(BEST_FRACTION * len(ranked)))]
+    fewest = 1 if one_lobe else min(MIN_VOTERS, len(ranked))
+    voters = ranked[: max(fewest, math.ceil(BEST_FRACTION * len(ranked)))]
     lags = np.array([c.lag_index for c in voters])
     weights = np.array([c.score * c.overlap for c in voters])
     support = [(weights * (np.abs(lags - lag) <= tolerance)).sum() for lag in lags]
     winner = int(lags[int(np.argmax(support))])
+    # centred on the sharpest pair of the winning lag's group, so that a vote confirming the
+    # sharpest pair keeps its peak (voters within the tolerance may peak a few steps apart)
+    winner = next(c.lag_index for c in voters if abs(c.lag_index - winner) <= tolerance)
     # one body of camera a pairs with at most one body of camera b at a time: keep the best
     used: list[Candidate] = []
     for candidate in ranked:

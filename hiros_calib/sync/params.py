@@ -26,6 +26,7 @@ __all__ = [
     "MIN_PRIOR_SIGNIFICANCE",
     "MIN_REPEATED_PEAK",
     "MIN_SHARPNESS",
+    "MIN_VOTERS",
     "PRIOR_CONTRADICTION",
     "REFINE_STEP",
     "SyncParams",
@@ -84,6 +85,11 @@ lag is this many times smaller than at every other (see :mod:`~hiros_calib.lags`
 
 BEST_FRACTION: float = 0.1
 """Fraction of the sharpest body pairs that choose the consensus lag (Eichler: 10 %)."""
+
+MIN_VOTERS: int = 3
+"""Fewest body pairs (all, when fewer are clear) that choose the consensus lag: with a
+handful of clear pairs, 10 % is one pair, whose peak may be a repetition of its person's
+motion that the others' peaks contradict."""
 
 CONSENSUS_TOLERANCE: float = 0.05
 """Body pairs whose peak lies within this (s) of the consensus join it."""

@@ -178,3 +178,23 @@ def test_windows_do_not_decide_between_exact_repetitions():
     for other in repetitions[:2]:  # the nearest, sharing enough windows with the true lag
         assert abs(_contest(tracks, pair, [truth, other])) < 4.0
         assert abs(_contest(tracks, pair, [other, truth])) < 4.0
+
+
+def test_one_sharp_body_pair_does_not_outvote_the_others():
+    """A handful of clear body pairs: three agree on the true lag, the sharpest one peaks a
+    repetition of its person's walk away. Three vote, so the lag they agree on wins."""
+    from hiros_calib.sync.correlation import Candidate, Curve
+    from hiros_calib.sync.pair import _consensus
+
+    curve = Curve(0, np.zeros(3), np.ones(3), np.ones(3), np.full(3, 100.0))
+
+    def pair(index: int, lag_index: int, sharpness: float) -> Candidate:
+        return Candidate(index, index, curve, lag_index, 0.4, sharpness, 0.5, 40.0)
+
+    repetition = pair(0, 1676, 18.0)
+    agreeing = [pair(1, 16, 15.0), pair(2, 17, 14.0), pair(3, 16, 12.0)]
+    others = [pair(4 + k, -1641 - 500 * k, 11.0 - k) for k in range(5)]
+    used = _consensus([repetition, *agreeing, *others])
+    assert sorted(c.index_a for c in used) == [1, 2, 3]
+    # within one candidate lag's lobe no repetition competes: the sharpest pair decides
+    assert [c.index_a for c in _consensus([repetition, *agreeing], one_lobe=True)] == [0]
