@@ -21,13 +21,15 @@ from __future__ import annotations
 from collections import Counter
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, TypeVar
 
 import numpy as np
 
 from hiros_calib.extrinsics import PairPose, relative_error
 from hiros_calib.sync import PairOffset
 from hiros_core.calibration import Calibration, CameraCalibration
+
+_Pair = TypeVar("_Pair", PairOffset, PairPose)
 
 __all__ = ["LoopTolerances", "arrival_offsets_from_delays", "flag_cameras"]
 
@@ -145,8 +147,7 @@ def _check_unconfirmed_choices(
     people at the wrong repetition as the other camera does at the true one). A second pair,
     closing a loop, confirms the choice; a camera linked by that one pair alone is doubtful.
     """
-    usable = [p for p in sync_pairs if p.ok and p.camera_a in cameras and p.camera_b in cameras]
-    links = Counter(name for p in usable for name in (p.camera_a, p.camera_b))
+    usable, links = _usable_links(sync_pairs, cameras)
     for pair in usable:
         if not _chosen_by_skeletons(pair):
             continue
@@ -159,6 +160,14 @@ def _check_unconfirmed_choices(
         for name in (pair.camera_a, pair.camera_b):
             if links[name] == 1:
                 reasons[name].append(text)
+
+
+def _usable_links(
+    pairs: Sequence[_Pair], cameras: dict[str, CameraCalibration]
+) -> tuple[list[_Pair], Counter[str]]:
+    """The pairs that hold (``ok``, both cameras calibrated) and how many link each camera."""
+    usable = [p for p in pairs if p.ok and p.camera_a in cameras and p.camera_b in cameras]
+    return usable, Counter(name for p in usable for name in (p.camera_a, p.camera_b))
 
 
 def _chosen_by_skeletons(pair: PairOffset) -> bool:
@@ -174,8 +183,7 @@ def _check_poses(
     reasons: dict[str, list[str]],
 ) -> None:
     """Each pair's pose against the solved poses, and how well the data pin both down."""
-    usable = [p for p in pose_pairs if p.ok and p.camera_a in cameras and p.camera_b in cameras]
-    links = Counter(name for p in usable for name in (p.camera_a, p.camera_b))
+    usable, links = _usable_links(pose_pairs, cameras)
     for pose in usable:
         solved = cameras[pose.camera_a].extrinsics.inverse() @ cameras[pose.camera_b].extrinsics
         angle, distance = relative_error(pose.transform, solved)
@@ -287,11 +295,12 @@ def _combined_rotation(
     compared with ``rotation_deg``. The pairs' halves count only for a camera whose pose
     rests on ``one_pair``: a pose solved on several pairs has its own halves.
     """
-    keys = ("pose_uncertainty_deg", "pose_split_deg", "loop_rotation_deg")
     parts = [
-        max(_number(camera.quality.get(key, 0.0)), 0.0) if one_pair or k else 0.0
-        for k, key in enumerate(keys)
+        max(_number(camera.quality.get(key, 0.0)), 0.0)
+        for key in ("pose_uncertainty_deg", "pose_split_deg", "loop_rotation_deg")
     ]
+    if not one_pair:
+        parts[0] = 0.0
     combined = float(np.sqrt(np.sum(np.square(parts))))
     camera.quality["pose_combined_deg"] = round(combined, 3)
     if combined > tolerances.rotation_deg:
