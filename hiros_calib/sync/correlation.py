@@ -124,27 +124,30 @@ class Candidate:
 
 
 def _peak(
-    curve: Curve, params: SyncParams, search: tuple[float, float] | None
+    curve: Curve,
+    params: SyncParams,
+    search: tuple[float, float] | None,
+    context: tuple[float, float] | None = None,
 ) -> tuple[int, float, float, float, float] | None:
     """(lag index, peak, sharpness, ambiguity, overlap s) of a curve, None when nothing valid.
 
     The peak is the lag of greatest significance, Fisher's z of the correlation times the
     square root of the overlap: a high correlation over a few seconds of overlap at the edge
     of the lag range is more often chance than one slightly lower over the whole recording.
+    Its sharpness is measured against the curve within ``context`` (s; default ``search``).
     """
     step = GRID_STEP
     r = curve.correlation()
     lags = (curve.first + np.arange(len(r))) * step
     overlap = curve.count * step
-    valid = (overlap >= MIN_OVERLAP) & np.isfinite(r)
-    if search is not None:
-        valid &= (lags >= search[0]) & (lags <= search[1])
+    usable = (overlap >= MIN_OVERLAP) & np.isfinite(r)
+    valid = usable & _within(lags, search)
     if valid.sum() < 5:
         return None
     significance = np.where(valid, fisher_significance(r, overlap), -np.inf)
     best = int(np.argmax(significance))
     peak = float(r[best])
-    spread = r[valid]
+    spread = r[usable & _within(lags, context)] if context is not None else r[valid]
     median = float(np.median(spread))
     mad = 1.4826 * float(np.median(np.abs(spread - median)))
     sharpness = (peak - median) / max(mad, 1e-6)
@@ -157,14 +160,24 @@ def _peak(
     return curve.first + best, peak, sharpness, max(ambiguity, 0.0), float(overlap[best])
 
 
+def _within(lags: np.ndarray, span: tuple[float, float] | None) -> np.ndarray | bool:
+    """Which ``lags`` (s) lie in ``span`` (all when None)."""
+    return True if span is None else (lags >= span[0]) & (lags <= span[1])
+
+
 def body_pair_candidates(
     sig_a: list[PoseSignature],
     sig_b: list[PoseSignature],
     params: SyncParams,
     search: tuple[float, float] | None,
     work: TrackWork,
+    *,
+    context: tuple[float, float] | None = None,
 ) -> list[Candidate]:
-    """Every moving body pair's correlation curve and peak within ``search``."""
+    """Every moving body pair's correlation curve and peak within ``search``.
+
+    Each peak's sharpness is measured within ``context`` (s; default ``search``).
+    """
     grid_a = {i: work.grid(s) for i, s in enumerate(sig_a) if work.motion(s) >= MIN_MOTION}
     grid_b = {j: work.grid(s) for j, s in enumerate(sig_b) if work.motion(s) >= MIN_MOTION}
     grid_a = {i: g for i, g in grid_a.items() if g is not None}
@@ -179,7 +192,7 @@ def body_pair_candidates(
     for i, ga in grid_a.items():
         for j, gb in grid_b.items():
             curve = _correlate(ga, gb, nfft, work)
-            found = _peak(curve, params, search)
+            found = _peak(curve, params, search, context)
             if found is not None:
                 candidates.append(Candidate(i, j, curve, *found))
     return candidates

@@ -22,6 +22,7 @@ from hiros_calib.sync.params import (
     CANDIDATE_RATIO,
     CONSENSUS_TOLERANCE,
     GRID_STEP,
+    LOBE_CONTEXT,
     MAX_CANDIDATES,
     MIN_MOTION,
     MIN_OVERLAP,
@@ -89,6 +90,16 @@ def _lobe(lag: float) -> tuple[float, float]:
     return lag - reach, lag + reach
 
 
+def _lobe_context(lobe: tuple[float, float]) -> tuple[float, float]:
+    """The lags (s) a peak within one ``lobe`` is judged against: ``LOBE_CONTEXT`` around it.
+
+    The lobe alone is a few tenths of a second of the curve, whose robust z-score says
+    nothing (its median is the peak's own shoulder); the arrival prior's window is as wide.
+    """
+    centre = 0.5 * (lobe[0] + lobe[1])
+    return centre - LOBE_CONTEXT, centre + LOBE_CONTEXT
+
+
 def _contradicts(free: PairOffset, near: PairOffset, params: SyncParams) -> bool:
     """Whether the best lag anywhere is far from, and far more significant than, the prior's."""
     if not free.ok or abs(free.offset - near.offset) <= params.prior_window:
@@ -124,7 +135,8 @@ def _estimate(
     )
     if refusal is not None:
         return refusal
-    candidates = body_pair_candidates(sig_a, sig_b, params, search, work)
+    context = _lobe_context(search) if one_lobe and search is not None else None
+    candidates = body_pair_candidates(sig_a, sig_b, params, search, work, context=context)
     if not candidates:
         return refused_pair(
             camera_a,

@@ -16,6 +16,7 @@ __all__ = [
     "CANDIDATE_RATIO",
     "CONSENSUS_TOLERANCE",
     "GRID_STEP",
+    "LOBE_CONTEXT",
     "LOOP_OVERRULE_STRENGTH",
     "MAX_CANDIDATES",
     "MAX_DRIFT",
@@ -44,6 +45,11 @@ MIN_DRIFT_SPAN: float = 30.0
 
 MAX_DRIFT: float = 1e-3
 """Largest drift (s/s) the window search allows for (real clocks drift within 1e-4)."""
+
+LOBE_CONTEXT: float = 1.0
+"""Half-width (s) of the correlation curve against which a body pair's peak is judged (its
+sharpness) when the search is pinned to one lobe, around a lag the poses or a loop chose;
+the arrival-time prior's window (``prior_window``) is as wide by default."""
 
 MIN_PRIOR_SIGNIFICANCE: float = 0.8
 """Within the arrival-time prior's window, a body pair whose peak's significance (Fisher

@@ -198,3 +198,29 @@ def test_one_sharp_body_pair_does_not_outvote_the_others():
     assert sorted(c.index_a for c in used) == [1, 2, 3]
     # within one candidate lag's lobe no repetition competes: the sharpest pair decides
     assert [c.index_a for c in _consensus([repetition, *agreeing], one_lobe=True)] == [0]
+
+
+def test_a_peak_pinned_to_its_lobe_is_judged_against_the_curve_around_it():
+    """Re-estimated in the lobe of a lag the poses chose (noisy-sdk seed 5's k01-k02, whose
+    peak is 0.1 over 20 s), a body pair's peak used to be judged against the lobe alone: its
+    own shoulders, a sharpness of about 2, so the pair was refused and the camera timed
+    through a third one, 8 ms worse. Judged against a second each side, it is clear."""
+    from hiros_calib.sync.correlation import Curve, _peak
+    from hiros_calib.sync.pair import _lobe, _lobe_context
+    from hiros_calib.sync.params import GRID_STEP, MIN_SHARPNESS
+
+    rng = np.random.default_rng(2)
+    lags = np.arange(-300, 301)  # +-3 s around the true lag, index 0
+    correlation = 0.1 * np.clip(1.0 - np.abs(lags) / 12.0, 0.0, None)
+    correlation += rng.normal(0.0, 0.01, len(lags))
+    ones = np.ones(len(lags))
+    curve = Curve(int(lags[0]), correlation, ones, ones, np.full(len(lags), 2000.0))
+    lobe = _lobe(0.0)
+    alone = _peak(curve, SyncParams(), lobe)
+    around = _peak(curve, SyncParams(), lobe, _lobe_context(lobe))
+    assert alone is not None
+    assert around is not None
+    assert alone[0] == around[0] == pytest.approx(0, abs=2)
+    assert alone[2] < MIN_SHARPNESS < around[2]
+    assert _lobe_context(lobe) == pytest.approx((-1.0, 1.0))
+    assert lobe[1] - lobe[0] < 50 * GRID_STEP
