@@ -20,6 +20,7 @@ from hiros_calib.extrinsics import (
     PairPose,
     associate,
     estimate_pair_pose,
+    motion_lever,
     pair_correspondences,
     solve_poses,
 )
@@ -259,6 +260,9 @@ class Calibrator:
                 pose.quality["bodies_associated"] = len(matches)
                 pose.body_pairs = [(i, j) for i, j, _ in matches]
                 pose.reported = joined
+                lever = motion_lever(pose.correspondences) if pose.ok else None
+                if lever is not None:
+                    pose.quality["motion_lever_m"] = round(lever, 3)
                 spread = split_half_spread(joined) if pose.ok else None
                 if spread is not None:
                     pose.quality["split_half_deg"] = round(spread[0], 3)

@@ -55,6 +55,11 @@ class LoopTolerances:
     halves share, about twice their half spread on the simulator's noisier SDK)."""
     uncertainty_m: float = 0.075
     """Largest pose uncertainty in translation, metres (same two figures)."""
+    min_motion_lever_m: float = 0.22
+    """Least lever (m) the joints' motion about their own means must give a camera's
+    rotation on at least one of its pairs (:func:`~hiros_calib.extrinsics.motion_lever`):
+    people exercising or gesturing on one spot give less, people walking about more
+    (docs/calibration-robustness.md, session 20)."""
 
 
 def arrival_offsets_from_delays(
@@ -198,10 +203,42 @@ def _check_poses(
             )
             for name in (pose.camera_a, pose.camera_b):
                 reasons[name].append(text)
+    _check_levers(cameras, usable, tolerances, reasons)
     for name, camera in cameras.items():
         _final_pose_spread(name, camera, tolerances, reasons[name])
         if not reasons[name]:
             _combined_rotation(name, camera, tolerances, reasons[name], one_pair=links[name] <= 1)
+
+
+def _check_levers(
+    cameras: dict[str, CameraCalibration],
+    usable: Sequence[PairPose],
+    tolerances: LoopTolerances,
+    reasons: dict[str, list[str]],
+) -> None:
+    """A reason for a camera whose every pose pair rests on people who stayed on one spot.
+
+    The joint offsets the solve learns leave the joints' motion about where they stood to fix
+    the rotation; over a short lever the body tracker's pose-dependent errors turn it by
+    degrees, alike in every span of time, so the split halves cannot show it.
+    """
+    levers: dict[str, list[float]] = {}
+    for pose in usable:
+        lever = pose.quality.get("motion_lever_m")
+        if lever is None:
+            continue
+        for name in (pose.camera_a, pose.camera_b):
+            levers.setdefault(name, []).append(float(lever))
+    for name, values in levers.items():
+        best = max(values)
+        cameras[name].quality["motion_lever_m"] = best
+        if best < tolerances.min_motion_lever_m:
+            reasons[name].append(
+                f"the pose of {name} rests on people who stayed on one spot: their joints' "
+                f"motion about where they stood gives its rotation a lever of {100 * best:.0f} "
+                f"cm (at least {100 * tolerances.min_motion_lever_m:.0f} cm pin it down against "
+                "the body tracker's own errors; record people walking across the area)"
+            )
 
 
 def _uncertainty(

@@ -32,13 +32,15 @@ without gain, are in ``docs/pose-accuracy.md``.
 The modules: :mod:`.params` (``ExtrinsicsParams``, the method's constants and ``Sampling``),
 :mod:`.correspondences` (steps 1-2), :mod:`.pair_pose` (3-5 for one camera pair),
 :mod:`.robust` (the robust solve every refinement runs), :mod:`.joint` (all cameras at
-once) and :mod:`.halves` (the two halves of time a pose's check solves on, and the distance
-between two poses).
+once), :mod:`.halves` (the two halves of time a pose's check solves on, and the distance
+between two poses) and :mod:`.lever` (how far the joints moved about where they stood, which
+the rotation rests on).
 """
 
 from hiros_calib.extrinsics.correspondences import Correspondences, associate, pair_correspondences
 from hiros_calib.extrinsics.halves import SPLIT_BLOCK, relative_error, second_half
 from hiros_calib.extrinsics.joint import CameraPose, solve_poses
+from hiros_calib.extrinsics.lever import motion_lever
 from hiros_calib.extrinsics.pair_pose import PairPose, baseline_pair_pose, estimate_pair_pose
 from hiros_calib.extrinsics.params import FULL_SAMPLING, QUICK_SAMPLING, ExtrinsicsParams, Sampling
 from hiros_core.geometry import kabsch
@@ -56,6 +58,7 @@ __all__ = [
     "baseline_pair_pose",
     "estimate_pair_pose",
     "kabsch",
+    "motion_lever",
     "pair_correspondences",
     "relative_error",
     "second_half",

@@ -127,3 +127,44 @@ def test_frames_kept_grow_with_the_recording():
     assert _frame_budget(pairs(30.0), sampling) == 1000  # short: no fewer than a minute's worth
     assert _frame_budget(pairs(180.0), sampling) == pytest.approx(3000, abs=1)
     assert _frame_budget(pairs(600.0), sampling) == 5000
+
+
+def _moving_joints(excursion: np.ndarray, bodies: np.ndarray | None = None):
+    """Correspondences of two joints far apart, each moved by ``excursion`` (F, 3) per frame."""
+    from hiros_calib.extrinsics import Correspondences
+
+    frames = len(excursion)
+    stand = np.array([[0.0, 0.0, 3.0], [0.0, -1.5, 3.5]])  # where each joint stands (m)
+    points = stand[None] + excursion[:, None]
+    bodies = bodies if bodies is not None else np.zeros(frames, dtype=np.int64)
+    return Correspondences(
+        points,
+        points,
+        np.ones((frames, 2)),
+        np.array([1, 0]),
+        ("a", "b"),
+        np.zeros(2, dtype=np.int64),
+        np.arange(frames) / 30.0,
+        bodies,
+    )
+
+
+def test_the_motion_lever_is_the_joints_motion_about_their_own_means():
+    """Where each joint stands is the SDK's offset to the solve, not a lever: only the
+    motion counts, and motion along one line fixes no rotation about that line."""
+    from hiros_calib.extrinsics import motion_lever
+
+    angle = np.linspace(0.0, 2.0 * np.pi, 600, endpoint=False)
+    circle = 0.3 * np.stack([np.cos(angle), np.sin(angle), np.zeros_like(angle)], axis=1)
+    assert motion_lever(_moving_joints(circle)) == pytest.approx(0.3 / np.sqrt(2.0), rel=1e-6)
+    line = np.stack([0.4 * np.sin(angle), np.zeros_like(angle), np.zeros_like(angle)], axis=1)
+    assert motion_lever(_moving_joints(line)) == pytest.approx(0.0, abs=1e-9)
+    # two body pairs standing 2 m apart, each on the spot: no lever from where they stood
+    small = 0.01 / 0.3 * np.concatenate([circle[::2], circle[::2]])  # two 1 cm circles
+    apart = np.where((np.arange(600) < 300)[:, None], 0.0, [2.0, 0.0, 0.0]) + small
+    bodies = (np.arange(600) >= 300).astype(np.int64)
+    assert motion_lever(_moving_joints(apart, bodies)) == pytest.approx(0.01 / np.sqrt(2.0))
+    assert motion_lever(_moving_joints(apart)) < 0.01  # as one body: a walk along a line
+    corners = np.repeat([[0.0, 0.0, 0.0], [2.0, 0.0, 0.0], [0.0, 0.0, 2.0]], 200, axis=0)
+    assert motion_lever(_moving_joints(corners)) > 0.5  # a walk over the floor
+    assert motion_lever(None) is None

@@ -351,3 +351,41 @@ def _repeated_waving(duration: float):
     (pair,) = calibrator.result.sync_pairs
     (accuracy,) = compare_calibration(estimate, scene.calibration).values()
     return pair, accuracy, estimate
+
+
+def test_a_pose_resting_on_people_on_one_spot_flags_its_camera():
+    """A camera whose every pose pair rests on joints that barely moved about where they
+    stood is flagged; one good pair, walking people, is enough."""
+    on_the_spot = {"motion_lever_m": 0.17}
+    walking = {"motion_lever_m": 0.45}
+    two = Calibration("k01", cameras={"k01": _camera(), "k02": _camera()})
+    flag_cameras(two, [], [PairPose("k01", "k02", "ok", quality=dict(on_the_spot))])
+    assert "k02 rests on people who stayed on one spot" in two.flagged["k02"]
+    assert "a lever of 17 cm" in two.flagged["k02"]
+    three = Calibration("k01", cameras={"k01": _camera(), "k02": _camera(), "k03": _camera()})
+    pairs = [
+        PairPose("k01", "k02", "ok", quality=dict(on_the_spot)),
+        PairPose("k01", "k03", "ok", quality=dict(on_the_spot)),
+        PairPose("k02", "k03", "ok", quality=dict(walking)),
+    ]
+    flag_cameras(three, [], pairs)
+    assert three.flagged == {}
+    assert three.cameras["k02"].quality["motion_lever_m"] == pytest.approx(0.45)
+
+
+@pytest.mark.slow
+def test_a_person_exercising_on_one_spot_before_two_cameras_is_flagged():
+    """One person bending over and over (the bundled inertial-mocap clip, looped) before two
+    cameras 45 deg apart, each on its own host: the rotation rests on the bending alone."""
+    from hiros_sim.params import default_bvh_files
+
+    bend = next(path for path in default_bvh_files() if "bend" in path)
+    params = preset_params("two-cameras-45", seed=2, duration=40.0, n_people=1,
+                           log_clock="camera", bvh_files=(bend,), loop_variation=0.1,
+                           max_time_offset=1.5)  # fmt: skip
+    scene = simulate(params)
+    calibration = Calibrator(CalibratorParams(reference="k01")).calibrate(
+        scene.camera_groups, arrival_ns=scene.receive_ns
+    )
+    assert "stayed on one spot" in calibration.flagged["k02"]
+    assert calibration.cameras["k02"].quality["motion_lever_m"] < 0.22
