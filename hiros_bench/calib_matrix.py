@@ -1,9 +1,10 @@
 """The calibration's robustness matrix: one row per simulator condition, default settings.
 
 Each row is a ``hiros_sim`` preset (log times in each camera's host clock, repeated
-Bandai-Namco motion, one person, two cameras 45° apart, a noisier SDK, 15 Hz, 5 % drops, then
-all of them together) simulated over several seeds and calibrated by ``Calibrator`` with its
-default parameters and the recording's own log times, as ``hiros calibrate`` would.
+Bandai-Namco motion, one person, two cameras 45° apart, a noisier SDK, 15 Hz, 5 % drops, one
+person exercising on one spot before the pair, then all of them together) simulated over
+several seeds and calibrated by ``Calibrator`` with its default parameters and the
+recording's own log times, as ``hiros calibrate`` would.
 
 Every run ends one of three ways: **calibrated** (no camera flagged), **flagged** (written,
 but some camera marked doubtful), or **refused** (an error saying why). A camera whose result
@@ -46,6 +47,7 @@ MATRIX_ROWS = (
     "noisy-sdk",
     "15hz",
     "drops-5",
+    "exercise-on-spot",
     "all",
 )
 """The simulator presets of the matrix, in order (``hiros_sim.presets``)."""

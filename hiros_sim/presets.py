@@ -51,6 +51,14 @@ _NOISY = {
     "bias_drift_time": 3.0,
     "noise_residual": 0.008,
 }
+_EXERCISE = {
+    **_HOST_CLOCKS,
+    **_ONE_PERSON,
+    **_PAIR,
+    "bvh_files": tuple(path for path in default_bvh_files() if "bend" in path),
+    "loop_variation": 0.1,
+    "max_time_offset": 1.5,
+}
 _RATE_15 = {"rate": 15.0}
 _DROPS_5 = {"drop_rate": 0.05}
 _CROSSING = {
@@ -86,6 +94,12 @@ PRESETS: Mapping[str, Preset] = MappingProxyType(
         "crossing-4": Preset(
             "four people walking to and fro in lanes 0.45 m apart, passing each other closely",
             _CROSSING,
+        ),
+        "exercise-on-spot": Preset(
+            "one person bending over and over on one spot (the bundled inertial-mocap bend, "
+            "looped +-10 %) before the 45-deg pair, each camera on its own host, clocks within "
+            "1.5 s: two Azure Kinects watching a strength exercise",
+            _EXERCISE,
         ),
         "all": Preset(
             "one person repeating Bandai-Namco motion before the 45-deg pair, host clocks, "
