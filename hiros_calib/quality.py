@@ -234,10 +234,11 @@ def _check_levers(
         cameras[name].quality["motion_lever_m"] = best
         if best < tolerances.min_motion_lever_m:
             reasons[name].append(
-                f"the pose of {name} rests on people who stayed on one spot: their joints' "
-                f"motion about where they stood gives its rotation a lever of {100 * best:.0f} "
-                f"cm (at least {100 * tolerances.min_motion_lever_m:.0f} cm pin it down against "
-                "the body tracker's own errors; record people walking across the area)"
+                f"the pose of {name} rests on joints that barely moved: the people stayed on "
+                f"one spot, and their joints' motion about where they stood gives its rotation "
+                f"a lever of {100 * best:.0f} cm (at least "
+                f"{100 * tolerances.min_motion_lever_m:.0f} cm pin it down against the body "
+                "tracker's own errors; record people walking across the area)"
             )
 
 
