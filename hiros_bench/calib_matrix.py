@@ -55,6 +55,10 @@ MATRIX_ROWS = (
 UNDECIDABLE = "the lag is ambiguous"
 """How a refusal begins when neither the motion nor the skeletons single out one lag."""
 
+ON_ONE_SPOT = "the people stayed on one spot"
+"""Part of a flag's reason when the people's joints barely moved about where they stood, so
+that nothing in the recording pins the rotation down against the body tracker's own errors."""
+
 WRONG = (50.0, 2.0, 10.0)
 """A camera off by more than this time (ms), rotation (deg) or translation (cm) is wrong."""
 
@@ -131,6 +135,7 @@ def one_run(preset: str, seed: int, duration: float, row: _Row) -> None:
     row.wrong_flagged += sum(w and camera in flagged for camera, w in wrong.items())
     if flagged:
         row.flagged += 1
+        row.undecidable += any(ON_ONE_SPOT in why for why in flagged.values())
         return
     if any(wrong.values()):
         return
@@ -224,8 +229,9 @@ def run(
         notes.extend(f"  {name}: {count}x {reason}" for reason, count in row.reasons.most_common(3))
     lines.append(
         "undec. = refused because neither the motion nor the skeletons single out one lag "
-        "(motion repeated over the whole recording, no usable log times): the data cannot "
-        "decide; of dec. = success among the other runs"
+        "(motion repeated over the whole recording, no usable log times), or flagged because "
+        "the people stayed on one spot (nothing pins the rotation down against the body "
+        "tracker's own errors): the data cannot decide; of dec. = success among the other runs"
     )
     lines.append("refusals and flags (most common per row):")
     lines.extend(notes or ["  none"])
