@@ -18,8 +18,11 @@ where a third camera closes a loop through it: with two cameras the camera is fl
 
 Every camera's quality figures expose a wrong result: the rigid-fit residual at the chosen lag
 against the best other lag, and with three or more cameras how far the solved clocks and poses
-miss each pair's own measurement (loops that do not close), and how far apart two halves of
-the recording put each pose. A camera that fails them is flagged: the file is written with
+miss each pair's own measurement (loops that do not close), how far apart two halves of
+the recording put each pose, and how far the people's joints moved about where they stood
+(lever cm: people who stayed on one spot, exercising or gesturing, leave the rotation to the
+body tracker's own errors; under 22 cm on every pair of a camera flags it). A camera that
+fails them is flagged: the file is written with
 the reason, the exit status is 3, and `hiros run` refuses the file unless given
 --accept-flagged.
 
@@ -174,8 +177,13 @@ def print_summary(console: Console, result: CalibrationResult) -> None:
             f"{100 * q['residual_m']:.1f}" if "residual_m" in q else "-",
         )
     console.print(table)
-    pairs = Table(title="camera pairs", box=box.SIMPLE, pad_edge=False, collapse_padding=True)
-    columns = ("pair", "lag s", "peak", "bodies", "fit cm", "next lag", "inliers", "L/R swap")
+    pairs = Table(
+        title="camera pairs (fit, lever: cm; L/R: frames read swapped)",
+        box=box.SIMPLE,
+        pad_edge=False,
+        collapse_padding=True,
+    )
+    columns = ("pair", "lag s", "peak", "bodies", "fit", "next lag", "inl", "L/R", "lever")
     for column in columns:
         pairs.add_column(column, justify="right", no_wrap=True)
     poses = {(p.camera_a, p.camera_b): p for p in result.pose_pairs}
@@ -191,6 +199,7 @@ def print_summary(console: Console, result: CalibrationResult) -> None:
             _runner_up(sync.quality),
             f"{100 * pq['inlier_ratio']:.0f}%" if "inlier_ratio" in pq else "-",
             f"{100 * pq['mirrored_fraction']:.0f}%" if "mirrored_fraction" in pq else "-",
+            f"{100 * pq['motion_lever_m']:.0f}" if "motion_lever_m" in pq else "-",
         )
     console.print(pairs)
     for camera, reason in result.refused.items():
