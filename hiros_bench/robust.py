@@ -1,7 +1,8 @@
 """The stages under the simulator's conditions: accuracy, identities, limb lengths, speed.
 
 One row per condition (``hiros_sim.PRESETS``: default, noisier SDK, one person, two cameras
-45° apart, 15 Hz, 5 % drops, repeated Bandai-Namco motion, four people crossing), each a
+45° apart, 15 Hz, 5 % drops, repeated Bandai-Namco motion, four people crossing, one person
+exercising and turning on one spot before two cameras), each a
 simulated recording run through tracker -> merger -> optimizer -> filter with default settings,
 first with the *true* calibration, so that only the stages are judged, then with the one
 ``hiros calibrate`` finds in the recording (``--calibration auto``; the output is moved into
@@ -43,7 +44,7 @@ __all__ = ["CONDITIONS", "Row", "measure", "run"]
 
 CONDITIONS = (
     "default", "noisy-sdk", "one-person", "two-cameras-45", "15hz", "drops-5", "repeated-motion",
-    "crossing-4",
+    "crossing-4", "exercise-on-spot",
 )  # fmt: skip
 """The rows, by ``hiros_sim.PRESETS`` name."""
 MERGE_RATE = 30.0
@@ -65,6 +66,9 @@ class Row:
     angle_change: float
     mirrored: float
     fps: float
+    flagged: tuple[str, ...] = ()
+    """Cameras the calibration flagged (``auto`` only): ``hiros run --calibration auto`` stops
+    there; the figures are what ``--accept-flagged`` runs on."""
 
     @property
     def ratio(self) -> float:
@@ -79,6 +83,11 @@ class Row:
             f"{self.switches:3d} {self.limb_cv * 100:6.2f} {self.accepted:2d}/{self.people:<2d} "
             f"{self.acceptance:6.1f} {self.angle_change * 100:+6.1f} {self.mirrored * 100:6.2f} "
             f"{self.fps:6.0f}"
+            + (
+                f"  calibration flagged ({', '.join(self.flagged)}): run stops"
+                if self.flagged
+                else ""
+            )
         )
 
 
@@ -91,7 +100,9 @@ UNITS = (
     "(MPJPE mm per stage and of the best single camera with oracle left/right labels; ratio = "
     "filter / that camera; sw: identity switches; limb CV % after acceptance; acc: people "
     "accepted / tracks; accept: longest acceptance time, s; angle: joint-angle RMSE change "
-    "tracker -> filter, %; mirror: mirrored filter skeletons, %; fps: camera frames per second)"
+    "tracker -> filter, %; mirror: mirrored filter skeletons, %; fps: camera frames per second; "
+    "calibration flagged: hiros run --calibration auto stops there, the figures are what "
+    "--accept-flagged runs on)"
 )
 
 
@@ -143,6 +154,7 @@ def measure(condition: str, seed: int = 0, duration: float = 60.0, *, auto: bool
             align_to_truth(outputs["filter"], calibration, true_calibration), truth
         ),
         fps=len(frames) / seconds,
+        flagged=tuple(sorted(calibration.flagged)),
     )
 
 

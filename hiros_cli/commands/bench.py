@@ -16,7 +16,8 @@ Suites:
   body       optimizer and filter time per frame vs Hi-ROS, filter lag/jitter vs One-Euro
   pipeline   offline throughput and end-to-end DDS latency (separate nodes and composed)
   robust     the stages under the simulator's conditions (noisy SDK, one person, 45 deg pair,
-             15 Hz, drops, repeated motion, four crossing), with the true calibration and with
+             15 Hz, drops, repeated motion, four crossing, exercise on one spot), with the true
+             calibration and with
              --calibration auto: MPJPE per stage, ratio to the best oracle-labelled camera,
              switches, limb CV, acceptance, mirrored share
   soak       the live pipeline and calib nodes fed a looping recording for --minutes (30):
