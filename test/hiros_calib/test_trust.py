@@ -193,19 +193,25 @@ def test_a_final_pose_that_moves_between_the_halves_flags_its_camera():
     assert steady.flagged == {}
 
 
+def _three_cameras(*qualities: dict) -> tuple[Calibration, list[PairPose]]:
+    """Cameras k01-k03 and their three pose pairs (k01-k02, k01-k03, k02-k03) with these
+    qualities."""
+    calibration = Calibration("k01", cameras={name: _camera() for name in ("k01", "k02", "k03")})
+    names = (("k01", "k02"), ("k01", "k03"), ("k02", "k03"))
+    pairs = [
+        PairPose(a, b, "ok", quality=dict(q)) for (a, b), q in zip(names, qualities, strict=True)
+    ]
+    return calibration, pairs
+
+
 def test_a_loose_pair_flags_only_a_camera_whose_pose_rests_on_it_alone():
     """A pair whose two halves give poses 3.4 deg and 18.6 cm apart (a noisier SDK) is all
     the pose of a camera linked by that pair alone; a camera with other pairs is solved on
     all of them, and its own split halves say how well (here: steady)."""
     loose = {"split_half_deg": 3.4, "split_half_cm": 18.6}
     steady = {"split_half_deg": 0.4, "split_half_cm": 3.0}
-    three = Calibration("k01", cameras={"k01": _camera(), "k02": _camera(), "k03": _camera()})
+    three, pairs = _three_cameras(loose, steady, steady)
     three.cameras["k02"].quality["pose_split_deg"] = 1.2  # with the pair's 1.7: 2.1 deg
-    pairs = [
-        PairPose("k01", "k02", "ok", quality=dict(loose)),
-        PairPose("k01", "k03", "ok", quality=dict(steady)),
-        PairPose("k02", "k03", "ok", quality=dict(steady)),
-    ]
     flag_cameras(three, [], pairs)
     assert three.flagged == {}
     assert three.cameras["k02"].quality["pose_uncertainty_deg"] == pytest.approx(1.7)
@@ -362,12 +368,7 @@ def test_a_pose_resting_on_people_on_one_spot_flags_its_camera():
     flag_cameras(two, [], [PairPose("k01", "k02", "ok", quality=dict(on_the_spot))])
     assert "the people stayed on one spot" in two.flagged["k02"]
     assert "a lever of 17 cm" in two.flagged["k02"]
-    three = Calibration("k01", cameras={"k01": _camera(), "k02": _camera(), "k03": _camera()})
-    pairs = [
-        PairPose("k01", "k02", "ok", quality=dict(on_the_spot)),
-        PairPose("k01", "k03", "ok", quality=dict(on_the_spot)),
-        PairPose("k02", "k03", "ok", quality=dict(walking)),
-    ]
+    three, pairs = _three_cameras(on_the_spot, on_the_spot, walking)
     flag_cameras(three, [], pairs)
     assert three.flagged == {}
     assert three.cameras["k02"].quality["motion_lever_m"] == pytest.approx(0.45)
