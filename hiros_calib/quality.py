@@ -55,10 +55,10 @@ class LoopTolerances:
     halves share, about twice their half spread on the simulator's noisier SDK)."""
     uncertainty_m: float = 0.075
     """Largest pose uncertainty in translation, metres (same two figures)."""
-    min_motion_lever_m: float = 0.22
-    """Least lever (m) the joints' motion about their own means must give a camera's
-    rotation on at least one of its pairs (:func:`~hiros_calib.extrinsics.motion_lever`):
-    people exercising or gesturing on one spot give less, people walking about more
+    min_motion_lever_m: float = 0.38
+    """Least RMS distance (m) the joints must move about their own means on at least one of
+    a camera's pairs (:func:`~hiros_calib.extrinsics.motion_lever`): people exercising or
+    gesturing on one spot move less, people walking, even to and fro along one line, more
     (docs/calibration-robustness.md, session 20)."""
 
 
@@ -235,10 +235,10 @@ def _check_levers(
         if best < tolerances.min_motion_lever_m:
             reasons[name].append(
                 f"the pose of {name} rests on joints that barely moved: the people stayed on "
-                f"one spot, and their joints' motion about where they stood gives its rotation "
-                f"a lever of {100 * best:.0f} cm (at least "
-                f"{100 * tolerances.min_motion_lever_m:.0f} cm pin it down against the body "
-                "tracker's own errors; record people walking across the area)"
+                f"one spot, and their joints moved {100 * best:.0f} cm RMS about where they "
+                f"stood (at least {100 * tolerances.min_motion_lever_m:.0f} cm pin the "
+                "rotation down against the body tracker's own errors; record people walking "
+                "across the area)"
             )
 
 

@@ -19,13 +19,12 @@ __all__ = ["motion_lever"]
 
 
 def motion_lever(correspondences: Correspondences | None) -> float | None:
-    """RMS lever arm (m) of the joints' motion about their own means, about the weakest axis.
+    """RMS distance (m) of the joints from their own mean positions, in camera a's frame.
 
-    Each (body pair, joint)'s camera-a positions are taken about their own weighted mean. A
-    small rotation ``w`` moves an excursion ``d`` by ``w x d``, so the rotation's information
-    is ``sum |d|^2 I - d d^T``, whose smallest eigenvalue is the scatter of ``d`` outside its
-    main direction: the two smaller eigenvalues of the excursions' scatter. Its square root is
-    returned; None when no joint pair has weight.
+    Each (body pair, joint)'s positions are taken about their own weighted mean, so where a
+    joint stands (the SDK's offset, to the solve) adds nothing; only its motion counts. A
+    small rotation ``w`` moves an excursion ``d`` by ``w x d``: the typical lever of the
+    rotation over its three axes is the RMS of ``|d|``. None when no joint pair has weight.
     """
     c = correspondences
     if c is None:
@@ -43,6 +42,5 @@ def motion_lever(correspondences: Correspondences | None) -> float | None:
         / weight_sums[:, None]
     )
     excursions = points - means[index]
-    scatter = np.einsum("n,ni,nj->ij", weights, excursions, excursions) / weights.sum()
-    smaller_two = np.linalg.eigvalsh(scatter)[:2].sum()
-    return float(np.sqrt(max(smaller_two, 0.0)))
+    squared = np.einsum("n,ni,ni->", weights, excursions, excursions) / weights.sum()
+    return float(np.sqrt(squared))

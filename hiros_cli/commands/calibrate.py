@@ -21,7 +21,7 @@ against the best other lag, and with three or more cameras how far the solved cl
 miss each pair's own measurement (loops that do not close), how far apart two halves of
 the recording put each pose, and how far the people's joints moved about where they stood
 (lever cm: people who stayed on one spot, exercising or gesturing, leave the rotation to the
-body tracker's own errors; under 22 cm on every pair of a camera flags it). A camera that
+body tracker's own errors; under 38 cm RMS on every pair of a camera flags it). A camera that
 fails them is flagged: the file is written with
 the reason, the exit status is 3, and `hiros run` refuses the file unless given
 --accept-flagged.
