@@ -260,7 +260,7 @@ class Calibrator:
                 pose.quality["bodies_associated"] = len(matches)
                 pose.body_pairs = [(i, j) for i, j, _ in matches]
                 pose.reported = joined
-                lever = motion_lever(pose.correspondences) if pose.ok else None
+                lever = motion_lever(pose.correspondences)  # None for a refused pair
                 if lever is not None:
                     pose.quality["motion_lever_m"] = round(lever, 3)
                 spread = split_half_spread(joined) if pose.ok else None

@@ -194,6 +194,8 @@ def _check_poses(
         angle, distance = relative_error(pose.transform, solved)
         _keep_largest(cameras, pose, "loop_rotation_deg", round(angle, 3))
         _keep_largest(cameras, pose, "loop_translation_cm", round(100 * distance, 2))
+        if "motion_lever_m" in pose.quality:
+            _keep_largest(cameras, pose, "motion_lever_m", pose.quality["motion_lever_m"])
         _uncertainty(cameras, pose, tolerances, reasons, links)
         if angle > tolerances.rotation_deg or distance > tolerances.translation_m:
             text = (
@@ -203,43 +205,34 @@ def _check_poses(
             )
             for name in (pose.camera_a, pose.camera_b):
                 reasons[name].append(text)
-    _check_levers(cameras, usable, tolerances, reasons)
     for name, camera in cameras.items():
+        _resting_on_one_spot(name, camera, tolerances, reasons[name])
         _final_pose_spread(name, camera, tolerances, reasons[name])
         if not reasons[name]:
             _combined_rotation(name, camera, tolerances, reasons[name], one_pair=links[name] <= 1)
 
 
-def _check_levers(
-    cameras: dict[str, CameraCalibration],
-    usable: Sequence[PairPose],
-    tolerances: LoopTolerances,
-    reasons: dict[str, list[str]],
+def _resting_on_one_spot(
+    name: str, camera: CameraCalibration, tolerances: LoopTolerances, reasons: list[str]
 ) -> None:
-    """A reason for a camera whose every pose pair rests on people who stayed on one spot.
+    """A reason when even the camera's best pose pair rests on people who stayed on one spot.
 
     The joint offsets the solve learns leave the joints' motion about where they stood to fix
-    the rotation; over a short lever the body tracker's pose-dependent errors turn it by
-    degrees, alike in every span of time, so the split halves cannot show it.
+    the rotation (``motion_lever_m``, the largest over the camera's pairs); over a short lever
+    the body tracker's pose-dependent errors turn it by degrees, alike in every span of time,
+    so the split halves cannot show it.
     """
-    levers: dict[str, list[float]] = {}
-    for pose in usable:
-        lever = pose.quality.get("motion_lever_m")
-        if lever is None:
-            continue
-        for name in (pose.camera_a, pose.camera_b):
-            levers.setdefault(name, []).append(float(lever))
-    for name, values in levers.items():
-        best = max(values)
-        cameras[name].quality["motion_lever_m"] = best
-        if best < tolerances.min_motion_lever_m:
-            reasons[name].append(
-                f"the pose of {name} rests on joints that barely moved: the people stayed on "
-                f"one spot, and their joints moved {100 * best:.0f} cm RMS about where they "
-                f"stood (at least {100 * tolerances.min_motion_lever_m:.0f} cm pin the "
-                "rotation down against the body tracker's own errors; record people walking "
-                "across the area)"
-            )
+    if "motion_lever_m" not in camera.quality:
+        return
+    best = _number(camera.quality["motion_lever_m"])
+    if best < tolerances.min_motion_lever_m:
+        reasons.append(
+            f"the pose of {name} rests on joints that barely moved: the people stayed on "
+            f"one spot, and their joints moved {100 * best:.0f} cm RMS about where they "
+            f"stood (at least {100 * tolerances.min_motion_lever_m:.0f} cm pin the "
+            "rotation down against the body tracker's own errors; record people walking "
+            "across the area)"
+        )
 
 
 def _uncertainty(

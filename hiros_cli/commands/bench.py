@@ -17,9 +17,8 @@ Suites:
   pipeline   offline throughput and end-to-end DDS latency (separate nodes and composed)
   robust     the stages under the simulator's conditions (noisy SDK, one person, 45 deg pair,
              15 Hz, drops, repeated motion, four crossing, exercise on one spot), with the true
-             calibration and with
-             --calibration auto: MPJPE per stage, ratio to the best oracle-labelled camera,
-             switches, limb CV, acceptance, mirrored share
+             calibration and with --calibration auto: MPJPE per stage, ratio to the best
+             oracle-labelled camera, switches, limb CV, acceptance, mirrored share
   soak       the live pipeline and calib nodes fed a looping recording for --minutes (30):
              each node's memory over time, latency percentiles, whether the output stopped
              (not run without being named, nor in CI)

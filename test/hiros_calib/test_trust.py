@@ -378,13 +378,7 @@ def test_a_pose_resting_on_people_on_one_spot_flags_its_camera():
 def test_a_person_exercising_on_one_spot_before_two_cameras_is_flagged():
     """One person bending over and over (the bundled inertial-mocap clip, looped) before two
     cameras 45 deg apart, each on its own host: the rotation rests on the bending alone."""
-    from hiros_sim.params import default_bvh_files
-
-    bend = next(path for path in default_bvh_files() if "bend" in path)
-    params = preset_params("two-cameras-45", seed=2, duration=40.0, n_people=1,
-                           log_clock="camera", bvh_files=(bend,), loop_variation=0.1,
-                           max_time_offset=1.5)  # fmt: skip
-    scene = simulate(params)
+    scene = simulate(preset_params("exercise-on-spot", seed=2, duration=40.0))
     calibration = Calibrator(CalibratorParams(reference="k01")).calibrate(
         scene.camera_groups, arrival_ns=scene.receive_ns
     )
