@@ -15,6 +15,8 @@ import math
 import numpy as np
 from numba import njit
 
+from hiros_core.compiled import refresh_stale_caches
+from hiros_tracker import labels
 from hiros_tracker.kernel_args import FacingBody, FacingPriors, FacingView, TrackFields
 from hiros_tracker.labels import relabel
 
@@ -286,3 +288,6 @@ def _update_up(
     if up[3] == 0.0:
         return np.full(3, np.nan)
     return up[:3].copy()
+
+
+refresh_stale_caches(globals(), labels)  # turn_facing calls labels.relabel

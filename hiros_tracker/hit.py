@@ -5,6 +5,8 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from hiros_core.compiled import refresh_stale_caches
+from hiros_tracker import facing, labels, track_update
 from hiros_tracker.facing import turn_facing
 from hiros_tracker.kernel_args import (
     FacingView,
@@ -95,3 +97,6 @@ def hit_frame(  # noqa: PLR0917 - the tracks, the frame, its pairs, view, layout
             tracks.confirmed,
         )
     return flips, full, turned, n_turned, tracks.ids[rows], labelled
+
+
+refresh_stale_caches(globals(), facing, labels, track_update)  # hit_frame calls their kernels

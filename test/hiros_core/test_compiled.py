@@ -2,11 +2,19 @@
 
 from __future__ import annotations
 
+import ast
+import importlib
+import importlib.util
+import inspect
 import os
+import pkgutil
 import subprocess
 import sys
 import textwrap
 from pathlib import Path
+from types import ModuleType
+
+from numba.core.dispatcher import Dispatcher
 
 CALLEE = """
 from numba import njit
@@ -63,3 +71,44 @@ def test_a_caller_sees_its_changed_callee(tmp_path: Path) -> None:
 def test_without_the_refresh_numba_keeps_the_stale_callee(tmp_path: Path) -> None:
     # what the refresh is for: numba alone loads the caller's machine code with the old callee
     assert _case(tmp_path, "") == ("2", "2")
+
+
+KERNEL_PACKAGES = (
+    "hiros_core", "hiros_tracker", "hiros_merger", "hiros_optimizer", "hiros_filter",
+    "hiros_visualizer",
+)  # fmt: skip
+
+
+def _kernel_modules() -> list[ModuleType]:
+    """The modules of ``KERNEL_PACKAGES`` that define numba kernels (read first, then imported)."""
+    found = []
+    for package in KERNEL_PACKAGES:
+        for info in pkgutil.walk_packages(importlib.import_module(package).__path__, f"{package}."):
+            spec = importlib.util.find_spec(info.name)
+            if spec and spec.origin and "@njit" in Path(spec.origin).read_text(encoding="utf-8"):
+                found.append(importlib.import_module(info.name))
+    return found
+
+
+def _refreshed(module: ModuleType) -> set[str]:
+    """The modules ``module``'s ``refresh_stale_caches`` call compares with (its default alone)."""
+    names: set[str] = set()
+    for node in ast.walk(ast.parse(inspect.getsource(module))):
+        if isinstance(node, ast.Call) and getattr(node.func, "id", "") == "refresh_stale_caches":
+            extra = [vars(module)[arg.id].__name__ for arg in node.args[1:]]
+            names |= set(extra) or {"hiros_core.compiled"}
+    return names
+
+
+def test_every_kernel_calling_another_modules_kernels_refreshes_on_that_module() -> None:
+    # The tracker's hit_frame kept running the old turn_facing after an edit of facing.py
+    # alone, until hit.py and facing.py refreshed on the modules they call.
+    modules = _kernel_modules()
+    assert len(modules) > 10, "the kernel modules were not found"
+    for module in modules:
+        kernels = [v for v in vars(module).values() if isinstance(v, Dispatcher)]
+        own = [k for k in kernels if k.py_func.__module__ == module.__name__]
+        callees = {k.py_func.__module__ for k in kernels} - {module.__name__}
+        if own and callees:
+            missing = callees - _refreshed(module)
+            assert not missing, f"{module.__name__} calls kernels of {missing} without refreshing"
