@@ -2,7 +2,8 @@
 
 :class:`Calibrator` chains the steps of this package: body tracks per camera
 (:mod:`~hiros_calib.tracks`), clock offsets and drift (:mod:`~hiros_calib.sync`), then camera
-poses (:mod:`~hiros_calib.extrinsics`), and writes the result as the DESIGN.md calibration
+poses (:mod:`~hiros_calib.extrinsics`), then the offsets refined by the joints' motion under
+those poses (:mod:`~hiros_calib.retime`), and writes the result as the DESIGN.md calibration
 with quality figures per camera. The live version is :class:`hiros_calib.live.LiveCalibrator`.
 """
 
@@ -26,6 +27,7 @@ from hiros_calib.extrinsics import (
 )
 from hiros_calib.lags import settle_lag, split_half_spread
 from hiros_calib.quality import arrival_offsets_from_delays, flag_cameras
+from hiros_calib.retime import retime
 from hiros_calib.sync import (
     CameraClock,
     PairOffset,
@@ -43,10 +45,10 @@ from hiros_core.model import SkeletonGroup
 __all__ = ["CalibrationResult", "Calibrator", "CalibratorParams"]
 
 WORLDS = ("floor", "camera")
+"""The world frames a calibration can be given in (``CalibratorParams.world``)."""
 
 MIN_TRACK_FRAMES = 10
 """Body tracks with fewer frames are left out (a glimpse pins neither a lag nor a pose)."""
-"""The world frames a calibration can be given in (``CalibratorParams.world``)."""
 
 Progress = Callable[[str, float], None]
 """Called with a stage description and the fraction (0..1) of the work done."""
@@ -196,6 +198,16 @@ class Calibrator:
         poses = solve_poses([c for c in cameras if clocks[c].ok], reference, pose_pairs)
         refused.update({c: pose.reason for c, pose in poses.items() if not pose.ok})
         self._check(refused, "pose")
+        report("clocks by the motion", 0.9)
+        clocks, motion_shifts = retime(
+            clocks,
+            reference,
+            sync_pairs=sync_pairs,
+            pose_pairs=pose_pairs,
+            poses=poses,
+            tracks=tracks,
+            params=params,
+        )
         calibration = _to_calibration(reference, params.world_frame, groups, clocks, poses)
         calibration.cameras = {
             c: calibration.cameras[c] for c in cameras if c in calibration.cameras
@@ -205,7 +217,7 @@ class Calibrator:
         if arrival_offsets or arrival_notes:
             for cal in calibration.cameras.values():
                 cal.quality["arrival_times"] = "ignored" if arrival_notes else "used"
-        flag_cameras(calibration, sync_pairs, pose_pairs)
+        flag_cameras(calibration, sync_pairs, pose_pairs, motion_shifts=motion_shifts)
         if params.world == "floor":
             notes.extend(_align_to_floor(calibration, tracks))
         self.result = CalibrationResult(

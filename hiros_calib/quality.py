@@ -26,6 +26,7 @@ from typing import Any, TypeVar
 import numpy as np
 
 from hiros_calib.extrinsics import PairPose, relative_error
+from hiros_calib.retime import SHIFT_SE_INFLATION, MotionShift
 from hiros_calib.sync import PairOffset
 from hiros_core.calibration import Calibration, CameraCalibration
 
@@ -60,6 +61,10 @@ class LoopTolerances:
     a camera's pairs (:func:`~hiros_calib.extrinsics.motion_lever`): people exercising or
     gesturing on one spot move less, people walking, even to and fro along one line, more
     (docs/calibration-robustness.md, session 20)."""
+    motion_confirms_s: float = 0.01
+    """A pair's lag the clocks miss is set aside, not flagged, when the joints' motion puts
+    that pair within this (s) of the clocks, twice its own standard error included
+    (:mod:`~hiros_calib.retime`): the clocks are right there, the pair's correlation is not."""
 
 
 def arrival_offsets_from_delays(
@@ -95,22 +100,37 @@ def flag_cameras(
     sync_pairs: Sequence[PairOffset],
     pose_pairs: Sequence[PairPose],
     tolerances: LoopTolerances | None = None,
+    motion_shifts: Sequence[MotionShift] = (),
 ) -> None:
     """Add loop-closure figures to every camera's quality; flag those that fail a check.
 
     A camera is flagged when one of its pairs' lag is contradicted by the poses, or when the
     solved clocks or poses miss one of its pairs' own measurements by more than the
-    tolerances (with three or more cameras: a loop that does not close). The reference
-    camera is never flagged on its own: it defines the frame and the clock.
+    tolerances (with three or more cameras: a loop that does not close), unless the joints'
+    motion (``motion_shifts``, measured at the solved clocks) confirms the clocks for that
+    pair. The reference camera is never flagged on its own: it defines the frame and the
+    clock.
     """
     tolerances = tolerances or LoopTolerances()
     cameras = calibration.cameras
     reasons: dict[str, list[str]] = {name: [] for name in cameras}
-    _check_clocks(cameras, sync_pairs, tolerances, reasons)
+    confirmed = _confirmed_by_motion(motion_shifts, tolerances)
+    _check_clocks(cameras, sync_pairs, tolerances, reasons, confirmed)
     _check_poses(cameras, pose_pairs, tolerances, reasons)
     for name, found in reasons.items():
         if found and name != calibration.reference:
             cameras[name].flagged = "; ".join(dict.fromkeys(found))
+
+
+def _confirmed_by_motion(
+    shifts: Sequence[MotionShift], tolerances: LoopTolerances
+) -> dict[frozenset[str], float]:
+    """Camera pairs whose motion agrees with the solved clocks, and by how much (s)."""
+    return {
+        frozenset((s.camera_a, s.camera_b)): s.shift
+        for s in shifts
+        if abs(s.shift) + SHIFT_SE_INFLATION * s.standard_error <= tolerances.motion_confirms_s
+    }
 
 
 def _check_clocks(
@@ -118,6 +138,7 @@ def _check_clocks(
     sync_pairs: Sequence[PairOffset],
     tolerances: LoopTolerances,
     reasons: dict[str, list[str]],
+    confirmed: dict[frozenset[str], float],
 ) -> None:
     """Each pair's lag against the solved clocks, and the poses' verdict on it."""
     for pair in sync_pairs:
@@ -129,7 +150,14 @@ def _check_clocks(
                 reasons[name].append(str(pair.quality["flagged"]))
         miss = _clock_miss(cameras[pair.camera_a], cameras[pair.camera_b], pair)
         _keep_largest(cameras, pair, "loop_time_ms", round(1e3 * abs(miss), 2))
-        if abs(miss) > tolerances.time_s:
+        agrees = confirmed.get(frozenset((pair.camera_a, pair.camera_b)))
+        if abs(miss) > tolerances.time_s and agrees is not None:
+            note = (
+                f"{pair.camera_a}-{pair.camera_b} {1e3 * miss:+.0f} ms (motion {1e3 * agrees:+.1f})"
+            )
+            for name in (pair.camera_a, pair.camera_b):
+                cameras[name].quality["time_lag_set_aside"] = note
+        elif abs(miss) > tolerances.time_s:
             text = (
                 f"the clocks miss the {pair.camera_a}-{pair.camera_b} lag by {1e3 * miss:+.0f} "
                 f"ms (a loop of camera clocks does not close; tolerance "

@@ -37,7 +37,12 @@ between two poses) and :mod:`.lever` (how far the joints moved about where they 
 the rotation rests on).
 """
 
-from hiros_calib.extrinsics.correspondences import Correspondences, associate, pair_correspondences
+from hiros_calib.extrinsics.correspondences import (
+    Correspondences,
+    associate,
+    joint_tables,
+    pair_correspondences,
+)
 from hiros_calib.extrinsics.halves import SPLIT_BLOCK, relative_error, second_half
 from hiros_calib.extrinsics.joint import CameraPose, solve_poses
 from hiros_calib.extrinsics.lever import motion_lever
@@ -57,6 +62,7 @@ __all__ = [
     "associate",
     "baseline_pair_pose",
     "estimate_pair_pose",
+    "joint_tables",
     "kabsch",
     "motion_lever",
     "pair_correspondences",

@@ -26,7 +26,7 @@ from hiros_calib.sync import CameraClock
 from hiros_calib.tracks import BodyTrack
 from hiros_core.layouts import Layout
 
-__all__ = ["Correspondences", "associate", "pair_correspondences", "subsample"]
+__all__ = ["Correspondences", "associate", "joint_tables", "pair_correspondences", "subsample"]
 
 
 @dataclass
@@ -99,7 +99,7 @@ def _body_part(name: str) -> int:
     return 0
 
 
-def _joint_tables(layout: Layout, names: list[str]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def joint_tables(layout: Layout, names: list[str]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Selected joints, their mirror permutation (local indices) and body parts."""
     joints = select_joints(layout, names)
     local = {int(j): k for k, j in enumerate(joints)}
@@ -116,7 +116,7 @@ def pair_correspondences(
     params: ExtrinsicsParams,
 ) -> Correspondences | None:
     """Same-instant joint pairs of two tracks of the same person, None when they never meet."""
-    joints, mirror, groups = _joint_tables(track_a.layout, params.pose_joints)
+    joints, mirror, groups = joint_tables(track_a.layout, params.pose_joints)
     t_b = clock_b.from_reference(clock_a.to_reference(track_a.times))
     positions_b, weights_b = track_b.at(np.asarray(t_b), MAX_INTERPOLATION_GAP)
     weights = np.minimum(track_a.weights[:, joints], weights_b[:, joints]) ** 2

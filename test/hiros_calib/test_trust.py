@@ -11,6 +11,7 @@ from hiros_calib import Calibrator, CalibratorParams, LiveCalibrator, LiveCalibr
 from hiros_calib.extrinsics import PairPose
 from hiros_calib.lags import LagFit, compare_fits
 from hiros_calib.quality import arrival_offsets_from_delays, flag_cameras
+from hiros_calib.retime import MotionShift
 from hiros_calib.sync import PairOffset, close_loops, overrule_weak_pairs
 from hiros_calib.sync import pair as pair_module
 from hiros_core.calibration import Calibration, CameraCalibration
@@ -111,6 +112,31 @@ def test_a_clock_loop_that_does_not_close_flags_its_cameras():
     pairs[2] = _pair("k02", "k03", -0.7)
     flag_cameras(closing, pairs, [])
     assert closing.flagged == {}
+
+
+def test_a_pair_lag_the_clocks_miss_is_set_aside_only_where_the_motion_confirms_the_clocks():
+    def three():
+        return Calibration("k01", cameras={
+            "k01": _camera(), "k02": _camera(0.5), "k03": _camera(-0.2),
+        })  # fmt: skip
+
+    # k02-k03's correlation says 60 ms off what the clocks give
+    pairs = [_pair("k01", "k02", 0.5), _pair("k01", "k03", -0.2), _pair("k02", "k03", -0.64)]
+    confirming = three()
+    flag_cameras(
+        confirming, pairs, [], motion_shifts=[MotionShift("k02", "k03", 0.002, 0.001, 900)]
+    )
+    assert confirming.flagged == {}
+    assert confirming.cameras["k03"].quality["time_lag_set_aside"] == "k02-k03 +60 ms (motion +2.0)"
+    for shift, error in ((0.03, 0.001), (0.002, 0.006)):  # the motion shifted, or unsure
+        doubting = three()
+        flag_cameras(
+            doubting, pairs, [], motion_shifts=[MotionShift("k02", "k03", shift, error, 9)]
+        )
+        assert set(doubting.flagged) == {"k02", "k03"}
+    elsewhere = three()  # the motion of another pair says nothing of this one
+    flag_cameras(elsewhere, pairs, [], motion_shifts=[MotionShift("k01", "k03", 0.0, 0.001, 900)])
+    assert set(elsewhere.flagged) == {"k02", "k03"}
 
 
 def test_a_clock_resting_on_one_lag_the_skeletons_chose_is_flagged():
