@@ -157,18 +157,33 @@ def print_summary(console: Console, result: CalibrationResult) -> None:
         if short != name:
             console.print(f"{short} = {name}", highlight=False)
     table = Table(
-        title=f"calibration (reference {label[calibration.reference]}; drift ppm, rot deg)",
+        title=(
+            f"calibration (reference {label[calibration.reference]}; drift ppm, rot deg; "
+            "motion: ms the joints' motion moved the offset)"
+        ),
         box=box.SIMPLE,
         pad_edge=False,
         collapse_padding=True,
     )
-    for column in ("camera", "offset s", "drift", "position m", "rot", "corr", "inl", "res cm"):
+    columns = (
+        "camera",
+        "offset s",
+        "motion",
+        "drift",
+        "position m",
+        "rot",
+        "corr",
+        "inl",
+        "res cm",
+    )
+    for column in columns:
         table.add_column(column, justify="right", no_wrap=True, overflow="fold")
     for name, cam in calibration.cameras.items():
         q = cam.quality
         table.add_row(
             label[name],
             f"{cam.time_offset:+.4f}",
+            f"{q['time_motion_shift_ms']:+.1f}" if "time_motion_shift_ms" in q else "-",
             f"{cam.drift * 1e6:+.0f}",
             " ".join(f"{v:+.2f}" for v in cam.translation),
             f"{np.degrees(cam.extrinsics.rotation.magnitude()):.1f}",
