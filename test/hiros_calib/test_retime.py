@@ -102,3 +102,14 @@ def test_a_shift_beyond_the_linear_range_is_left_to_the_lag_checks(calibrated):
 
     assert all("cam1" not in (s.camera_a, s.camera_b) for s in shifts)
     assert refined["cam1"].time_offset == clocks["cam1"].time_offset
+
+
+def test_a_calibration_reports_how_far_the_motion_moved_each_clock(calibrated):
+    scene, calibrator = calibrated
+    calibration = calibrator.result.calibration
+    for camera in ("cam1", "cam2"):
+        moved = calibration.cameras[camera].quality["time_motion_shift_ms"]
+        error = calibration.cameras[camera].time_offset - scene.truth.cameras[camera].time_offset
+        assert abs(moved) < 5.0  # a clock the correlation timed well stays about where it was
+        assert abs(error) < 0.003
+    assert "time_motion_shift_ms" not in calibration.cameras["cam0"].quality
