@@ -4,8 +4,8 @@ An SDK sometimes reports a body front/back flipped (its left labelled right). Ea
 of a track gives log-odds that the track's sides are right (``_facing_evidence``): the front
 its sides say against the way its feet and nose point, each hypothesis weighted by the flip
 prior of the view its camera would have, and walking forward as extra evidence. The log-odds
-fade over the facing memory; a track whose log-odds fall below minus the threshold is
-relabelled.
+fade over the facing memory (a longer one while the track stands); a track whose log-odds fall
+below minus the threshold is relabelled, and so is one whose doubt passes ``DOUBT_LIMIT``.
 """
 
 from __future__ import annotations
@@ -21,19 +21,44 @@ from hiros_tracker.kernel_args import FacingBody, FacingPriors, FacingView, Trac
 from hiros_tracker.labels import relabel
 
 __all__ = [
+    "CLEAR_CONTRADICTION",
+    "CONTRADICTING_VIEWS",
     "DOUBT_LIMIT",
+    "VERDICT_LIFETIME_S",
     "turn_facing",
 ]
 
 DOUBT_LIMIT = 40.0
-"""Log-odds at which a walking track whose cameras keep disagreeing with it is turned at once.
+"""Log-odds at which a track whose cameras keep disagreeing with it is turned at once.
 
 A track's doubt sums its cameras' evidence against its sides (the walking term left out) over
-an unbroken run of its detections in which it walks backwards by those sides, never below 0 (a
-CUSUM, Page 1954): a mirrored walking track reaches it within a fraction of a second whatever
-its facing log-odds had grown to over seconds of agreement (a clean 3-camera walk: turned
-after 0.5 s instead of 1.3 s). A right track at the end of a pass, still moving the old way
-while it faces the new one, walks backwards too, but its cameras agree with it: no run grows."""
+an unbroken run of its detections that contradict it, never below 0 (a CUSUM, Page 1954), so
+that a mirrored track is turned within a fraction of a second whatever its facing log-odds had
+grown to over seconds of agreement (``_doubt_step``):
+
+- a walking track's run lasts while it walks backwards by its sides (a clean 3-camera walk:
+  turned after 0.5 s instead of 1.3 s). A right track at the end of a pass, still moving the
+  old way while it faces the new one, walks backwards too, but its cameras agree with it;
+- a standing track's run lasts while ``CONTRADICTING_VIEWS`` cameras clearly contradict it and
+  none supports it. Weak contradictions (a person seen from behind, whom SDKs report facing
+  them) do not feed it: a person standing with their back to every camera looks like that
+  detection after detection, and the long standing memory must keep them."""
+
+CLEAR_CONTRADICTION = 1.5
+"""Log-odds against a track's sides beyond which a detection clearly contradicts it.
+
+A camera that sees the body from the side gives about -2.2 (flip prior 0.1 under both
+hypotheses). One that sees the track's front gives -1.1 and one that sees its back -0.25: the
+other hypothesis puts the camera behind the person, where SDKs flip often (0.7)."""
+
+CONTRADICTING_VIEWS = 2
+"""Cameras whose last verdicts must clearly contradict a standing track to feed its doubt.
+
+One camera is not enough: SDKs also flip in side views now and then, and a
+person turned slightly away is a side view by the track's front and a back view by the SDK's."""
+
+VERDICT_LIFETIME_S = 0.4
+"""Seconds a camera's last verdict on a track counts towards the standing doubt."""
 
 
 @njit(cache=True, error_model="numpy")
@@ -87,7 +112,7 @@ def _facing_evidence(  # noqa: PLR0917 - one loop over the frame's pairs
     body: FacingBody,
     priors: FacingPriors,
 ) -> tuple[np.ndarray, np.ndarray]:
-    """``(U,)`` log-odds each detection gives that its track faces the way its sides say.
+    """``(U,)`` log-odds each detection's view, ``(U,)`` its track's walk, give on its sides.
 
     Tracks ``rows`` ``(U,)`` were hit by ``canonical`` ``(U, J, 3)``; ``up`` ``(3,)`` is the
     world's up (NaN: unknown, no evidence). With ``flat(v) = v - (v·up) up``:
@@ -104,12 +129,8 @@ def _facing_evidence(  # noqa: PLR0917 - one loop over the frame's pairs
     - a track moving faster than ``walking_speed`` (its ``flat`` body velocity) adds
       ``walking_evidence`` when it moves along ``f``, subtracts it when against.
 
-    Evidence that is not finite counts 0.
-
-    Returns:
-        ``(U,)`` the evidence, and ``(U,)`` each detection's step of its track's doubt (see
-        ``DOUBT_LIMIT``): minus the evidence without the walking term where the track walks
-        against ``f``, else 0 (the run ends).
+    Evidence that is not finite counts 0; a track without walking evidence (slower than
+    ``walking_speed``, or of unknown front) stands.
 
     """
     positions, velocity = tracks.positions, tracks.velocity
@@ -118,8 +139,8 @@ def _facing_evidence(  # noqa: PLR0917 - one loop over the frame's pairs
     flip_prior, flip_prior_back = priors.flip_prior, priors.flip_prior_back
     walking_speed, walking_evidence = priors.walking_speed, priors.walking_evidence
     n_pairs = len(rows)
-    evidence = np.zeros(n_pairs)
-    doubt_step = np.zeros(n_pairs)
+    view_evidence = np.zeros(n_pairs)
+    walk_evidence = np.zeros(n_pairs)
     ux, uy, uz = up[0], up[1], up[2]
     for u in range(n_pairs):
         r = rows[u]
@@ -172,11 +193,37 @@ def _facing_evidence(  # noqa: PLR0917 - one loop over the frame's pairs
         if not math.isfinite(agreement):  # no forward pointer seen, or no front: no evidence
             value = 0.0
         walk = _walking(velocity[r], (fx, fy, fz), up, walking_speed, walking_evidence)
-        if walk < 0.0 and math.isfinite(value):  # walking backwards by its sides
-            doubt_step[u] = -value
-        value += walk
-        evidence[u] = value if math.isfinite(value) else 0.0
-    return evidence, doubt_step
+        view_evidence[u] = value if math.isfinite(value) else 0.0
+        walk_evidence[u] = walk if math.isfinite(walk) else 0.0
+    return view_evidence, walk_evidence
+
+
+@njit(cache=True, error_model="numpy")
+def _doubt_step(  # noqa: PLR0917 - one detection's verdict on its track
+    tracks: TrackFields, r: int, camera: int, stamp_ns: int, view: float, walk: float
+) -> float:
+    """One detection's step of track ``r``'s doubt run (``DOUBT_LIMIT``); records its verdict.
+
+    ``view`` and ``walk`` are its evidence on the track's sides. Walking: minus ``view`` while
+    the track walks backwards by its sides, else 0 (the run ends). Standing, over the cameras'
+    verdicts of the last ``VERDICT_LIFETIME_S``: minus ``view`` when ``CONTRADICTING_VIEWS``
+    clearly contradict the sides and none supports them, else 0.
+    """
+    if camera < tracks.camera_verdicts.shape[1]:
+        tracks.camera_verdicts[r, camera] = view
+        tracks.camera_verdicts_ns[r, camera] = stamp_ns
+    if walk != 0.0:
+        return -view if walk < 0.0 else 0.0
+    clear = 0
+    for k in range(tracks.camera_verdicts.shape[1]):
+        if stamp_ns - tracks.camera_verdicts_ns[r, k] > VERDICT_LIFETIME_S * 1e9:
+            continue
+        verdict = tracks.camera_verdicts[r, k]
+        if verdict > 0.0:
+            return 0.0
+        if verdict < -CLEAR_CONTRADICTION:
+            clear += 1
+    return -view if clear >= CONTRADICTING_VIEWS else 0.0
 
 
 @njit(cache=True, error_model="numpy")
@@ -231,8 +278,9 @@ def turn_facing(  # noqa: PLR0917 - the tracks, the frame's pairs, the view, bod
 
     Track ``r = rows[u]`` (hit by ``canonical[u]``) keeps log-odds ``facing[r]`` that its
     sides are right, set at ``facing_ns[r]``: ``facing[r] = facing[r] * exp(-dt /
-    facing_memory) + evidence[u]`` (``dt`` s since then, at least 0); its doubt (``DOUBT_LIMIT``)
-    past the limit sets them below the threshold. Below
+    memory) + evidence[u]`` (``dt`` s since then, at least 0; the memory is ``facing_memory``,
+    or ``facing_memory_standing`` for a track without walking evidence); its doubt
+    (``DOUBT_LIMIT``) past the limit sets them below the threshold. Below
     ``-facing_threshold`` the track is relabelled with ``body.mirror`` (all parts,
     ``relabel``), its log-odds and held left-right axes (its own and its cameras') negated.
     ``tracks`` changes in place, and ``view.up`` too (``_update_up``, before the evidence).
@@ -242,17 +290,17 @@ def turn_facing(  # noqa: PLR0917 - the tracks, the frame's pairs, the view, bod
 
     """
     facing, facing_ns = tracks.facing, tracks.facing_ns
-    memory, threshold = priors.facing_memory, priors.facing_threshold
-    stamp_ns = view.stamp_ns
+    threshold, stamp_ns = priors.facing_threshold, view.stamp_ns
     world_up = _update_up(view.up, tracks.positions, rows, body.root, body.neck)
-    evidence, doubt_step = _facing_evidence(tracks, rows, canonical, world_up, view, body, priors)
+    views, walks = _facing_evidence(tracks, rows, canonical, world_up, view, body, priors)
     turned = np.zeros(len(rows), dtype=np.bool_)
     for u in range(len(rows)):
         r = rows[u]
+        memory = priors.facing_memory if walks[u] != 0.0 else priors.facing_memory_standing
         fade = math.exp(-max(stamp_ns - facing_ns[r], 0) * 1e-9 / memory)
-        facing[r] = facing[r] * fade + evidence[u]
+        facing[r] = facing[r] * fade + views[u] + walks[u]
         facing_ns[r] = stamp_ns
-        step = doubt_step[u]
+        step = _doubt_step(tracks, r, view.camera, stamp_ns, views[u], walks[u])
         tracks.doubt[r] = max(tracks.doubt[r] + step, 0.0) if step != 0.0 else 0.0
         if tracks.doubt[r] > DOUBT_LIMIT:
             facing[r] = min(facing[r], -threshold - 1.0)
@@ -261,6 +309,7 @@ def turn_facing(  # noqa: PLR0917 - the tracks, the frame's pairs, the view, bod
             for a in range(3):
                 tracks.sides[r, a] = -tracks.sides[r, a]
             tracks.camera_sides[r] = -tracks.camera_sides[r]
+            tracks.camera_verdicts[r] = -tracks.camera_verdicts[r]
             facing[r] = -facing[r]
             turned[u] = True
             tracks.doubt[r] = 0.0

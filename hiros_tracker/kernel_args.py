@@ -135,6 +135,8 @@ class TrackFields(NamedTuple):
     sides: np.ndarray  # (T, 3) held left-right axis, m (``labels.hold_axes``; 0: none yet)
     camera_sides: np.ndarray  # (T, C, 3) each camera's last detection's axis, as labelled
     camera_sides_ns: np.ndarray  # (T, C) its stamp
+    camera_verdicts: np.ndarray  # (T, C) each camera's last view evidence on the sides
+    camera_verdicts_ns: np.ndarray  # (T, C) its stamp (0: none)
     confirmed: np.ndarray  # (T,)
     ids: np.ndarray  # (T,)
 
@@ -177,6 +179,7 @@ class FacingPriors(NamedTuple):
     walking_speed: float
     walking_evidence: float
     facing_memory: float  # s
+    facing_memory_standing: float  # s
     facing_threshold: float
 
 

@@ -253,6 +253,7 @@ class FrameMatching:
             params.walking_speed,
             params.walking_evidence,
             params.facing_memory,
+            params.facing_memory_standing,
             params.facing_threshold,
         )
 

@@ -117,7 +117,12 @@ class TrackerParams:
         flip_prior: chance that a detection is front/back flipped when its camera sees the
             person's front or side.
         flip_prior_back: the same when the camera sees the person's back (cos < -0.5).
-        facing_memory: seconds over which the facing evidence fades.
+        facing_memory: seconds over which the facing evidence fades while the track walks.
+        facing_memory_standing: the same while it stands (slower than ``walking_speed``):
+            what a person's turn taught the track must outlast their standing with their back
+            to the cameras, whose SDKs then report them facing the cameras detection after
+            detection. A standing track that two cameras clearly contradict is turned
+            within a second all the same (``facing.DOUBT_LIMIT``).
         facing_threshold: log-odds against the track's facing at which it is relabelled.
         walking_speed: m/s above which a person is taken to face where they walk.
         walking_evidence: log-odds added per detection for facing the walking direction.
@@ -159,6 +164,7 @@ class TrackerParams:
     flip_prior: float = 0.1
     flip_prior_back: float = 0.7
     facing_memory: float = 3.0
+    facing_memory_standing: float = 30.0
     facing_threshold: float = 3.0
     walking_speed: float = 0.4
     walking_evidence: float = 1.0

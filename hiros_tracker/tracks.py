@@ -30,6 +30,8 @@ Per track (``J`` joints, ``C`` cameras, ``R`` record slots):
   the first, and after a relabelling by ``relabel``), ``labels.hold_axes``; per camera, the
   left-right axis of its last detection as labelled, ``camera_sides`` ``(C, 3)`` (0: none),
   at ``camera_sides_ns`` ``(C,)``;
+- ``camera_verdicts`` ``(C,)``: the view evidence each camera's last detection gave on the
+  track's sides (log-odds, ``facing``), at ``camera_verdicts_ns`` ``(C,)`` (0: none);
 - ``votes``/``mirrored``: Python, for the mirror-vote fallback only (camera -> (ns, flips)).
 """
 
@@ -50,14 +52,18 @@ LIMB_MEMORY = 300
 
 _FLOAT_FIELDS = (
     "positions", "velocities", "velocity", "facing", "sums", "limbs", "limb_count", "sides",
-    "doubt", "camera_sides",
+    "doubt", "camera_sides", "camera_verdicts",
 )  # fmt: skip
 _INT_FIELDS = (
     "ids", "born_ns", "time_ns", "last_hit_ns", "epoch_ns", "facing_ns", "hits", "n_cameras",
     "body_ids", "record_ns", "record_camera", "record_start", "record_count", "camera_sides_ns",
+    "camera_verdicts_ns",
 )  # fmt: skip
 _BOOL_FIELDS = ("confirmed", "seen")
-_CAMERA_FIELDS = ("sums", "body_ids", "seen", "camera_sides", "camera_sides_ns")
+_CAMERA_FIELDS = (
+    "sums", "body_ids", "seen", "camera_sides", "camera_sides_ns", "camera_verdicts",
+    "camera_verdicts_ns",
+)  # fmt: skip
 _ROW_FIELDS = (*_FLOAT_FIELDS, *_INT_FIELDS, *_BOOL_FIELDS, "record_terms")
 
 
@@ -77,7 +83,8 @@ class TrackTable:
             "seen": (cameras,), "record_ns": (records,), "record_camera": (records,),
             "record_terms": (records, joints, 9), "limbs": (joints,),
             "limb_count": (joints,), "sides": (3,), "camera_sides": (cameras, 3),
-            "camera_sides_ns": (cameras,),
+            "camera_sides_ns": (cameras,), "camera_verdicts": (cameras,),
+            "camera_verdicts_ns": (cameras,),
         }  # fmt: skip
         for name in _ROW_FIELDS:
             dtype = float if name in _FLOAT_FIELDS or name == "record_terms" else np.int64
@@ -111,6 +118,8 @@ class TrackTable:
     doubt: np.ndarray
     camera_sides: np.ndarray
     camera_sides_ns: np.ndarray
+    camera_verdicts: np.ndarray
+    camera_verdicts_ns: np.ndarray
 
     @property
     def capacity(self) -> int:
@@ -208,12 +217,13 @@ class TrackTable:
     def relabel(self, row: int, permutation: np.ndarray) -> None:
         """Reorder a track's joints (swap the sides of some parts); votes are the caller's.
 
-        Its held left-right axes (the track's and each camera's) are forgotten (the pose's is
-        used until detections give them anew).
+        Its held left-right axes (the track's and each camera's) and its cameras' verdicts on
+        its sides are forgotten (the pose's axis is used until detections give them anew).
         """
         kernels.relabel(self.hit_fields(), row, permutation)
         self.sides[row] = 0.0
         self.camera_sides[row] = 0.0
+        self.camera_verdicts_ns[row] = 0
 
     def _grow_rows(self) -> None:
         for name in _ROW_FIELDS:

@@ -149,6 +149,8 @@ def _scene(rng: np.random.Generator, n_tracks: int, n_cameras: int) -> Scene:
         for c in range(n_cameras):
             table.camera_sides[r, c] = rng.choice([0.0, 1.0, -1.0]) * axis
             table.camera_sides_ns[r, c] = STAMP - rng.integers(0, 400_000_000)
+            table.camera_verdicts[r, c] = rng.choice([-2.2, -1.1, -0.25, 0.0, 0.25, 2.2])
+            table.camera_verdicts_ns[r, c] = STAMP - rng.integers(0, 800_000_000)
     table.positions[:n][rng.random((n, N_JOINTS)) < 0.05] = np.nan  # joints never measured
     return Scene(table, people, n_cameras)
 
@@ -186,6 +188,7 @@ def _priors(rng: np.random.Generator) -> FacingPriors:
         walking_speed=0.4,
         walking_evidence=0.0 if rng.random() < 0.2 else 1.0,
         facing_memory=3.0,
+        facing_memory_standing=float(rng.choice([3.0, 30.0])),
         facing_threshold=float(rng.choice([1.0, 3.0])),
     )
 
@@ -480,13 +483,15 @@ def test_a_detection_without_its_forward_pointers_gives_no_facing_evidence() -> 
     (it used to read as 'not flipped' and add full evidence that the sides were right)."""
     rng = np.random.default_rng(7)
     scene = _scene(rng, 1, 1)
+    scene.table.positions[0] = scene.people[0]  # the track's own front is known
     positions = _frame(rng, scene, 0, missing=0.0)
     pointed = np.unique(BODY.pointers)
     blind = positions.copy()
     blind[:, pointed[pointed != BODY.root]] = np.nan
     rows = np.zeros(1, dtype=np.int64)
     up = np.array([0.0, 0.0, 1.0])
-    still = _priors(rng)._replace(walking_evidence=0.0)
+    # flip prior 0.1: with 0.3, a camera behind one hypothesis weighs 0.7 against 0.7 (no evidence)
+    still = _priors(rng)._replace(walking_evidence=0.0, flip_prior=0.1)
     for has_camera in (False, True):
         view = _view(rng, scene, True, has_camera)
         fields = scene.table.hit_fields()

@@ -21,7 +21,12 @@ from __future__ import annotations
 import numpy as np
 from tracker_reference_association import vector_norm
 
-from hiros_tracker.facing import DOUBT_LIMIT
+from hiros_tracker.facing import (
+    CLEAR_CONTRADICTION,
+    CONTRADICTING_VIEWS,
+    DOUBT_LIMIT,
+    VERDICT_LIFETIME_S,
+)
 from hiros_tracker.kernel_args import (
     FacingBody,
     FacingPriors,
@@ -333,13 +338,13 @@ def facing_evidence(  # noqa: PLR0917 - the kernel's inputs
     body: FacingBody,
     priors: FacingPriors,
 ) -> tuple[np.ndarray, np.ndarray]:
-    """``_facing_evidence``: ``(U,)`` log-odds each detection gives, ``(U,)`` doubt steps.
+    """``_facing_evidence``: ``(U,)`` log-odds each detection's view gives, ``(U,)`` its walk's.
 
     A front or forward that cannot be computed (no forward pointer seen, an unknown up) gives
     no view evidence: the detection cannot look flipped or not.
     """
-    evidence = np.zeros(len(rows))
-    doubt_step = np.zeros(len(rows))
+    views = np.zeros(len(rows))
+    walks = np.zeros(len(rows))
     for u, r in enumerate(rows):
         pose = tracks.positions[r]
         across = pose[body.left].sum(axis=0) - pose[body.right].sum(axis=0)
@@ -353,11 +358,26 @@ def facing_evidence(  # noqa: PLR0917 - the kernel's inputs
         if not np.isfinite(agreement):
             value = 0.0
         walk = walking(tracks.velocity[r], front, up, priors)
-        if walk < 0.0 and np.isfinite(value):
-            doubt_step[u] = -value
-        value += walk
-        evidence[u] = value if np.isfinite(value) else 0.0
-    return evidence, doubt_step
+        views[u] = np.nan_to_num(value, nan=0.0, posinf=0.0, neginf=0.0)
+        walks[u] = np.nan_to_num(walk, nan=0.0, posinf=0.0, neginf=0.0)
+    return views, walks
+
+
+def doubt_step(
+    tracks: TrackFields, r: int, view: FacingView, evidence: float, walk: float
+) -> float:
+    """``_doubt_step``: the run's step (0: it ends), the camera's verdict recorded."""
+    if view.camera < tracks.camera_verdicts.shape[1]:
+        tracks.camera_verdicts[r, view.camera] = evidence
+        tracks.camera_verdicts_ns[r, view.camera] = view.stamp_ns
+    if walk:
+        return -evidence if walk < 0 else 0.0
+    age = (view.stamp_ns - tracks.camera_verdicts_ns[r]) * 1e-9
+    recent = tracks.camera_verdicts[r][age <= VERDICT_LIFETIME_S]
+    clear = np.count_nonzero(recent < -CLEAR_CONTRADICTION)
+    if np.any(recent > 0.0) or clear < CONTRADICTING_VIEWS:
+        return 0.0
+    return -evidence
 
 
 def reference_turn_facing(  # noqa: PLR0917 - the kernel's inputs
@@ -370,20 +390,23 @@ def reference_turn_facing(  # noqa: PLR0917 - the kernel's inputs
 ) -> np.ndarray:
     """``turn_facing``: the tracks' facing log-odds weighed, reversed ones relabelled (in place)."""
     up = update_up(view.up, tracks.positions, rows, body)
-    evidence, doubt_step = facing_evidence(tracks, rows, canonical, up, view, body, priors)
+    views, walks = facing_evidence(tracks, rows, canonical, up, view, body, priors)
     turned = np.zeros(len(rows), dtype=bool)
     for u, r in enumerate(rows):
         elapsed = max(view.stamp_ns - tracks.facing_ns[r], 0) * 1e-9
-        tracks.facing[r] = tracks.facing[r] * np.exp(-elapsed / priors.facing_memory) + evidence[u]
+        memory = priors.facing_memory if walks[u] else priors.facing_memory_standing
+        fade = np.exp(-elapsed / memory)
+        tracks.facing[r] = tracks.facing[r] * fade + views[u] + walks[u]
         tracks.facing_ns[r] = view.stamp_ns
-        step = doubt_step[u]
-        tracks.doubt[r] = max(tracks.doubt[r] + step, 0.0) if step != 0.0 else 0.0
+        step = doubt_step(tracks, r, view, views[u], walks[u])
+        tracks.doubt[r] = 0.0 if step == 0.0 else max(tracks.doubt[r] + step, 0.0)
         if tracks.doubt[r] > DOUBT_LIMIT:
             tracks.facing[r] = min(tracks.facing[r], -priors.facing_threshold - 1.0)
         if tracks.facing[r] < -priors.facing_threshold:
             reference_relabel(tracks, r, body.mirror)
             tracks.sides[r] = -tracks.sides[r]
             tracks.camera_sides[r] = -tracks.camera_sides[r]
+            tracks.camera_verdicts[r] = -tracks.camera_verdicts[r]
             tracks.facing[r] = -tracks.facing[r]
             tracks.doubt[r] = 0.0
             turned[u] = True
