@@ -34,6 +34,8 @@ __all__ = ["load_truth", "save_truth", "write_recording"]
 TRUTH_FILE = "truth.npz"
 CALIBRATION_FILE = "calibration.yaml"
 RECORDING_FILE = "recording.mcap"
+BAG_METADATA_FILE = "metadata.yaml"
+"""rosbag2's description of the recording, beside it: the folder opens as a bag."""
 
 
 def save_truth(result: SimResult, out_dir: str | Path) -> Path:
@@ -69,9 +71,8 @@ def save_truth(result: SimResult, out_dir: str | Path) -> Path:
 def write_recording(result: SimResult, out_dir: str | Path) -> Path:
     """Write the recording (MCAP), the truth and the calibration into ``out_dir``.
 
-    An existing ``recording.mcap`` in the folder is replaced.
-
-    An existing ``recording.mcap`` in the folder is replaced.
+    Beside ``recording.mcap`` goes rosbag2's ``metadata.yaml``, so that the folder itself opens
+    as a bag. An existing recording (and its ``metadata.yaml``) in the folder is replaced.
 
     Raises:
         RecordingError: the folder cannot be written.
@@ -82,8 +83,8 @@ def write_recording(result: SimResult, out_dir: str | Path) -> Path:
 
     out = save_truth(result, out_dir)
     recording = out / RECORDING_FILE
-    if recording.exists():
-        recording.unlink()
+    for old in (recording, out / BAG_METADATA_FILE):
+        old.unlink(missing_ok=True)
     # one time-ordered stream across cameras, by arrival at the recorder
     entries = [
         (int(receive), name, k)
@@ -91,7 +92,7 @@ def write_recording(result: SimResult, out_dir: str | Path) -> Path:
         for k, receive in enumerate(result.receive_ns[name][: len(groups)])
     ]
     entries.sort()
-    with RecordingWriter(recording) as writer:
+    with RecordingWriter(recording, bag_metadata=True) as writer:
         for receive, name, k in entries:
             data = group_to_driver_markers(result.camera_groups[name][k])
             writer.write_marker_array(f"/{name}/body_tracking_data", data, receive)

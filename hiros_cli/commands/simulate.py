@@ -6,8 +6,10 @@ frame rate. Each camera reports what its body-tracking SDK would: noisy joints (
 Azure Kinect vs Xsens take), occluded joints with low confidence, front/back flips, left/right
 swaps, ghost bodies and changing body ids.
 
-DIR receives recording.mcap (Azure-driver topics /<cam>/body_tracking_data), truth.npz (world
-joints of each person at the mocap rate) and calibration.yaml (true camera poses and clocks).
+DIR receives recording.mcap (Azure-driver topics /<cam>/body_tracking_data) with rosbag2's
+metadata.yaml (DIR itself opens as a bag: hiros calibrate DIR, ros2 bag info DIR), truth.npz
+(world joints of each person at the mocap rate) and calibration.yaml (true camera poses and
+clocks).
 
 Examples:
   hiros simulate --out sim                      # 3 cameras, 2 people, 60 s
@@ -43,7 +45,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--force",
         action="store_true",
         help="replace an existing --out, only if it holds nothing but an earlier simulation's "
-        "files (recording.mcap, truth.npz, calibration.yaml)",
+        "files (recording.mcap, metadata.yaml, truth.npz, calibration.yaml)",
     )
     from hiros_sim.presets import PRESETS
 
@@ -177,7 +179,7 @@ def _fit_noise() -> int:
     return 0
 
 
-SIMULATION_FILES = ("recording.mcap", "truth.npz", "calibration.yaml")
+SIMULATION_FILES = ("recording.mcap", "metadata.yaml", "truth.npz", "calibration.yaml")
 """What a simulation folder holds: all that ``--force`` may replace."""
 
 

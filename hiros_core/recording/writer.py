@@ -113,6 +113,9 @@ class RecordingWriter:
         discard_on_error: as a context manager, delete the recording (:meth:`discard`) when
             the block or the closing fails with an error, so that a failed run or conversion
             leaves no half-written output to pass for one; an interrupt (Ctrl-C) keeps it.
+        bag_metadata: for one ``.mcap`` file, also write rosbag2's ``metadata.yaml`` beside
+            it, so that its folder opens as a bag (``hiros simulate``'s folder, where the
+            recording lies beside its truth).
 
     Raises:
         RecordingError: the path exists already or cannot be written.
@@ -132,17 +135,23 @@ class RecordingWriter:
         chunk_size: int = 4 << 20,
         level: int = ZSTD_LEVEL,
         discard_on_error: bool = False,
+        bag_metadata: bool = False,
     ) -> None:
         self.path = Path(path)
         self.discard_on_error = discard_on_error
-        if self.path.exists():
-            msg = f"{self.path} exists already; choose a new recording path"
-            raise RecordingError(msg)
         self.folder: Path | None = None
         file_path = self.path
         if self.path.suffix != ".mcap":
             self.folder = self.path
             file_path = self.path / f"{self.path.name}_0.mcap"
+        self.metadata_path: Path | None = None
+        """Where ``metadata.yaml`` is written (a folder's, or beside a file with bag_metadata)."""
+        if self.folder is not None or bag_metadata:
+            self.metadata_path = file_path.parent / "metadata.yaml"
+        for taken in (self.path, self.metadata_path):
+            if taken is not None and taken.exists():
+                msg = f"{taken} exists already; choose a new recording path"
+                raise RecordingError(msg)
         if compression.lower() not in COMPRESSIONS:
             msg = f"unknown MCAP compression {compression!r}: use zstd, lz4 or none"
             raise RecordingError(msg)
@@ -276,7 +285,7 @@ class RecordingWriter:
         self.write(topic, MARKER_ARRAY, encode_marker_array(data), log_time_ns)
 
     def close(self) -> None:
-        """Finish the file (summary, indexes) and, for a folder, write ``metadata.yaml``."""
+        """Finish the file (summary, indexes) and write ``metadata.yaml`` where one is kept."""
         if self.closed:
             return
         if self._initial:
@@ -294,21 +303,22 @@ class RecordingWriter:
             raise
         finally:
             self._stream.close()
-        if self.folder is not None:
+        if self.metadata_path is not None:
             info = {"rosbag2_bagfile_information": self._bag_info()}
-            (self.folder / "metadata.yaml").write_text(yaml.safe_dump(info, sort_keys=False))
+            self.metadata_path.write_text(yaml.safe_dump(info, sort_keys=False))
 
     def discard(self) -> None:
         """Close and delete the recording: the output of a failed run must not pass for one.
 
-        Only what this writer created goes (its MCAP file, and for a folder its
-        ``metadata.yaml`` and the folder once empty).
+        Only what this writer created goes (its MCAP file, its ``metadata.yaml`` and a folder
+        it made once empty).
         """
         with contextlib.suppress(Exception):  # the file goes anyway
             self.close()
         self.file_path.unlink(missing_ok=True)
+        if self.metadata_path is not None:
+            self.metadata_path.unlink(missing_ok=True)
         if self.folder is not None:
-            (self.folder / "metadata.yaml").unlink(missing_ok=True)
             with contextlib.suppress(OSError):  # not empty: something else was put there
                 self.folder.rmdir()
 

@@ -40,6 +40,28 @@ def test_recording_round_trip(small, tmp_path):
                 np.testing.assert_allclose(b.confidences(), a.confidences(), atol=1e-12)
 
 
+def test_the_folder_opens_as_a_rosbag2_bag(small, tmp_path):
+    # rosbag2's own layout: metadata.yaml lists the file beside it, so that a bag reader (and
+    # hiros calibrate DIR, without a warning) takes the folder for what it is
+    from rosbags.rosbag2 import Reader
+
+    write_recording(small, tmp_path)
+    with RecordingReader(tmp_path / "recording.mcap") as reader:
+        count = sum(1 for _ in reader)
+    with Reader(tmp_path) as bag:
+        assert bag.message_count == count
+        assert {c.topic for c in bag.connections} == {
+            "/k01/body_tracking_data",
+            "/k02/body_tracking_data",
+        }
+    with RecordingReader(tmp_path) as reader:
+        assert reader.problems == []
+        assert sum(1 for _ in reader) == count
+    write_recording(small, tmp_path)  # replaced, metadata.yaml with it
+    with Reader(tmp_path) as bag:
+        assert bag.message_count == count
+
+
 def test_truth_and_calibration_files(small, tmp_path):
     save_truth(small, tmp_path)
     truth = load_truth(tmp_path)
