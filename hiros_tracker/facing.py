@@ -282,7 +282,8 @@ def turn_facing(  # noqa: PLR0917 - the tracks, the frame's pairs, the view, bod
     or ``facing_memory_standing`` for a track without walking evidence); its doubt
     (``DOUBT_LIMIT``) past the limit sets them below the threshold. Below
     ``-facing_threshold`` the track is relabelled with ``body.mirror`` (all parts,
-    ``relabel``), its log-odds and held left-right axes (its own and its cameras') negated.
+    ``relabel``), its log-odds, held left-right axes (its own and its cameras') and its
+    cameras' verdicts negated.
     ``tracks`` changes in place, and ``view.up`` too (``_update_up``, before the evidence).
 
     Returns:
