@@ -4,10 +4,12 @@ A link's length is *learnt* once it is measured in at least ``MIN_LINK_PRESENCE`
 ``N`` frames and its robust coefficient of variation (``1.4826 MAD / median``) over them is
 below ``max_calibration_coefficient_of_variation`` (Hi-ROS's acceptance rule, per link and with
 robust statistics so that a few bad frames do not spoil it). Each link locks on its own: a
-noisy hand or an unseen thumb keeps only itself free, never a thigh. A person is *accepted*
-once the links of their limbs (upper arms, forearms, thighs, shanks: what joint angles are
-made of) are learnt; how long that took from the person's first frame is their acceptance
-time, and a person not accepted within ``acceptance_timeout`` is reported with the reason of
+noisy hand or an unseen thumb keeps only itself free, never a thigh. A limb link not learnt
+while its mirror on the other side is takes that one's length for now (*borrowed*), until
+its own is learnt. A person is *accepted* once the links of their limbs (upper arms,
+forearms, thighs, shanks: what joint angles are made of) are learnt or borrowed; how long
+that took from the person's first frame is their acceptance time, and a person not
+accepted within ``acceptance_timeout`` is reported with the reason of
 each limb link still free. Once a person is accepted, every link measured often enough is
 locked too, steady or not: a steady body vouches for the measurement, and a noisy link's
 median over the window is still a good length (its standard error shrinks with the window;
@@ -105,6 +107,7 @@ class PersonProgress:
         free: ``(J,)`` links not learnt yet, by link id (None: no full window yet).
         presence: ``(J,)`` share of the last full window each link was measured in.
         variation: ``(J,)`` robust CV of each link over that window.
+        borrowed: ``(J,)`` limb links whose length is the other side's for now.
 
     """
 
@@ -115,6 +118,7 @@ class PersonProgress:
     free: np.ndarray | None = None
     presence: np.ndarray | None = None
     variation: np.ndarray | None = None
+    borrowed: np.ndarray | None = None
 
     @property
     def acceptance_time(self) -> float | None:
@@ -128,9 +132,16 @@ class PersonProgress:
         """Seconds from the first frame to the latest."""
         return (max(self.last_ns, self.first_ns) - self.first_ns) * 1e-9
 
-    def observe(self, statistics: WindowStatistics, row: int, free: np.ndarray) -> None:
-        """Keep window ``row``'s figures and the ``(J,)`` links still ``free`` after it."""
+    def observe(
+        self,
+        statistics: WindowStatistics,
+        row: int,
+        free: np.ndarray,
+        borrowed: np.ndarray | None = None,
+    ) -> None:
+        """Keep window ``row``'s figures, the ``(J,)`` links still ``free`` and ``borrowed``."""
         self.free = free
+        self.borrowed = borrowed
         self.presence = statistics.presence[row]
         self.variation = statistics.variation[row]
 
@@ -165,6 +176,9 @@ class PersonProgress:
             text = f"not accepted after {self.seen_for:.1f} s: {blocking}"
         if others:
             text += f" (free: {', '.join(others)})"
+        if self.borrowed is not None and self.borrowed.any():
+            names = ", ".join(sorted(layout.link_names[i] for i in np.flatnonzero(self.borrowed)))
+            text += f" (the other side's length for now: {names})"
         return text
 
 

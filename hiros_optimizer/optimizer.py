@@ -6,9 +6,12 @@ link measured in at least ``MIN_LINK_PRESENCE`` of them whose robust coefficient
 (``1.4826 MAD / median``) is below ``max_calibration_coefficient_of_variation`` is learnt, and
 from then on constrained to its (unbiased) median. Links not learnt yet keep learning from the
 raw measurements and follow them meanwhile, so chronically noisy or unseen short links (hand
-tips, thumbs, the 7 cm pelvis-hip links) stay free without keeping a thigh free. A person is
-accepted once their limb links are learnt; the time that took, or what keeps a person from it
-past ``acceptance_timeout``, is reported (:meth:`Optimizer.people`, :meth:`Optimizer.report`).
+tips, thumbs, the 7 cm pelvis-hip links) stay free without keeping a thigh free. A limb link
+not learnt whose mirror link is borrows that one's length until its own is learnt
+(``_borrow_from_mirrors``): a shank below both cameras' views, or a forearm a noisy SDK
+jitters, no longer keeps its person unconstrained. A person is accepted once their limb
+links are learnt or borrowed; the time that took, or what keeps a person from it past
+``acceptance_timeout``, is reported (:meth:`Optimizer.people`, :meth:`Optimizer.report`).
 Until a first link is learnt the person passes through unchanged.
 
 Once a link is constrained, each frame's joints are replaced by the positions closest to the
@@ -138,6 +141,8 @@ class PersonCalibration:
         variation: ``(J,)`` robust coefficient of variation seen during calibration (NaN if
             unknown, e.g. loaded without it).
         n_frames: frames the lengths were learnt from.
+        borrowed: ``(J,)`` limb links whose length is their mirror link's (the other side's),
+            until their own is learnt (None: none).
 
     """
 
@@ -145,14 +150,25 @@ class PersonCalibration:
     lengths: np.ndarray
     variation: np.ndarray
     n_frames: int = 0
+    borrowed: np.ndarray | None = None
+
+    def __post_init__(self) -> None:
+        if self.borrowed is None:
+            self.borrowed = np.zeros(len(self.lengths), dtype=bool)
 
     def to_dict(self) -> dict[str, Any]:
-        """Plain types for YAML: links by name, ``{length, cv}`` in metres and as a fraction."""
+        """Plain types for YAML: links by name, ``{length, cv}`` in metres and as a fraction.
+
+        A borrowed link's entry says so (``borrowed: true``), so that a loaded calibration goes
+        on learning it.
+        """
         links = {}
         for link_id in np.flatnonzero(np.isfinite(self.lengths)):
-            entry = {"length": round(float(self.lengths[link_id]), 6)}
+            entry: dict[str, Any] = {"length": round(float(self.lengths[link_id]), 6)}
             if np.isfinite(self.variation[link_id]):
                 entry["cv"] = round(float(self.variation[link_id]), 6)
+            if self.borrowed[link_id]:
+                entry["borrowed"] = True
             links[self.layout.link_names[link_id]] = entry
         return {"layout": self.layout.name, "n_frames": int(self.n_frames), "links": links}
 
@@ -166,6 +182,7 @@ class PersonCalibration:
         names = {name: i for i, name in enumerate(layout.link_names) if name}
         lengths = np.full(layout.n_joints, np.nan)
         variation = np.full(layout.n_joints, np.nan)
+        borrowed = np.zeros(layout.n_joints, dtype=bool)
         for name, entry in data["links"].items():
             if name not in names:
                 msg = f"link {name!r} is not a link of layout {layout.name!r}"
@@ -182,7 +199,8 @@ class PersonCalibration:
             lengths[names[name]] = length
             if isinstance(entry, dict) and entry.get("cv") is not None:
                 variation[names[name]] = float(entry["cv"])
-        return cls(layout, lengths, variation, int(data.get("n_frames", 0)))
+            borrowed[names[name]] = isinstance(entry, dict) and entry.get("borrowed") is True
+        return cls(layout, lengths, variation, int(data.get("n_frames", 0)), borrowed)
 
 
 @dataclass
@@ -202,7 +220,12 @@ class _Track:
         """Take ``calibration`` (None: learn again from scratch); accepted at ``stamp_ns``."""
         self.calibration = calibration
         lengths = None if calibration is None else calibration.lengths
-        self.learning = lengths is None or bool(np.isnan(lengths[self.layout.link_children]).any())
+        links = self.layout.link_children
+        self.learning = (
+            calibration is None
+            or bool(np.isnan(calibration.lengths[links]).any())
+            or bool(calibration.borrowed[links].any())  # type: ignore[index]
+        )
         accepted = lengths is not None and bool(np.isfinite(lengths[limb_links(self.layout)]).all())
         if not accepted:
             self.progress.accepted_ns = None
@@ -522,26 +545,51 @@ class Optimizer(Accounted):
         for row, item in enumerate(due):
             track = item.track
             old = track.calibration
-            known = (
-                np.zeros(layout.n_joints, dtype=bool) if old is None else np.isfinite(old.lengths)
-            )
+            none = np.zeros(layout.n_joints, dtype=bool)
+            known = none if old is None else np.isfinite(old.lengths)
+            was_borrowed = none if old is None else old.borrowed
+            own = known & ~was_borrowed  # type: ignore[operator]
             kept = np.full(layout.n_joints, np.nan) if old is None else old.lengths
             steady = np.where(statistics.learnt[row], statistics.lengths[row], np.nan)
-            lengths = np.where(known, kept, steady)
+            lengths = np.where(own, kept, steady)  # a borrowed link's own length replaces it
+            lengths, borrowed = _borrow_from_mirrors(lengths, layout)
             if np.isfinite(lengths[limbs]).all():  # accepted: every link seen often enough
-                lengths = np.where(known, kept, statistics.lengths[row])
+                lengths = np.where(np.isfinite(lengths), lengths, statistics.lengths[row])
             variation = statistics.variation[row]
             if old is not None:
-                variation = np.where(known, old.variation, variation)
+                variation = np.where(own, old.variation, variation)
             free = np.zeros(layout.n_joints, dtype=bool)
             free[links] = np.isnan(lengths[links])
-            track.progress.observe(statistics, row, free)
-            if np.array_equal(np.isfinite(lengths), known):
+            track.progress.observe(statistics, row, free, borrowed)
+            if np.array_equal(np.isfinite(lengths), known) and np.array_equal(
+                borrowed, was_borrowed
+            ):
                 continue  # nothing new learnt
-            calibration = PersonCalibration(layout, lengths, variation, memory.window.shape[2])
+            calibration = PersonCalibration(
+                layout, lengths, variation, memory.window.shape[2], borrowed
+            )
             track.adopt(calibration, item.skeleton.src_time_ns)
             self.calibrations[item.track_id] = calibration
             self.new_calibrations.append(item.track_id)
+
+
+def _borrow_from_mirrors(lengths: np.ndarray, layout: Layout) -> tuple[np.ndarray, np.ndarray]:
+    """Limb links not learnt take their mirror link's own length; ``(J,)`` and which did.
+
+    A person's left and right limbs are alike in length (long bones differ by about a
+    centimetre in healthy adults), whereas a limb a camera pair never sees whole (a shank
+    below both views), or sees only through a noisy SDK's jitter, may not be learnt for many
+    seconds. Borrowed, it is constrained at once and its person accepted; its own length
+    replaces the borrowed one once learnt, so a real difference between the sides shows.
+    """
+    limbs = limb_links(layout)
+    mirrors = np.asarray(layout.mirror)[limbs]
+    take = np.isnan(lengths[limbs]) & np.isfinite(lengths[mirrors])
+    out = lengths.copy()
+    out[limbs[take]] = lengths[mirrors[take]]
+    borrowed = np.zeros(len(lengths), dtype=bool)
+    borrowed[limbs[take]] = True
+    return out, borrowed
 
 
 @lru_cache(maxsize=1)

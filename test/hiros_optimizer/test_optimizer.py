@@ -317,22 +317,58 @@ def test_noisy_short_links_do_not_keep_a_person_from_acceptance(noisy_people, ru
     np.testing.assert_allclose(link_lengths(after, PARENTS)[:, 1:], np.tile(lengths[1:], (60, 1)))
 
 
-def test_an_unsteady_limb_stays_free_while_the_other_links_lock(noisy_people, run):
+def shaken(positions, joints, scale, seed):
+    """``positions`` with ``joints`` jittered by ``scale`` m per axis: links far from steady."""
+    rng = np.random.default_rng(seed)
+    shaky = positions.copy()
+    shaky[:, joints] += scale * rng.standard_normal((len(shaky), len(joints), 3))
+    return shaky
+
+
+def test_limbs_unsteady_on_both_sides_stay_free_while_the_other_links_lock(noisy_people, run):
     _, measured, true_lengths = noisy_people
-    rng = np.random.default_rng(4)
-    shaky = measured[0].copy()
-    thigh, shank = AZURE_KINECT.index("KneeLeft"), AZURE_KINECT.index("AnkleLeft")
-    scale = 0.5 * true_lengths[0][[thigh, shank]].max()  # the knee: both its links unsteady
-    shaky[:, thigh] += scale * rng.standard_normal((len(shaky), 3))
+    knees = [AZURE_KINECT.index("KneeLeft"), AZURE_KINECT.index("KneeRight")]
+    legs = [*knees, AZURE_KINECT.index("AnkleLeft"), AZURE_KINECT.index("AnkleRight")]
+    shaky = shaken(measured[0], knees, 0.5 * true_lengths[0][legs].max(), seed=4)
     optimizer = small_optimizer()
     run(optimizer, [shaky], 45)
     lengths = optimizer.calibrations[0].lengths
-    assert np.isnan(lengths[[thigh, shank]]).all()
-    assert np.isfinite(np.delete(lengths, [0, thigh, shank])).all()
+    assert np.isnan(lengths[legs]).all()
+    assert np.isfinite(np.delete(lengths, [0, *legs])).all()
     assert optimizer.people()[0].accepted_ns is None
     report = optimizer.report()[0]
     assert report.startswith("not accepted after 1.5 s: HipLeft-KneeLeft unsteady (CV ")
-    assert "KneeLeft-AnkleLeft unsteady" in report
+    assert "KneeRight-AnkleRight unsteady" in report
+
+
+def test_an_unsteady_limb_takes_the_other_sides_length_until_its_own_is_learnt(moving_person, run):
+    """The left knee jitters for 1.5 s: the left thigh and shank borrow the right ones'
+    lengths (the fixture's sides differ, as a real person's may), the person is accepted at
+    the first full window, and once the knee is steady the left links take their own."""
+    positions, true_lengths = moving_person(180, seed=1)
+    knee, ankle = AZURE_KINECT.index("KneeLeft"), AZURE_KINECT.index("AnkleLeft")
+    right = [AZURE_KINECT.index("KneeRight"), AZURE_KINECT.index("AnkleRight")]
+    shaky = shaken(positions, [knee], 0.5 * true_lengths[[knee, ankle]].max(), seed=4)
+    shaky[45:] = positions[45:]
+    optimizer = small_optimizer()
+    run(optimizer, [shaky], 45)
+    calibration = optimizer.calibrations[0]
+    np.testing.assert_allclose(calibration.lengths[[knee, ankle]], calibration.lengths[right])
+    assert calibration.borrowed[[knee, ankle]].all()
+    assert calibration.borrowed.sum() == 2
+    assert optimizer.people()[0].acceptance_time == pytest.approx((FRAMES - 1) / 30)
+    assert optimizer.report()[0] == (
+        "accepted after 1.0 s (the other side's length for now: HipLeft-KneeLeft, "
+        "KneeLeft-AnkleLeft)"
+    )
+    assert PersonCalibration.from_dict(calibration.to_dict()).borrowed[[knee, ankle]].all()
+    run(optimizer, [shaky], 135, start=45)
+    calibration = optimizer.calibrations[0]
+    own = true_lengths[[knee, ankle]]
+    assert (np.abs(own / true_lengths[right] - 1) > 0.05).all()  # the sides differ
+    np.testing.assert_allclose(calibration.lengths[[knee, ankle]], own, rtol=0.02)
+    assert not calibration.borrowed.any()
+    assert optimizer.report()[0] == "accepted after 1.0 s"
 
 
 def test_hands_never_seen_still_give_constrained_legs(noisy_people, run):
@@ -350,11 +386,12 @@ def test_hands_never_seen_still_give_constrained_legs(noisy_people, run):
 
 
 def test_a_person_who_never_qualifies_is_reported(noisy_people, run):
-    """The left arm never seen: the legs lock, the person is reported once past the timeout."""
+    """Neither arm ever seen: the legs lock, the person is reported once past the timeout."""
     _, measured, _ = noisy_people
     armless = measured[0].copy()
-    elbow, right = AZURE_KINECT.index("ElbowLeft"), AZURE_KINECT.index("ClavicleRight")
-    armless[:, elbow:right] = np.nan  # elbow to thumb, left
+    elbows = [AZURE_KINECT.index("ElbowLeft"), AZURE_KINECT.index("ElbowRight")]
+    armless[:, elbows[0] : elbows[0] + 5] = np.nan  # elbow to thumb, left
+    armless[:, elbows[1] : elbows[1] + 5] = np.nan  # and right
     optimizer = small_optimizer(acceptance_timeout=1.5)
     overdue = []
     for frame in range(60):
@@ -367,8 +404,11 @@ def test_a_person_who_never_qualifies_is_reported(noisy_people, run):
     report = optimizer.report()[0]
     assert report == (
         "not accepted after 2.0 s: ElbowLeft-WristLeft seen in 0 % of frames; "
-        "ShoulderLeft-ElbowLeft seen in 0 % of frames "
-        "(free: HandLeft-HandTipLeft, WristLeft-HandLeft, WristLeft-ThumbLeft)"
+        "ElbowRight-WristRight seen in 0 % of frames; "
+        "ShoulderLeft-ElbowLeft seen in 0 % of frames; "
+        "ShoulderRight-ElbowRight seen in 0 % of frames "
+        "(free: HandLeft-HandTipLeft, HandRight-HandTipRight, WristLeft-HandLeft, "
+        "WristLeft-ThumbLeft, WristRight-HandRight, WristRight-ThumbRight)"
     )
     assert optimizer.diagnostics() == {"person.0": report}
 
