@@ -26,6 +26,7 @@ from pathlib import Path
 from hiros_core.errors import OutputError
 
 __all__ = [
+    "BAG_METADATA",
     "STAGING_PREFIX",
     "check_output",
     "is_calibration_file",
@@ -42,6 +43,9 @@ _MCAP_MAGIC = b"\x89MCAP0\r\n"
 _HEADER_OPCODE = 0x01
 _MAX_CALIBRATION_BYTES = 1 << 20
 """A calibration file larger than this is not one ``hiros calibrate`` wrote (they are ~4 KB)."""
+
+BAG_METADATA = "metadata.yaml"
+"""The file rosbag2 describes a bag folder in, beside its MCAP files."""
 
 
 def _resolved(path: Path) -> Path:
@@ -191,7 +195,7 @@ def is_hiros_recording(path: Path) -> bool:
     """
     if path.is_dir():
         mcap = path / f"{path.name}_0.mcap"
-        return only_holds(path, {mcap.name, "metadata.yaml"}) and is_hiros_recording(mcap)
+        return only_holds(path, {mcap.name, BAG_METADATA}) and is_hiros_recording(mcap)
     if not path.is_file() or path.is_symlink():
         return False
     try:

@@ -27,6 +27,7 @@ import numpy as np
 
 from hiros_core.calibration import save_calibration
 from hiros_core.errors import RecordingError
+from hiros_core.outputs import BAG_METADATA
 from hiros_sim.simulate import SimResult, Truth
 
 __all__ = ["load_truth", "save_truth", "write_recording"]
@@ -34,8 +35,6 @@ __all__ = ["load_truth", "save_truth", "write_recording"]
 TRUTH_FILE = "truth.npz"
 CALIBRATION_FILE = "calibration.yaml"
 RECORDING_FILE = "recording.mcap"
-BAG_METADATA_FILE = "metadata.yaml"
-"""rosbag2's description of the recording, beside it: the folder opens as a bag."""
 
 
 def save_truth(result: SimResult, out_dir: str | Path) -> Path:
@@ -83,7 +82,7 @@ def write_recording(result: SimResult, out_dir: str | Path) -> Path:
 
     out = save_truth(result, out_dir)
     recording = out / RECORDING_FILE
-    for old in (recording, out / BAG_METADATA_FILE):
+    for old in (recording, out / BAG_METADATA):
         old.unlink(missing_ok=True)
     # one time-ordered stream across cameras, by arrival at the recorder
     entries = [

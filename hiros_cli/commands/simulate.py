@@ -29,7 +29,7 @@ from dataclasses import replace
 from pathlib import Path
 
 from hiros_core.errors import ConfigError
-from hiros_core.outputs import staged_output
+from hiros_core.outputs import BAG_METADATA, staged_output
 
 HELP = "semi-synthetic multi-camera recording from real mocap, with the truth"
 
@@ -179,7 +179,7 @@ def _fit_noise() -> int:
     return 0
 
 
-SIMULATION_FILES = ("recording.mcap", "metadata.yaml", "truth.npz", "calibration.yaml")
+SIMULATION_FILES = ("recording.mcap", BAG_METADATA, "truth.npz", "calibration.yaml")
 """What a simulation folder holds: all that ``--force`` may replace."""
 
 

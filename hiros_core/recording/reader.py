@@ -30,6 +30,7 @@ from pathlib import Path
 from types import TracebackType
 
 from hiros_core.errors import RecordingError
+from hiros_core.outputs import BAG_METADATA
 from hiros_core.recording.mcap_source import McapSource
 from hiros_core.recording.messages import MessageBatch, RecordedMessage, Source, batched
 from hiros_core.recording.rosbags_source import REINDEX, RosbagsSource
@@ -48,7 +49,7 @@ _MAX_METADATA_BYTES = 8 << 20
 
 def _folder_sources(path: Path, drops: Counter[str], problems: list[str]) -> list[Source]:
     """The sources of a rosbag2 folder, with or without its ``metadata.yaml``."""
-    metadata = path / "metadata.yaml"
+    metadata = path / BAG_METADATA
     files: list[Path] = []
     storage = ""
     if metadata.is_file():

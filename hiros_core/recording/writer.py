@@ -24,6 +24,7 @@ import numpy as np
 import yaml
 
 from hiros_core.errors import RecordingError
+from hiros_core.outputs import BAG_METADATA
 from hiros_core.recording.mcap_out import COMPRESSIONS, ZSTD_LEVEL, McapWriter
 from hiros_core.recording.msgdefs import message_definition, normalize_msgtype, type_hash
 
@@ -147,7 +148,7 @@ class RecordingWriter:
         self.metadata_path: Path | None = None
         """Where ``metadata.yaml`` is written (a folder's, or beside a file with bag_metadata)."""
         if self.folder is not None or bag_metadata:
-            self.metadata_path = file_path.parent / "metadata.yaml"
+            self.metadata_path = file_path.parent / BAG_METADATA
         for taken in (self.path, self.metadata_path):
             if taken is not None and taken.exists():
                 msg = f"{taken} exists already; choose a new recording path"
