@@ -66,6 +66,7 @@ def hit_frame(  # noqa: PLR0917 - the tracks, the frame, its pairs, view, layout
         tracks.camera_sides_ns,
         view.camera,
         view.stamp_ns,
+        tracks.facing,
     )
     canonical, flips = canonical_poses(
         frame.positions, dets, flips, layout.mirror, settings.align, layout.sides, held

@@ -107,6 +107,7 @@ class HeldSides(NamedTuple):
     camera_ns: np.ndarray  # (T, C) its stamp
     camera: int  # the frame's camera code
     stamp_ns: int  # the frame's stamp
+    facing: np.ndarray  # (T,) the tracks' log-odds that their sides are right (``facing``)
 
 
 class TrackFields(NamedTuple):

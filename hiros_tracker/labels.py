@@ -142,6 +142,12 @@ decides where the two point apart (a camera whose labels went wrong is put back)
 CAMERA_GAP = 0.2
 """Seconds within which a camera's last detection of a track still tells its next one's sides
 (``_reference_axis``): a few frames at 15-30 Hz; longer, the person may have turned."""
+CLEAR_AXIS = 0.25
+"""Metres of a detection's left-right axis (left shoulder and hip less the right ones) below
+which it counts less in its track's held axis, by ``(length / CLEAR_AXIS)^2``
+(``hold_axes``). An adult's measures about 0.5 m; a camera that sees the body from the side
+sees it along its depth, with the far shoulder and hip hidden, and SDKs then report it a
+few centimetres long, pointing anywhere."""
 
 
 @njit(cache=True, error_model="numpy")
@@ -189,16 +195,19 @@ def _reference_axis(held: HeldSides, r: int) -> np.ndarray:
     """``(3,)`` the left-right axis the detections of track ``r`` are held to.
 
     The track's held axis (``held.axes[r]``, ``hold_axes``) once it has one, else its pose's,
-    as a unit vector; plus ``CAMERA_WEIGHT`` times the unit axis of the frame's camera's last
-    detection of the track as labelled (``held.camera_axes``) when that is at most
-    ``CAMERA_GAP`` old. A person turns continuously in every camera's stream, whereas the
+    as a unit vector; plus ``CAMERA_WEIGHT`` times the clearness times the unit axis of the
+    frame's camera's last detection of the track as labelled (``held.camera_axes``) when that
+    is at most ``CAMERA_GAP`` old. A person turns continuously in every camera's stream, whereas the
     track's held axis, averaged over ``SIDE_MEMORY`` across cameras, lags a fast turn at the
     end of a walk far enough that correct detections would count as reversed and be
     relabelled into the mirror; the camera's own last axis has turned with the body, and
     its drifting bias is the same one frame later. With a weight under 1 the camera's axis
     wins unless the two point nearly opposite ways, so a camera whose labels went wrong is
     still put back by a track that disagrees with it outright; an SDK flip reverses the
-    detection against both.
+    detection against both. The camera's axis counts by its ``_clearness``: a camera that
+    saw the body side-on, its axis a few centimetres long and swinging, would otherwise carry
+    whatever labelling that noise reached into its next detections, correct ones included,
+    once it sees the body squarely again.
     """
     axis = held.axes[r]
     if axis[0] == 0.0 and axis[1] == 0.0 and axis[2] == 0.0:
@@ -211,8 +220,9 @@ def _reference_axis(held: HeldSides, r: int) -> np.ndarray:
     last_size = math.sqrt(np.sum(last * last))
     recent = (held.stamp_ns - held.camera_ns[r, held.camera]) * 1e-9 <= CAMERA_GAP
     if last_size > 0.0 and recent:
+        weight = CAMERA_WEIGHT * _clearness(last)
         for a in range(3):
-            reference[a] += CAMERA_WEIGHT * last[a] / last_size
+            reference[a] += weight * last[a] / last_size
     return reference
 
 
@@ -248,13 +258,15 @@ def hold_axes(
     SIDE_MEMORY)``, ``dt`` s since the axis last took a detection's (``_last_fold_ns``; the
     track's previous hit, ``last_hit_ns`` ``(T,)``, before any) and ``c`` how steady the
     detection's axis is in its camera's stream (``_steadiness``: the cosine with the
-    camera's last, at least 0): a detection that
-    continues its camera's counts fully, one that jumped across the body not at all. A
+    camera's last, at least 0) times how plainly it shows (``_clearness``): a detection that
+    continues its camera's counts fully, one that jumped across the body not at all, one seen
+    from the side, its axis a few centimetres long, hardly. A
     track without an axis yet (0) takes the detection's, and the axis is kept as its camera's
     last (``held.camera_axes``, ``_reference_axis``). A detection missing one of those joints
     adds nothing. Before that, a track walking faster than
     ``WALK_SPEED`` (its body velocity across the up, ``view.up``) has its axis pulled
-    towards that of a body facing where it walks (``_follow_walk``). ``held.axes`` and
+    towards that of a body facing where it walks (``_follow_walk``), unless it is sure of
+    its sides (``held.facing``) and faces away from its walk. ``held.axes`` and
     ``held.camera_axes`` change in place.
 
     The held axis is what the next detections' sides are held to (``_reference_axis``): the
@@ -268,7 +280,10 @@ def hold_axes(
     a few of them carried it far enough that the next detections, correct, counted as
     reversed. Weighed by the stream's steadiness instead of against the held axis itself,
     the axis still follows a fast turn (each camera's stream turns with the body), where
-    it would stall on its own lag.
+    it would stall on its own lag. A camera that sees the body side-on gives a steady stream
+    of axes a few centimetres long that swing anywhere; weighed whole, with the person
+    stepping back, they turned a right track's axis half round in 0.3 s while the other
+    cameras' detections (and the pose) did not turn (docs/stages-robustness.md, session 24).
     """
     upright = view.up[3] != 0.0
     for u in range(len(held.track_rows)):
@@ -280,9 +295,10 @@ def hold_axes(
         elapsed = max(view.stamp_ns - _last_fold_ns(held, r, last_hit_ns[r]), 0) * 1e-9
         keep = 0.0
         if known:
-            keep = math.exp(-elapsed * _steadiness(held, r, axis, view) / SIDE_MEMORY)
+            weight = _steadiness(held, r, axis, view) * _clearness(axis)
+            keep = math.exp(-elapsed * weight / SIDE_MEMORY)
         if known and upright:
-            _follow_walk(held.axes[r], held.velocity[r], view.up, elapsed)
+            _follow_walk(held.axes[r], held.velocity[r], view.up, elapsed, held.facing[r] > 0.0)
         for a in range(3):
             held.axes[r, a] = keep * held.axes[r, a] + (1.0 - keep) * axis[a]
         if view.camera < held.camera_axes.shape[1]:
@@ -325,13 +341,25 @@ def _steadiness(held: HeldSides, r: int, axis: np.ndarray, view: FacingView) -> 
 
 
 @njit(cache=True, error_model="numpy")
-def _follow_walk(axis: np.ndarray, velocity: np.ndarray, up: np.ndarray, elapsed: float) -> None:
+def _clearness(axis: np.ndarray) -> float:
+    """``min(1, (|axis| / CLEAR_AXIS)^2)``: how plainly a detection shows its left-right axis."""
+    size = math.sqrt(axis[0] * axis[0] + axis[1] * axis[1] + axis[2] * axis[2])
+    return min(1.0, (size / CLEAR_AXIS) ** 2)
+
+
+@njit(cache=True, error_model="numpy")
+def _follow_walk(
+    axis: np.ndarray, velocity: np.ndarray, up: np.ndarray, elapsed: float, sure: bool
+) -> None:
     """Pull ``axis`` ``(3,)`` towards the left-right axis of a body facing where it walks.
 
     With ``v`` the ``velocity`` ``(3,)`` across the unit ``up`` (the first three of ``up``),
     faster than ``WALK_SPEED``: ``axis <- k axis + (1 - k) |axis| unit(up x v)``, ``k =
     exp(-elapsed / WALK_MEMORY)`` (``up x forward`` is the left of a body facing forward).
-    In place; slower, unchanged.
+    In place; slower, unchanged. A track ``sure`` of its sides (facing log-odds above 0)
+    whose axis faces away from the walk (``axis · (up x v) <= 0``) is not pulled: people
+    step back and aside, and its cameras say which way it faces; a track in doubt is pulled
+    round, which puts a mirrored track walking forwards right.
     """
     normal = up[:3]
     flat = velocity - np.sum(velocity * normal) * normal
@@ -345,6 +373,8 @@ def _follow_walk(axis: np.ndarray, velocity: np.ndarray, up: np.ndarray, elapsed
             normal[0] * flat[1] - normal[1] * flat[0],
         ]
     )
+    if sure and np.sum(axis * left) <= 0.0:
+        return
     size = math.sqrt(np.sum(axis * axis)) / speed
     keep = math.exp(-elapsed / WALK_MEMORY)
     for a in range(3):

@@ -6,7 +6,7 @@ import pytest
 from hiros_core.layouts import AZURE_KINECT
 from hiros_tracker import kernels
 from hiros_tracker.kernel_args import FacingView, HeldSides, SideLayout
-from hiros_tracker.labels import SIDE_MEMORY, WALK_MEMORY, WALK_SPEED
+from hiros_tracker.labels import CLEAR_AXIS, SIDE_MEMORY, WALK_MEMORY, WALK_SPEED
 from hiros_tracker.tracker import _body_frame, _mirror_parts, _side_arrays
 
 _NO_CAMERA = (np.zeros((1, 1, 3)), np.zeros((1, 1), dtype=np.int64), 0, 0)
@@ -49,7 +49,14 @@ def _canonical(  # noqa: PLR0917 - the detection, its track and what the track h
         stamp = round(camera_age * 1e9)
         camera = (camera_axis[None, None].astype(float), np.zeros((1, 1), dtype=np.int64), 0, stamp)
     held = HeldSides(
-        track[None], axes, np.zeros((1, 3)), np.array([0]), frame.left, frame.right, *camera
+        track[None],
+        axes,
+        np.zeros((1, 3)),
+        np.array([0]),
+        frame.left,
+        frame.right,
+        *camera,
+        np.zeros(1),
     )
     _, flips = kernels.canonical_poses(
         detection[None],
@@ -133,6 +140,20 @@ def test_a_detection_that_goes_on_turning_with_its_camera_keeps_its_labels() -> 
     assert stale.all()  # the camera's axis of half a second before tells nothing
 
 
+@pytest.mark.parametrize(("length", "kept"), [(0.5, True), (0.05, False)])
+def test_a_side_views_short_axis_does_not_steer_its_cameras_next_detection(length, kept):
+    # The camera's last detection, labelled 115 deg off the held axis (left = +y): a clear
+    # one (0.5 m) had turned with the body, and the next, 130 deg off, keeps its labels; a
+    # side view's 5 cm axis says nothing, and the next detection is held to the track.
+    track = _standing()
+    detection = _turned(track, 130.0)
+    last = _axis(_turned(track, 115.0))
+    last *= length / np.linalg.norm(last)
+    flips = _canonical(detection, track, axis=np.array([0.0, 1.0, 0.0]), camera_axis=last)
+    assert (not flips.any()) == kept
+    assert flips.all() != kept
+
+
 def test_a_camera_whose_labels_went_wrong_is_held_to_the_track() -> None:
     # The camera's previous detection went into the track with its sides reversed (170 deg
     # off the held axis); its next one, as reversed, is relabelled all the same.
@@ -151,8 +172,11 @@ def test_a_cameras_last_axis_is_kept_and_turned_with_its_track() -> None:
     assert held.camera_ns[0, 0] == 7
 
 
-def _held(track: np.ndarray, velocity: tuple[float, float, float] = (0.0, 0.0, 0.0)) -> HeldSides:
-    """One track at ``track`` with no held axis yet, moving at ``velocity`` (m/s)."""
+def _held(
+    track: np.ndarray, velocity: tuple[float, float, float] = (0.0, 0.0, 0.0), facing: float = 0.0
+) -> HeldSides:
+    """One track at ``track`` with no held axis yet, moving at ``velocity`` (m/s), with
+    ``facing`` log-odds that its sides are right."""
     frame = _body_frame(AZURE_KINECT)
     velocities = np.array([velocity], dtype=float)
     return HeldSides(
@@ -166,6 +190,7 @@ def _held(track: np.ndarray, velocity: tuple[float, float, float] = (0.0, 0.0, 0
         np.zeros((1, 2), dtype=np.int64),
         0,
         0,
+        np.array([facing]),
     )
 
 
@@ -261,3 +286,42 @@ def test_a_walking_tracks_axis_turns_to_face_where_it_walks() -> None:
     keep = np.exp(-WALK_MEMORY / SIDE_MEMORY)
     expected = keep * walked + (1 - keep) * _axis(mirrored)
     assert held.axes[0] == pytest.approx(expected)
+
+
+@pytest.mark.parametrize(("facing", "pulled"), [(10.0, False), (0.0, True)])
+def test_a_track_sure_of_its_sides_is_not_turned_by_a_step_back(facing, pulled) -> None:
+    # The person faces +x and steps back fast (-x): a track whose cameras have told it its
+    # sides keeps them; one in doubt is turned to face its walk, as a mirrored one must be.
+    track = _standing()
+    held = _held(track, (-1.5 * WALK_SPEED, 0.0, 0.0), facing=facing)
+    first = np.zeros(1, dtype=np.int64)
+    kernels.hold_axes(held, track[None], first, _view(0))
+    kernels.hold_axes(held, track[None], first, _view(round(WALK_MEMORY * 1e9)))
+    assert (held.axes[0] != pytest.approx(_axis(track))) == pulled
+
+
+def test_a_side_views_short_axis_hardly_turns_the_held_one() -> None:
+    # A camera at the person's side sees the axis along its depth and reports it a few
+    # centimetres long, pointing anywhere: it counts by (length / CLEAR_AXIS)^2.
+    track = _standing()
+    held = _held(track)
+    first = np.zeros(1, dtype=np.int64)
+    kernels.hold_axes(held, track[None], first, _view(0))
+    side = track.copy()
+    side[:, 1] *= 0.1  # the shoulders and hips 4 cm from the midline...
+    side = _turned(side, -90.0)  # ...and the axis pointing along +x
+    short = _axis(side)
+    length = np.linalg.norm(short)
+    assert 0.05 < length < 0.1
+    stamp = round(SIDE_MEMORY * 1e9 / 2)
+    kernels.hold_axes(held, side[None], first, _view(stamp, camera=1))
+    keep = np.exp(-0.5 * (length / CLEAR_AXIS) ** 2)
+    assert held.axes[0] == pytest.approx(keep * _axis(track) + (1 - keep) * short)
+
+    def turn(axis: np.ndarray) -> float:
+        cosine = axis @ _axis(track) / np.linalg.norm(axis) / np.linalg.norm(_axis(track))
+        return np.degrees(np.arccos(min(cosine, 1.0)))
+
+    whole = np.exp(-0.5) * _axis(track) + (1 - np.exp(-0.5)) * short
+    assert 0.0 < turn(held.axes[0]) < 0.5
+    assert turn(whole) > 3.0  # taken whole; and a run of them turns it far more

@@ -206,6 +206,7 @@ def _held(tracks: TrackFields, rows: np.ndarray, view: FacingView, sided: bool) 
         camera_ns=tracks.camera_sides_ns,
         camera=view.camera,
         stamp_ns=view.stamp_ns,
+        facing=tracks.facing,
     )
 
 

@@ -45,6 +45,7 @@ from hiros_tracker.kernel_args import (
 from hiros_tracker.labels import (
     CAMERA_GAP,
     CAMERA_WEIGHT,
+    CLEAR_AXIS,
     REVERSED_COS,
     SIDE_MEMORY,
     WALK_MEMORY,
@@ -96,7 +97,8 @@ def reference_axis(held: HeldSides, r: int) -> np.ndarray:
     """``(3,)`` what the detections of track ``r`` are held to (``_reference_axis``).
 
     The unit held axis (the pose's while none is held) plus ``CAMERA_WEIGHT`` times the unit
-    axis of the frame's camera's last detection of the track, when at most ``CAMERA_GAP`` old.
+    axis of the frame's camera's last detection of the track, when at most ``CAMERA_GAP`` old,
+    times that axis's clearness ``min(1, (|last| / CLEAR_AXIS)^2)``.
     """
     axis = held.axes[r]
     if not axis.any():
@@ -107,7 +109,8 @@ def reference_axis(held: HeldSides, r: int) -> np.ndarray:
         last = held.camera_axes[r, held.camera]
         recent = (held.stamp_ns - held.camera_ns[r, held.camera]) * 1e-9 <= CAMERA_GAP
         if vector_norm(last) > 0.0 and recent:
-            reference = reference + CAMERA_WEIGHT * last / vector_norm(last)
+            clear = min(1.0, (vector_norm(last) / CLEAR_AXIS) ** 2)
+            reference = reference + CAMERA_WEIGHT * clear * last / vector_norm(last)
     return reference
 
 
@@ -170,8 +173,11 @@ def reference_canonical_poses(  # noqa: PLR0917 - the kernel's inputs
     return canonical, used
 
 
-def follow_walk(axis: np.ndarray, velocity: np.ndarray, up: np.ndarray, elapsed: float) -> None:
-    """``_follow_walk``: ``axis`` pulled towards ``|axis| unit(up x v)`` when walking, in place."""
+def follow_walk(
+    axis: np.ndarray, velocity: np.ndarray, up: np.ndarray, elapsed: float, sure: bool
+) -> None:
+    """``_follow_walk``: ``axis`` pulled towards ``|axis| unit(up x v)`` when walking, in place,
+    unless ``sure`` and facing away from the walk."""
     normal = up[:3]
     flat = _flat(velocity, normal)
     speed = vector_norm(flat)
@@ -179,6 +185,8 @@ def follow_walk(axis: np.ndarray, velocity: np.ndarray, up: np.ndarray, elapsed:
         return
     keep = np.exp(-elapsed / WALK_MEMORY)
     facing_left = np.cross(normal, flat) / speed
+    if sure and axis @ facing_left <= 0.0:
+        return
     axis[:] = keep * axis + (1.0 - keep) * vector_norm(axis) * facing_left
 
 
@@ -207,9 +215,11 @@ def reference_hold_axes(
         keep = 0.0
         if held.axes[r].any():
             steady = _steadiness(held, r, axis, view.camera, view.stamp_ns)
-            keep = np.exp(-elapsed * steady / SIDE_MEMORY)
+            clear = min(1.0, (vector_norm(axis) / CLEAR_AXIS) ** 2)
+            keep = np.exp(-elapsed * steady * clear / SIDE_MEMORY)
             if upright:
-                follow_walk(held.axes[r], held.velocity[r], view.up, elapsed)
+                sure = held.facing[r] > 0.0
+                follow_walk(held.axes[r], held.velocity[r], view.up, elapsed, sure)
         held.axes[r] = keep * held.axes[r] + (1.0 - keep) * axis
         if view.camera < held.camera_axes.shape[1]:
             held.camera_axes[r, view.camera] = axis
@@ -585,6 +595,7 @@ def reference_hit_frame(  # noqa: PLR0917 - the kernel's inputs
         camera_ns=tracks.camera_sides_ns,
         camera=view.camera,
         stamp_ns=view.stamp_ns,
+        facing=tracks.facing,
     )
     canonical, flips = reference_canonical_poses(
         frame.positions, dets, flips, layout.mirror, settings.align, layout.sides, held
