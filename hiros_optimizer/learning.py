@@ -3,17 +3,17 @@
 A link's length is *learnt* once it is measured in at least ``MIN_LINK_PRESENCE`` of the last
 ``N`` frames and its robust coefficient of variation (``1.4826 MAD / median``) over them is
 below ``max_calibration_coefficient_of_variation`` (Hi-ROS's acceptance rule, per link and with
-robust statistics so that a few bad frames do not spoil it). Each link locks on its own: a
-noisy hand or an unseen thumb keeps only itself free, never a thigh. A limb link not learnt
-while its mirror on the other side is takes that one's length for now (*borrowed*), until
-its own is learnt. A person is *accepted* once the links of their limbs (upper arms,
-forearms, thighs, shanks: what joint angles are made of) are learnt or borrowed; how long
-that took from the person's first frame is their acceptance time, and a person not
-accepted within ``acceptance_timeout`` is reported with the reason of
-each limb link still free. Once a person is accepted, every link measured often enough is
-locked too, steady or not: a steady body vouches for the measurement, and a noisy link's
-median over the window is still a good length (its standard error shrinks with the window;
-constraining it steadies the joint angles next to it). Links seen too rarely stay free.
+robust statistics so that a few bad frames do not spoil it). Each link locks on its own: a noisy
+hand or an unseen thumb keeps only itself free, never a thigh. A limb link not learnt while its
+mirror on the other side is takes that one's length for now (*borrowed*), until its own is
+learnt. A person is *accepted* once the links of their limbs (upper arms, forearms, thighs,
+shanks: what joint angles are made of) are learnt or borrowed; how long that took from the
+person's first frame is their acceptance time, and a person not accepted within
+``acceptance_timeout`` is reported with the reason of each limb link still free. Once a person
+is accepted, every link measured often enough is locked too, steady or not: a steady body
+vouches for the measurement, and a noisy link's median over the window is still a good length
+(its standard error shrinks with the window; constraining it steadies the joint angles next to
+it). Links seen too rarely stay free.
 """
 
 from __future__ import annotations

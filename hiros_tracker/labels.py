@@ -144,10 +144,11 @@ CAMERA_GAP = 0.2
 (``_reference_axis``): a few frames at 15-30 Hz; longer, the person may have turned."""
 CLEAR_AXIS = 0.25
 """Metres of a detection's left-right axis (left shoulder and hip less the right ones) below
-which it counts less in its track's held axis, by ``(length / CLEAR_AXIS)^2``
-(``hold_axes``). An adult's measures about 0.5 m; a camera that sees the body from the side
-sees it along its depth, with the far shoulder and hip hidden, and SDKs then report it a
-few centimetres long, pointing anywhere."""
+which it counts less, by ``(length / CLEAR_AXIS)^2`` (``_clearness``), in its track's held
+axis (``hold_axes``) and in what its camera's next detection is held to
+(``_reference_axis``). An adult's measures about 0.5 m; a camera that sees the body from
+the side sees it along its depth, with the far shoulder and hip hidden, and SDKs then report
+it a few centimetres long, pointing anywhere."""
 
 
 @njit(cache=True, error_model="numpy")
@@ -194,20 +195,19 @@ def _sides_axis(pose: np.ndarray, left: np.ndarray, right: np.ndarray) -> np.nda
 def _reference_axis(held: HeldSides, r: int) -> np.ndarray:
     """``(3,)`` the left-right axis the detections of track ``r`` are held to.
 
-    The track's held axis (``held.axes[r]``, ``hold_axes``) once it has one, else its pose's,
-    as a unit vector; plus ``CAMERA_WEIGHT`` times the clearness times the unit axis of the
-    frame's camera's last detection of the track as labelled (``held.camera_axes``) when that
-    is at most ``CAMERA_GAP`` old. A person turns continuously in every camera's stream, whereas the
-    track's held axis, averaged over ``SIDE_MEMORY`` across cameras, lags a fast turn at the
-    end of a walk far enough that correct detections would count as reversed and be
-    relabelled into the mirror; the camera's own last axis has turned with the body, and
-    its drifting bias is the same one frame later. With a weight under 1 the camera's axis
-    wins unless the two point nearly opposite ways, so a camera whose labels went wrong is
-    still put back by a track that disagrees with it outright; an SDK flip reverses the
-    detection against both. The camera's axis counts by its ``_clearness``: a camera that
-    saw the body side-on, its axis a few centimetres long and swinging, would otherwise carry
-    whatever labelling that noise reached into its next detections, correct ones included,
-    once it sees the body squarely again.
+    The track's held axis (``held.axes[r]``, ``hold_axes``) once it has one, else its pose's, as
+    a unit vector; plus ``CAMERA_WEIGHT`` times the clearness times the unit axis of the frame's
+    camera's last detection of the track as labelled (``held.camera_axes``) when that is at most
+    ``CAMERA_GAP`` old. A person turns continuously in every camera's stream, whereas the
+    track's held axis, averaged over ``SIDE_MEMORY`` across cameras, lags a fast turn at the end
+    of a walk far enough that correct detections would count as reversed and be relabelled into
+    the mirror; the camera's own last axis has turned with the body, and its drifting bias is
+    the same one frame later. With a weight under 1 the camera's axis wins unless the two point
+    nearly opposite ways, so a camera whose labels went wrong is still put back by a track that
+    disagrees with it outright; an SDK flip reverses the detection against both. The camera's
+    axis counts by its ``_clearness``: a camera that saw the body side-on, its axis a few
+    centimetres long and swinging, would otherwise carry whatever labelling that noise reached
+    into its next detections, correct ones included, once it sees the body squarely again.
     """
     axis = held.axes[r]
     if axis[0] == 0.0 and axis[1] == 0.0 and axis[2] == 0.0:
