@@ -220,7 +220,7 @@ def _reference_axis(held: HeldSides, r: int) -> np.ndarray:
     last_size = math.sqrt(np.sum(last * last))
     recent = (held.stamp_ns - held.camera_ns[r, held.camera]) * 1e-9 <= CAMERA_GAP
     if last_size > 0.0 and recent:
-        weight = CAMERA_WEIGHT * _clearness(last)
+        weight = CAMERA_WEIGHT * _clearness(last_size)
         for a in range(3):
             reference[a] += weight * last[a] / last_size
     return reference
@@ -295,7 +295,8 @@ def hold_axes(
         elapsed = max(view.stamp_ns - _last_fold_ns(held, r, last_hit_ns[r]), 0) * 1e-9
         keep = 0.0
         if known:
-            weight = _steadiness(held, r, axis, view) * _clearness(axis)
+            clear = _clearness(math.sqrt(axis[0] * axis[0] + axis[1] * axis[1] + axis[2] * axis[2]))
+            weight = _steadiness(held, r, axis, view) * clear
             keep = math.exp(-elapsed * weight / SIDE_MEMORY)
         if known and upright:
             _follow_walk(held.axes[r], held.velocity[r], view.up, elapsed, held.facing[r] > 0.0)
@@ -341,10 +342,9 @@ def _steadiness(held: HeldSides, r: int, axis: np.ndarray, view: FacingView) -> 
 
 
 @njit(cache=True, error_model="numpy")
-def _clearness(axis: np.ndarray) -> float:
-    """``min(1, (|axis| / CLEAR_AXIS)^2)``: how plainly a detection shows its left-right axis."""
-    size = math.sqrt(axis[0] * axis[0] + axis[1] * axis[1] + axis[2] * axis[2])
-    return min(1.0, (size / CLEAR_AXIS) ** 2)
+def _clearness(length: float) -> float:
+    """``min(1, (length / CLEAR_AXIS)^2)``: how plainly a left-right axis that long shows."""
+    return min(1.0, (length / CLEAR_AXIS) ** 2)
 
 
 @njit(cache=True, error_model="numpy")

@@ -93,6 +93,11 @@ def _cosine_or(a: np.ndarray, b: np.ndarray, otherwise: float) -> float:
     return float(np.sum(a * b) / scale) if scale > 0.0 else otherwise
 
 
+def clearness(axis: np.ndarray) -> float:
+    """``_clearness`` of an axis: ``min(1, (|axis| / CLEAR_AXIS)^2)``."""
+    return min(1.0, (vector_norm(axis) / CLEAR_AXIS) ** 2)
+
+
 def reference_axis(held: HeldSides, r: int) -> np.ndarray:
     """``(3,)`` what the detections of track ``r`` are held to (``_reference_axis``).
 
@@ -109,8 +114,7 @@ def reference_axis(held: HeldSides, r: int) -> np.ndarray:
         last = held.camera_axes[r, held.camera]
         recent = (held.stamp_ns - held.camera_ns[r, held.camera]) * 1e-9 <= CAMERA_GAP
         if vector_norm(last) > 0.0 and recent:
-            clear = min(1.0, (vector_norm(last) / CLEAR_AXIS) ** 2)
-            reference = reference + CAMERA_WEIGHT * clear * last / vector_norm(last)
+            reference = reference + CAMERA_WEIGHT * clearness(last) * last / vector_norm(last)
     return reference
 
 
@@ -215,8 +219,7 @@ def reference_hold_axes(
         keep = 0.0
         if held.axes[r].any():
             steady = _steadiness(held, r, axis, view.camera, view.stamp_ns)
-            clear = min(1.0, (vector_norm(axis) / CLEAR_AXIS) ** 2)
-            keep = np.exp(-elapsed * steady * clear / SIDE_MEMORY)
+            keep = np.exp(-elapsed * steady * clearness(axis) / SIDE_MEMORY)
             if upright:
                 sure = held.facing[r] > 0.0
                 follow_walk(held.axes[r], held.velocity[r], view.up, elapsed, sure)
