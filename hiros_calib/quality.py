@@ -284,11 +284,11 @@ def _uncertainty(
     _keep_largest(cameras, pose, "pose_uncertainty_deg", round(angle, 3))
     _keep_largest(cameras, pose, "pose_uncertainty_cm", round(100 * distance, 2))
     if angle > tolerances.uncertainty_deg or distance > tolerances.uncertainty_m:
+        lever = pose.quality.get("motion_lever_m")
         text = (
             f"the {pose.camera_a}-{pose.camera_b} pose is poorly determined: two halves of the "
             f"recording give poses {2 * angle:.1f} deg and {200 * distance:.1f} cm apart "
-            "(people walking across the whole area pin a pose down better than gestures on "
-            "the spot)"
+            f"({_loose_pose_advice(lever, tolerances)})"
         )
         for name in (pose.camera_a, pose.camera_b):
             if links[name] == 1:
@@ -307,11 +307,35 @@ def _final_pose_spread(
     angle = _number(camera.quality.get("pose_split_deg", 0.0))
     distance = 0.01 * _number(camera.quality.get("pose_split_cm", 0.0))
     if angle > tolerances.uncertainty_deg or distance > tolerances.uncertainty_m:
+        lever = camera.quality.get("motion_lever_m")
         reasons.append(
             f"the pose of {name} is poorly determined: solved on two halves of the recording "
-            f"it moves {angle:.1f} deg and {100 * distance:.1f} cm (people walking across the "
-            "whole area pin a pose down better than gestures on the spot)"
+            f"it moves {angle:.1f} deg and {100 * distance:.1f} cm "
+            f"({_loose_pose_advice(lever, tolerances)})"
         )
+
+
+WALK_ACROSS = (
+    "people walking across the whole area pin a pose down better than gestures on the spot"
+)
+"""What to record instead of people who stayed on one spot."""
+
+
+def _loose_pose_advice(lever: Any, tolerances: LoopTolerances) -> str:
+    """What to record instead of a recording that leaves a pose loose, from how far joints moved.
+
+    ``lever`` is the pose's ``motion_lever_m`` (None: not measured). Where the people walked
+    across the area the motion was there and the body tracker's noise is what the halves
+    disagree by, which a longer recording averages down; where they gestured on one spot, the
+    motion is what was missing.
+    """
+    if lever is None or _number(lever) < tolerances.min_motion_lever_m:
+        return WALK_ACROSS
+    return (
+        f"the people's joints moved {100 * _number(lever):.0f} cm RMS about their means, so "
+        "it is the body tracker's noise that the halves disagree by: a longer recording "
+        "averages it down"
+    )
 
 
 def _clock_miss(a: CameraCalibration, b: CameraCalibration, pair: PairOffset) -> float:

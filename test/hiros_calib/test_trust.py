@@ -247,6 +247,23 @@ def test_a_loose_pair_flags_only_a_camera_whose_pose_rests_on_it_alone():
     assert "the k01-k02 pose is poorly determined" in two.flagged["k02"]
 
 
+def test_a_loose_pose_says_what_to_record_from_how_far_the_joints_moved():
+    """People who walked across the area leave a pose loose through the body tracker's
+    noise, which a longer recording averages down; people on one spot leave it loose for want
+    of motion, and walking across the area is the advice. Told apart by the motion lever."""
+    advice = {}
+    for lever in (0.9, 0.2):
+        loose = {"split_half_deg": 3.4, "split_half_cm": 18.6, "motion_lever_m": lever}
+        two = Calibration("k01", cameras={"k01": _camera(), "k02": _camera()})
+        flag_cameras(two, [], [PairPose("k01", "k02", "ok", quality=dict(loose))])
+        advice[lever] = [why for why in two.flagged["k02"].split("; ") if "poorly" in why]
+    assert advice[0.9]
+    assert all("longer recording" in why and "90 cm RMS" in why for why in advice[0.9])
+    assert not any("walking across" in why for why in advice[0.9])
+    assert advice[0.2]
+    assert all("walking across the whole area" in why for why in advice[0.2])
+
+
 def test_rotation_checks_each_within_tolerance_but_not_together_flag_the_camera():
     # one person gesturing before two cameras: every check is below its own tolerance
     doubtful = Calibration("k01", cameras={"k01": _camera(), "k02": _camera()})
