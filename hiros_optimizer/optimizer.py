@@ -32,7 +32,7 @@ Person calibrations can be restarted (:meth:`Optimizer.calibrate`), moved to ano
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from functools import lru_cache
 from typing import Any, NamedTuple
 
@@ -142,7 +142,7 @@ class PersonCalibration:
             unknown, e.g. loaded without it).
         n_frames: frames the lengths were learnt from.
         borrowed: ``(J,)`` limb links whose length is their mirror link's (the other side's),
-            until their own is learnt (None: none).
+            until their own is learnt (empty, the default: none).
 
     """
 
@@ -150,10 +150,10 @@ class PersonCalibration:
     lengths: np.ndarray
     variation: np.ndarray
     n_frames: int = 0
-    borrowed: np.ndarray | None = None
+    borrowed: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=bool))
 
     def __post_init__(self) -> None:
-        if self.borrowed is None:
+        if not len(self.borrowed):
             self.borrowed = np.zeros(len(self.lengths), dtype=bool)
 
     def to_dict(self) -> dict[str, Any]:
@@ -224,7 +224,7 @@ class _Track:
         self.learning = (
             calibration is None
             or bool(np.isnan(calibration.lengths[links]).any())
-            or bool(calibration.borrowed[links].any())  # type: ignore[index]
+            or bool(calibration.borrowed[links].any())
         )
         accepted = lengths is not None and bool(np.isfinite(lengths[limb_links(self.layout)]).all())
         if not accepted:
@@ -548,7 +548,7 @@ class Optimizer(Accounted):
             none = np.zeros(layout.n_joints, dtype=bool)
             known = none if old is None else np.isfinite(old.lengths)
             was_borrowed = none if old is None else old.borrowed
-            own = known & ~was_borrowed  # type: ignore[operator]
+            own = known & ~was_borrowed
             kept = np.full(layout.n_joints, np.nan) if old is None else old.lengths
             steady = np.where(statistics.learnt[row], statistics.lengths[row], np.nan)
             lengths = np.where(own, kept, steady)  # a borrowed link's own length replaces it
