@@ -90,8 +90,10 @@ class SideLayout(NamedTuple):
     """Left/right pairs held to the shoulders' side (``_side_arrays``)."""
 
     shoulders: np.ndarray  # (2,) left and right shoulder, or empty
-    pairs: np.ndarray  # (P, 2) left and right joint of each pair
+    pairs: np.ndarray  # (P, 2) left and right top joint of each other part
     pair_parts: np.ndarray  # (P,) each pair's mirror part
+    below: np.ndarray  # (Q, 2) left and right joints below those tops (knees, ankles, feet)
+    below_parts: np.ndarray  # (Q,) each of those pairs' mirror part
 
 
 class HeldSides(NamedTuple):

@@ -63,11 +63,9 @@ def canonical_poses(  # noqa: PLR0917 - one frame's pairs, the layout and the tr
     ``held.axes``, else the pose's), the part is flipped
     when ``c < -0.5`` and not when ``c > 0.5``, whatever the part's mean joint distance said:
     a flipped detection's shoulders and hips only trade labels, while its noisy or swinging
-    hands can make the arms' labels look right. Then each left/right pair ``(a, b)`` of
-    ``sides.pairs`` (of part
-    ``pair_parts``) pointing against the shoulders ``s = p[left shoulder] - p[right]``,
-    ``(p_a - p_b)·s < -0.5 |p_a - p_b| |s|``, flips its part (once, on the pose relabelled so
-    far; nothing is flagged where a joint is missing, or without shoulders). Then the whole
+    hands can make the arms' labels look right. Then each other part whose top pair points
+    against the shoulders flips, unless the joints below it point along them
+    (``_follow_shoulders``, once, on the pose relabelled so far). Then the whole
     body's sides are held to the track's (``_reversed_sides`` against the same axis;
     ``held.left`` empty: not held): a reversed pose flips every part.
 
@@ -76,7 +74,7 @@ def canonical_poses(  # noqa: PLR0917 - one frame's pairs, the layout and the tr
 
     """
     part, mirror = layout.part, layout.mirror
-    shoulders, pairs, pair_parts = sides.shoulders, sides.pairs, sides.pair_parts
+    shoulders, pairs = sides.shoulders, sides.pairs
     n_pairs, n_joints = len(rows), positions.shape[1]
     flips = flips.copy()
     canonical = np.empty((n_pairs, n_joints, 3))
@@ -92,22 +90,7 @@ def canonical_poses(  # noqa: PLR0917 - one frame's pairs, the layout and the tr
             canonical[u, j] = positions[rows[u], order[j]]
         if not align or len(shoulders) < 2 or len(pairs) == 0:
             continue
-        sx = canonical[u, shoulders[0], 0] - canonical[u, shoulders[1], 0]
-        sy = canonical[u, shoulders[0], 1] - canonical[u, shoulders[1], 1]
-        sz = canonical[u, shoulders[0], 2] - canonical[u, shoulders[1], 2]
-        shoulder_sq = sx * sx + sy * sy + sz * sz
-        changed = False
-        for p in range(len(pairs)):
-            a, b = pairs[p, 0], pairs[p, 1]
-            vx = canonical[u, a, 0] - canonical[u, b, 0]
-            vy = canonical[u, a, 1] - canonical[u, b, 1]
-            vz = canonical[u, a, 2] - canonical[u, b, 2]
-            along = vx * sx + vy * sy + vz * sz
-            scale = math.sqrt((vx * vx + vy * vy + vz * vz) * shoulder_sq)
-            if along < -0.5 * scale:  # clearly reversed only: eyes must not toggle on noise
-                flips[u, pair_parts[p]] = not flips[u, pair_parts[p]]
-                changed = True
-        if changed:
+        if _follow_shoulders(flips[u], canonical[u], sides):
             _order(flips[u], part, mirror, order)
             for j in range(n_joints):
                 canonical[u, j] = positions[rows[u], order[j]]
@@ -120,6 +103,39 @@ def canonical_poses(  # noqa: PLR0917 - one frame's pairs, the layout and the tr
             for j in range(n_joints):
                 canonical[u, j] = positions[rows[u], order[j]]
     return canonical, flips
+
+
+@njit(cache=True, error_model="numpy")
+def _follow_shoulders(flips: np.ndarray, pose: np.ndarray, sides: SideLayout) -> bool:
+    """Flip the parts of ``flips`` ``(K,)`` that ``pose`` ``(J, 3)`` has against its shoulders.
+
+    A part (legs, eyes, ears) is against the shoulders ``s = p[left shoulder] - p[right]`` when
+    its top pair ``(a, b)`` of ``sides.pairs`` is, ``(p_a - p_b)·s < -0.5 |p_a - p_b| |s|``
+    (hips, eyes and ears sit on the shoulders' side on every body), unless the sum of its
+    pairs below (``sides.below``: knees, ankles, feet) clearly points along them (the same
+    test, over 0.5). SDKs report the hips about 10 cm apart, and a few centimetres of noise
+    point them anywhere, while the rest of a correctly labelled leg still says which side it
+    is on. The joints below can only keep a part's labels, never flip them: knees and feet
+    cross the midline on a turning step, hips do not. Nothing is flipped where a joint of the
+    top pair or a shoulder is missing; a missing joint below adds nothing. Returns whether
+    any part flipped.
+    """
+    shoulders = sides.shoulders
+    side = pose[shoulders[0]] - pose[shoulders[1]]
+    below = np.zeros((len(flips), 3))
+    for q in range(len(sides.below)):
+        vector = pose[sides.below[q, 0]] - pose[sides.below[q, 1]]
+        if math.isfinite(vector[0]) and math.isfinite(vector[1]) and math.isfinite(vector[2]):
+            below[sides.below_parts[q]] += vector
+    changed = False
+    for p in range(len(sides.pairs)):
+        k = sides.pair_parts[p]
+        top = pose[sides.pairs[p, 0]] - pose[sides.pairs[p, 1]]
+        # clearly only (0.5): eyes must not toggle on noise; a missing joint gives cosine 0
+        if _cosine(top, side) < -0.5 and not _cosine(below[k], side) > 0.5:
+            flips[k] = not flips[k]
+            changed = True
+    return changed
 
 
 REVERSED_COS = 0.5

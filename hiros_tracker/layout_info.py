@@ -119,35 +119,50 @@ def _body_frame(layout: Layout) -> _BodyFrame:
 @cache
 def _side_pairs(
     layout: Layout, parts: _MirrorParts
-) -> tuple[tuple[int, int] | None, np.ndarray, np.ndarray]:
-    """The shoulders (left, right), and for every other part its top joints (left, right).
+) -> tuple[tuple[int, int] | None, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The shoulders (left, right), every other part's top joints, and the joints below them.
 
     Returns:
-        the shoulder pair or None, ``(P, 2)`` left/right top joints and ``(P,)`` their parts.
+        the shoulder pair or None, ``(P, 2)`` left/right top joints and ``(P,)`` their parts,
+        ``(Q, 2)`` left/right joints below a top joint in the same part and ``(Q,)`` theirs.
 
     """
     names = layout.joint_names
+    none = np.empty((0, 2), dtype=np.int64), np.empty(0, dtype=np.int64)
     if "ShoulderLeft" not in names or "ShoulderRight" not in names:
-        return None, np.empty((0, 2), dtype=np.int64), np.empty(0, dtype=np.int64)
+        return None, *none, *none
     reference = (names.index("ShoulderLeft"), names.index("ShoulderRight"))
-    pairs, part_ids = [], []
+    tops: list[tuple[int, int]] = []
+    top_parts: list[int] = []
+    below: list[tuple[int, int]] = []
+    below_parts: list[int] = []
     for k in range(parts.count):
         if k == parts.part[reference[0]]:
             continue
         for joint in np.flatnonzero(parts.part == k):
+            if "Left" not in names[joint]:
+                continue
             parent = layout.parents[joint]
-            if "Left" in names[joint] and (parent < 0 or parts.part[parent] != k):
-                pairs.append((int(joint), int(parts.mirror[joint])))
-                part_ids.append(k)
-    return reference, np.array(pairs, dtype=np.int64).reshape(-1, 2), np.array(part_ids)
+            top = parent < 0 or parts.part[parent] != k
+            (tops if top else below).append((int(joint), int(parts.mirror[joint])))
+            (top_parts if top else below_parts).append(k)
+    return (
+        reference,
+        np.array(tops, dtype=np.int64).reshape(-1, 2),
+        np.array(top_parts, dtype=np.int64),
+        np.array(below, dtype=np.int64).reshape(-1, 2),
+        np.array(below_parts, dtype=np.int64),
+    )
 
 
 @cache
-def _side_arrays(layout: Layout, parts: _MirrorParts) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """``_side_pairs`` as arrays for the kernels: ``(2,)`` shoulders (or empty), pairs, parts."""
-    reference, pairs, part_ids = _side_pairs(layout, parts)
+def _side_arrays(
+    layout: Layout, parts: _MirrorParts
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """``_side_pairs`` as arrays for the kernels: ``(2,)`` shoulders (or empty), the pairs."""
+    reference, pairs, part_ids, below, below_parts = _side_pairs(layout, parts)
     shoulders = np.array(reference if reference is not None else (), dtype=np.int64)
-    return shoulders, pairs.astype(np.int64), part_ids.astype(np.int64).reshape(-1)
+    return shoulders, pairs, part_ids, below, below_parts
 
 
 @dataclass(frozen=True, eq=False)
@@ -158,7 +173,7 @@ class _LayoutInfo:
     parts: _MirrorParts
     weights: np.ndarray  # (J,) cost weights (_joint_weights)
     frame: _BodyFrame
-    sides: tuple[np.ndarray, np.ndarray, np.ndarray]  # _side_arrays
+    sides: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]  # _side_arrays
 
     @cached_property
     def parents(self) -> np.ndarray:

@@ -39,7 +39,7 @@ def _canonical(  # noqa: PLR0917 - the detection, its track and what the track h
     s before this one (default: none).
     """
     parts = _mirror_parts(AZURE_KINECT)
-    shoulders, pairs, pair_parts = _side_arrays(AZURE_KINECT, parts)
+    sides = SideLayout(*_side_arrays(AZURE_KINECT, parts))
     frame = _body_frame(AZURE_KINECT)
     if matched is None:
         matched = np.zeros(parts.count, dtype=bool)
@@ -64,7 +64,7 @@ def _canonical(  # noqa: PLR0917 - the detection, its track and what the track h
         matched[None],
         parts.arrays,
         True,
-        SideLayout(shoulders, pairs, pair_parts),
+        sides,
         held,
     )
     return flips[0]
@@ -112,6 +112,45 @@ def test_the_arms_follow_a_clearly_reversed_torso_whatever_the_part_match() -> N
     matched[legs] = True
     flips = _canonical(detection, track, matched)
     assert flips[arms]
+
+
+def _legs_reported(hips_apart: float, below: str) -> np.ndarray:
+    """A standing track's detection whose hips are ``hips_apart`` m apart, ``below`` the
+    hips as labelled ("right"), swapped ("swapped": crossed, or the whole leg mislabelled)
+    or not seen ("unseen")."""
+    names = {name: j for j, name in enumerate(AZURE_KINECT.joint_names)}
+    detection = _standing()
+    left, right = names["HipLeft"], names["HipRight"]
+    middle = (detection[left] + detection[right]) / 2
+    half = np.array([0.0, hips_apart / 2, 0.0])
+    detection[left] = middle + half
+    detection[right] = middle - half
+    for joint in ("Knee", "Ankle", "Foot"):
+        left, right = names[f"{joint}Left"], names[f"{joint}Right"]
+        if below == "swapped":
+            detection[[left, right]] = detection[[right, left]]
+        elif below == "unseen":
+            detection[[left, right]] = np.nan
+    return detection
+
+
+@pytest.mark.parametrize(
+    ("hips_apart", "below", "flipped"),
+    [
+        (-0.04, "right", False),  # an SDK's hips 4 cm apart, pointing the wrong way: noise
+        (-0.04, "unseen", True),  # the hips alone, as before: nothing says otherwise
+        (-0.36, "swapped", True),  # the whole leg labelled the other side's
+        (0.36, "swapped", False),  # a turning step: knees and feet cross, the hips do not
+    ],
+)
+def test_the_legs_are_held_to_the_shoulders_by_the_hips_unless_the_leg_says_otherwise(
+    hips_apart: float, below: str, flipped: bool
+) -> None:
+    track = _standing()
+    legs = _mirror_parts(AZURE_KINECT).part[AZURE_KINECT.joint_names.index("HipLeft")]
+    flips = _canonical(_legs_reported(hips_apart, below), track)
+    assert flips[legs] == flipped
+    assert flips.sum() == flipped  # no other part moves
 
 
 def test_detections_are_held_to_the_tracks_held_axis_not_to_its_dragged_pose() -> None:

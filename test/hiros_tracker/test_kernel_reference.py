@@ -345,8 +345,13 @@ def test_live_tracks(seed: int) -> None:
 
 # --------------------------------------------------------------------------------- labels
 SIDES = SideLayout(*_side_arrays(LAYOUT, PARTS))
-NO_SHOULDERS = SideLayout(np.empty(0, np.int64), SIDES.pairs, SIDES.pair_parts)
-NO_PAIRS = SideLayout(SIDES.shoulders, np.empty((0, 2), np.int64), np.empty(0, np.int64))
+NO_SHOULDERS = SIDES._replace(shoulders=np.empty(0, np.int64))
+NO_PAIRS = SIDES._replace(
+    pairs=np.empty((0, 2), np.int64),
+    pair_parts=np.empty(0, np.int64),
+    below=np.empty((0, 2), np.int64),
+    below_parts=np.empty(0, np.int64),
+)
 
 
 def _check_canonical_poses(

@@ -142,12 +142,14 @@ def _canonical_one(  # noqa: PLR0917 - one pair's detection, flips and context
     pose = detection[_permutation(flips, layout)]
     if align and len(sides.shoulders) == 2 and len(sides.pairs):  # pairs to the shoulders
         shoulders = pose[sides.shoulders[0]] - pose[sides.shoulders[1]]
+        below = pose[sides.below[:, 0]] - pose[sides.below[:, 1]]
+        below[~np.isfinite(below).all(axis=1)] = 0.0  # a missing joint below adds nothing
+        below_sums = np.zeros((len(flips), 3))
+        np.add.at(below_sums, sides.below_parts, below)
         toggle = np.zeros_like(flips)
         for (a, b), k in zip(sides.pairs, sides.pair_parts, strict=True):
-            pair = pose[a] - pose[b]
-            scale = np.sqrt(np.sum(pair * pair) * np.sum(shoulders * shoulders))
-            if np.dot(pair, shoulders) < -0.5 * scale:
-                toggle[k] ^= True
+            against = _cosine_or(pose[a] - pose[b], shoulders, 0.0) < -0.5
+            toggle[k] ^= against and not _cosine_or(below_sums[k], shoulders, 0.0) > 0.5
         flips ^= toggle
         pose = detection[_permutation(flips, layout)]
     reversed_ = align and has_sides  # the whole body's sides held to the track's
