@@ -128,9 +128,9 @@ def _side_pairs(
 
     """
     names = layout.joint_names
-    none = np.empty((0, 2), dtype=np.int64), np.empty(0, dtype=np.int64)
+    empty = np.empty((0, 2), dtype=np.int64), np.empty(0, dtype=np.int64)
     if "ShoulderLeft" not in names or "ShoulderRight" not in names:
-        return None, *none, *none
+        return None, *empty, *empty
     reference = (names.index("ShoulderLeft"), names.index("ShoulderRight"))
     tops: list[tuple[int, int]] = []
     top_parts: list[int] = []
