@@ -46,6 +46,10 @@ wider than the mean of a few noisy detections strays (a few %), narrower than wh
 people apart clearly (a child, another build)."""
 MIN_SHAPE_LINKS = 4
 """Links both tracks must have measured for their shapes to be compared at all."""
+BLIND_GAP_S = 1.0
+"""Seconds without a frame from any camera beyond which nobody was looking: the recording or
+every driver paused. Such a gap does not count towards ``reid_timeout``: a person is lost
+only while the cameras could have seen them."""
 
 
 def _centre(positions: np.ndarray, root: int) -> np.ndarray:
@@ -77,6 +81,8 @@ class TrackLifecycle:
     _table: TrackTable | None
     _doomed: list[int]
     _lost: list[_Lost]
+    _blind: list[tuple[int, int]]  # (from, to) ns: gaps with no frame from any camera
+    _last_frame_ns: int | None
 
     def _confirm(self, table: TrackTable, row: int, info: _LayoutInfo, time_ns: int) -> None:
         """Confirm a tentative track seen enough, unless it duplicates a confirmed one.
@@ -136,7 +142,8 @@ class TrackLifecycle:
         A person whom every camera lost (out of the shared view, hidden, or a turn the
         motion model missed) comes back as a new track. It re-takes the id of a lost track
         when that track was last seen within ``reid_timeout`` before the new one was born
-        (never seen beside it), within ``reid_distance`` of where the new one is (root joint)
+        (never seen beside it; gaps in which no camera sent a frame not counted,
+        ``_recently_lost``), within ``reid_distance`` of where the new one is (root joint)
         and with the same body shape (``_same_shape``); of several, the nearest. A lost track
         is a confirmed one still live but unseen since the new one was born (it is removed)
         or one that expired (``_expire`` keeps it in ``_lost``).
@@ -145,17 +152,16 @@ class TrackLifecycle:
         if params.reid_timeout <= 0:
             return
         born = int(table.born_ns[row])
-        earliest = born - round(params.reid_timeout * 1e9)
         here = _centre(table.positions[row], info.frame.root)
         live = [
             _Lost(int(table.ids[k]), int(table.last_hit_ns[k]), table.positions[k].copy(),
                   table.limbs[k].copy(), table.limb_count[k].copy(), k)
             for k in np.flatnonzero(table.confirmed[: table.n]).tolist()
-            if k != row and earliest <= table.last_hit_ns[k] < born and k not in self._doomed
+            if k != row and table.last_hit_ns[k] < born and k not in self._doomed
         ]  # fmt: skip
         best, nearest = None, params.reid_distance
         for lost in [*live, *self._lost]:
-            if not earliest <= lost.last_hit_ns < born:
+            if not (lost.last_hit_ns < born and self._recently_lost(lost.last_hit_ns, born)):
                 continue
             distance = float(np.linalg.norm(_centre(lost.positions, info.frame.root) - here))
             if distance <= nearest and _same_shape(lost, table.limbs[row], table.limb_count[row]):
@@ -179,8 +185,8 @@ class TrackLifecycle:
     def _expire(self, now_ns: int) -> None:
         """Remove the tracks not hit within their timeout; keep confirmed ones as lost."""
         table, params = self._table, self.params
-        horizon = now_ns - round(params.reid_timeout * 1e9)
-        self._lost = [lost for lost in self._lost if lost.last_hit_ns >= horizon]
+        self._note_frame(now_ns)
+        self._lost = [lost for lost in self._lost if self._recently_lost(lost.last_hit_ns, now_ns)]
         if table is None or not table.n:
             return
         count, keep = kernels.live_tracks(
@@ -200,3 +206,29 @@ class TrackLifecycle:
                     for k in gone
                 )  # fmt: skip
             table.keep(keep)
+
+    def _note_frame(self, now_ns: int) -> None:
+        """Keep a gap before this frame with no frame from any camera (``BLIND_GAP_S``).
+
+        Gaps that end before every lost track was last seen are forgotten.
+        """
+        last = self._last_frame_ns
+        if last is not None and (now_ns - last) * _NS > BLIND_GAP_S:
+            self._blind.append((last, now_ns))
+        self._last_frame_ns = now_ns if last is None else max(last, now_ns)
+        oldest = min((lost.last_hit_ns for lost in self._lost), default=None)
+        table = self._table
+        if table is not None and table.n:
+            live = int(table.last_hit_ns[: table.n].min())
+            oldest = live if oldest is None else min(oldest, live)
+        self._blind = [gap for gap in self._blind if oldest is not None and gap[1] > oldest]
+
+    def _recently_lost(self, last_hit_ns: int, now_ns: int) -> bool:
+        """Whether a track last seen at ``last_hit_ns`` is still within ``reid_timeout``.
+
+        Counted up to ``now_ns``, less the gaps in which no camera sent a frame (``_blind``).
+        """
+        blind = sum(
+            max(0, min(end, now_ns) - max(start, last_hit_ns)) for start, end in self._blind
+        )
+        return (now_ns - last_hit_ns - blind) * _NS <= self.params.reid_timeout

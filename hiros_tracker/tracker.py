@@ -131,7 +131,8 @@ class TrackerParams:
         reid_timeout: seconds a lost track (every camera lost the person) is remembered: a
             new track starting within this of its last detection, near where it was and
             with the same body shape, re-takes its id (0: never; a person leaving the shared
-            view and returning is then a new id).
+            view and returning is then a new id). Gaps of over ``BLIND_GAP_S`` (1 s) with no
+            frame from any camera (a paused recording) do not count.
         reid_distance: metres between where a lost track was last seen and where a new track
             is (root joints) within which the new one may re-take its id.
         joint_weight_decay: a joint's weight in the cost is this to the power of its depth in
@@ -204,6 +205,8 @@ class Tracker(FrameMatching, TrackLifecycle, Accounted):
         self._table: TrackTable | None = None  # made for the first detections' joint count
         self._doomed: list[int] = []  # rows of duplicate tracks, removed at the frame's end
         self._lost: list[_Lost] = []  # expired confirmed tracks, for re-identification
+        self._blind: list[tuple[int, int]] = []  # gaps with no frame at all (_note_frame)
+        self._last_frame_ns: int | None = None
         self._next_id = 0
         self._buffer: list[tuple[int, int, str, MovedFrame]] = []
         self._sequence = itertools.count()
@@ -340,6 +343,8 @@ class Tracker(FrameMatching, TrackLifecycle, Accounted):
         self._recent.clear()
         self._table = None
         self._lost.clear()
+        self._blind.clear()
+        self._last_frame_ns = None
         self.restarts += 1
         self._last_restart = f"{camera} went back {(flushed.stamp_ns - stamp_ns) / 1e9:.1f} s"
         self._seen_before(camera, stamp_ns)

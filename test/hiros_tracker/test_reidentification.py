@@ -87,3 +87,24 @@ def test_a_cameras_displaced_view_of_a_person_it_follows_is_no_new_track(scenes)
     assert tracker.drops["duplicate of a confirmed track"] > 0
     ids, _ = run(lambda camera, t, person: 7 if camera == "k01" and 1.0 < t < 4.0 else 1)
     assert len(ids) == 2, "under a new body id it is another body as far as anyone can tell"
+
+
+def test_a_gap_with_no_frame_from_any_camera_does_not_count_towards_the_timeout(scenes):
+    """Twelve seconds in which no camera sends a frame (a paused recording, every driver
+    down) are not time the person was lost: still there after it, they keep their id. The
+    same twelve seconds with the cameras sending frames that do not show them is a person
+    lost past ``reid_timeout`` (10 s): a new id."""
+    people = [scenes.straight((0.0, 0.0), (0.0, 0.0))]
+
+    def out_of_view(camera, t, person, pose):
+        return None if 2.0 < t < 14.0 else pose
+
+    scene = scenes.render(people, duration=16.0)
+    paused = [f for f in scene.frames if not 2.0 < f.stamp_ns * 1e-9 - scenes.T0 < 14.0]
+    assert len(paused) < len(scene.frames) / 2
+    tracker = Tracker(TrackerParams(), scene.calibration)
+    outputs = scenes.run_tracker(tracker, paused)
+    assert set(scenes.identities(outputs, scene.truth)[0]) == {0}
+    hidden = scenes.render(people, duration=16.0, modify=out_of_view)
+    ids, _ = _ids_per_person(scenes, hidden, TrackerParams())
+    assert len(ids[0]) == 2
