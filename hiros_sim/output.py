@@ -35,6 +35,8 @@ __all__ = ["load_truth", "save_truth", "write_recording"]
 TRUTH_FILE = "truth.npz"
 CALIBRATION_FILE = "calibration.yaml"
 RECORDING_FILE = "recording.mcap"
+SIMULATION_FILES = (RECORDING_FILE, BAG_METADATA, TRUTH_FILE, CALIBRATION_FILE)
+"""What a simulation folder holds: all that ``hiros simulate --force`` may replace."""
 
 
 def save_truth(result: SimResult, out_dir: str | Path) -> Path:

@@ -216,6 +216,8 @@ class TrackLifecycle:
         if last is not None and (now_ns - last) * _NS > BLIND_GAP_S:
             self._blind.append((last, now_ns))
         self._last_frame_ns = now_ns if last is None else max(last, now_ns)
+        if not self._blind:  # the usual case: nothing to forget, every frame
+            return
         oldest = min((lost.last_hit_ns for lost in self._lost), default=None)
         table = self._table
         if table is not None and table.n:

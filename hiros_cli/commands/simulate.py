@@ -29,7 +29,7 @@ from dataclasses import replace
 from pathlib import Path
 
 from hiros_core.errors import ConfigError
-from hiros_core.outputs import BAG_METADATA, staged_output
+from hiros_core.outputs import check_output, only_holds, staged_output
 
 HELP = "semi-synthetic multi-camera recording from real mocap, with the truth"
 
@@ -179,17 +179,13 @@ def _fit_noise() -> int:
     return 0
 
 
-SIMULATION_FILES = ("recording.mcap", BAG_METADATA, "truth.npz", "calibration.yaml")
-"""What a simulation folder holds: all that ``--force`` may replace."""
-
-
 def _check_out(args: argparse.Namespace) -> bool:
     """Refuse an --out holding anything but an earlier simulation, or one without --force.
 
     An empty folder is used as it is; a folder that holds an input (--bvh, --setup) never.
     Returns whether an existing --out is to be replaced.
     """
-    from hiros_core.outputs import check_output, only_holds
+    from hiros_sim.output import SIMULATION_FILES
 
     out: Path = args.out
     setup = Path(args.setup) if args.setup else None

@@ -118,15 +118,15 @@ def _legs_reported(hips_apart: float, below: str) -> np.ndarray:
     """A standing track's detection whose hips are ``hips_apart`` m apart, ``below`` the
     hips as labelled ("right"), swapped ("swapped": crossed, or the whole leg mislabelled)
     or not seen ("unseen")."""
-    names = {name: j for j, name in enumerate(AZURE_KINECT.joint_names)}
+    index = AZURE_KINECT.index
     detection = _standing()
-    left, right = names["HipLeft"], names["HipRight"]
+    left, right = index("HipLeft"), index("HipRight")
     middle = (detection[left] + detection[right]) / 2
     half = np.array([0.0, hips_apart / 2, 0.0])
     detection[left] = middle + half
     detection[right] = middle - half
     for joint in ("Knee", "Ankle", "Foot"):
-        left, right = names[f"{joint}Left"], names[f"{joint}Right"]
+        left, right = index(f"{joint}Left"), index(f"{joint}Right")
         if below == "swapped":
             detection[[left, right]] = detection[[right, left]]
         elif below == "unseen":
