@@ -25,6 +25,7 @@ from hiros_calib.extrinsics import (
     pair_correspondences,
     solve_poses,
 )
+from hiros_calib.known import keep_known_poses, known_relative_poses, place_as_known
 from hiros_calib.lags import settle_lag, split_half_spread
 from hiros_calib.quality import arrival_offsets_from_delays, flag_cameras
 from hiros_calib.retime import retime
@@ -40,6 +41,7 @@ from hiros_calib.tracks import BodyTrack, extract_tracks
 from hiros_calib.world import align_to_floor, fit_floor
 from hiros_core.calibration import Calibration, CameraCalibration
 from hiros_core.errors import CalibrationError, ConfigError
+from hiros_core.geometry import RigidTransform
 from hiros_core.model import SkeletonGroup
 
 __all__ = ["CalibrationResult", "Calibrator", "CalibratorParams"]
@@ -132,6 +134,7 @@ class Calibrator:
         arrival_ns: Mapping[str, Sequence[int]] | None = None,
         *,
         one_receiver: bool = False,
+        known_poses: Calibration | None = None,
     ) -> Calibration:
         """The calibration of every camera; also kept with all details in ``self.result``.
 
@@ -146,10 +149,17 @@ class Calibrator:
             one_receiver: the arrival times are the caller's own receiving clock (a live
                 node), never each camera's host clock, so they are used even when they look
                 alike on every camera (cameras whose clocks already agree).
+            known_poses: an earlier calibration of the same cameras, unmoved (people walking
+                across the area pin poses down; people exercising on one spot do not): its
+                poses and world are kept, and only the clocks are found, the skeletons judging
+                each lag against the known poses. Each camera's quality says how well the
+                known pose still fits (``known_pose_*``); a camera it no longer fits is flagged
+                as moved.
 
         Raises:
             CalibrationError: fewer than two cameras, or (with ``require_all``) a camera
-                whose clock or pose the data cannot determine, with the reason.
+                whose clock or pose the data cannot determine, with the reason (a camera
+                ``known_poses`` lacks among them).
 
         """
         groups = dict(camera_groups) if camera_groups is not None else dict(self._groups)
@@ -175,6 +185,7 @@ class Calibrator:
             msg = f"reference camera {reference!r} is not among the cameras {sorted(groups)}"
             raise CalibrationError(msg)
         cameras = [reference, *[c for c in groups if c != reference]]
+        known = known_relative_poses(known_poses, cameras, reference) if known_poses else None
         report("body tracks", 0.0)
         tracks = {
             camera: extract_tracks(
@@ -189,13 +200,18 @@ class Calibrator:
         }
         report("clock offsets", 0.1)
         clocks, sync_pairs = synchronise(
-            tracks, reference, params, arrival_offsets, settle=self._settle(tracks)
+            tracks, reference, params, arrival_offsets, settle=self._settle(tracks, known)
         )
         refused = {c: clock.reason for c, clock in clocks.items() if not clock.ok}
         self._check(refused, "clock")
         report("camera poses", 0.6)
         pose_pairs = self._pose_pairs(cameras, tracks, clocks)
-        poses = solve_poses([c for c in cameras if clocks[c].ok], reference, pose_pairs)
+        calibrated = [c for c in cameras if clocks[c].ok]
+        poses = (
+            keep_known_poses(calibrated, known, pose_pairs)
+            if known is not None
+            else solve_poses(calibrated, reference, pose_pairs)
+        )
         refused.update({c: pose.reason for c, pose in poses.items() if not pose.ok})
         self._check(refused, "pose")
         report("clocks by the motion", 0.9)
@@ -217,8 +233,16 @@ class Calibrator:
         if arrival_offsets or arrival_notes:
             for cal in calibration.cameras.values():
                 cal.quality["arrival_times"] = "ignored" if arrival_notes else "used"
-        flag_cameras(calibration, sync_pairs, pose_pairs, motion_shifts=motion_shifts)
-        if params.world == "floor":
+        flag_cameras(
+            calibration,
+            sync_pairs,
+            pose_pairs,
+            motion_shifts=motion_shifts,
+            poses_known=known is not None,
+        )
+        if known_poses is not None:
+            place_as_known(calibration, known_poses)
+        elif params.world == "floor":
             notes.extend(_align_to_floor(calibration, tracks))
         self.result = CalibrationResult(
             calibration, clocks, sync_pairs, poses, pose_pairs, tracks, refused, notes
@@ -226,7 +250,9 @@ class Calibrator:
         report("done", 1.0)
         return calibration
 
-    def _settle(self, tracks: dict[str, list[BodyTrack]]) -> Settle:
+    def _settle(
+        self, tracks: dict[str, list[BodyTrack]], known: dict[str, RigidTransform] | None
+    ) -> Settle:
         """The poses' check of each pair's lag (see :mod:`~hiros_calib.lags`)."""
         params = self.params
 
@@ -239,6 +265,11 @@ class Calibrator:
                 repin,
                 max_ambiguity=params.max_ambiguity,
                 min_lag_margin=MIN_LAG_MARGIN,
+                known=(
+                    known[pair.camera_a].inverse() @ known[pair.camera_b]
+                    if known is not None
+                    else None
+                ),
             )
 
         return settle

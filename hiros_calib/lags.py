@@ -53,14 +53,19 @@ from hiros_calib.tracks import BodyTrack
 from hiros_core.geometry import RigidTransform
 
 __all__ = [
+    "KNOWN_POSES",
     "MIN_FIT_COVERAGE",
     "LagFit",
     "compare_fits",
     "fit_at_lag",
+    "frame_residuals",
     "settle_lag",
     "split_half_spread",
 ]
 
+
+KNOWN_POSES = "known poses"
+"""``lag_decided_by`` of a lag the skeletons chose measured against poses given beforehand."""
 
 MIN_FIT_COVERAGE = 0.5
 """A lag's skeletons must match at least this fraction of the frames that the best-matched
@@ -90,8 +95,14 @@ def fit_at_lag(
     lag: float,
     correlation: float,
     params: ExtrinsicsParams,
+    *,
+    known: RigidTransform | None = None,
 ) -> LagFit:
-    """Camera b's skeletons fitted onto camera a's at clock lag ``lag``, per frame of a."""
+    """Camera b's skeletons fitted onto camera a's at clock lag ``lag``, per frame of a.
+
+    ``known`` is camera b's pose in camera a's frame when it is known (from a calibration of
+    the same cameras): the skeletons are then measured against it, not fitted.
+    """
     clock_a = CameraClock("a", "ok", time_offset=0.0)
     clock_b = CameraClock("b", "ok", time_offset=lag)  # o_b - o_a = tau
     matches = associate(tracks_a, tracks_b, clock_a, clock_b, params)
@@ -104,18 +115,9 @@ def fit_at_lag(
     if not usable:
         return fit
     joined = Correspondences.concatenate([c for _, c in usable])
-    # two-fold cross-validation over alternating blocks of time: each frame's residual comes
-    # from a transform fitted without it, so a lag with little common data cannot win by a
-    # transform that fits its few frames too closely
-    fold = second_half(joined.times)
-    if fold.all() or not fold.any():
+    residual = frame_residuals(joined, known) if known is not None else _cross_validated(joined)
+    if residual is None:
         return fit
-    residual = np.full(joined.n_frames, np.nan)
-    for held in (fold, ~fold):
-        pose = estimate_pair_pose(joined.take(np.flatnonzero(~held)), sampling=QUICK_SAMPLING)
-        if not pose.ok:
-            return fit
-        residual[held] = _frame_residuals(joined.take(np.flatnonzero(held)), pose.transform)
     tracks = np.array([track for track, _ in usable])[joined.bodies]
     keys = np.round(joined.times * 1e4).astype(np.int64)
     seen = np.isfinite(residual)
@@ -124,6 +126,23 @@ def fit_at_lag(
         for t, k, r in zip(tracks[seen], keys[seen], residual[seen], strict=True)
     )
     return fit
+
+
+def _cross_validated(joined: Correspondences) -> np.ndarray | None:
+    """``(F,)`` per-frame residuals, each after a rigid fit to the other half (None: no fit)."""
+    # two-fold cross-validation over alternating blocks of time: each frame's residual comes
+    # from a transform fitted without it, so a lag with little common data cannot win by a
+    # transform that fits its few frames too closely
+    fold = second_half(joined.times)
+    if fold.all() or not fold.any():
+        return None
+    residual = np.full(joined.n_frames, np.nan)
+    for held in (fold, ~fold):
+        pose = estimate_pair_pose(joined.take(np.flatnonzero(~held)), sampling=QUICK_SAMPLING)
+        if not pose.ok:
+            return None
+        residual[held] = frame_residuals(joined.take(np.flatnonzero(held)), pose.transform)
+    return residual
 
 
 def split_half_spread(correspondences: Correspondences | None) -> tuple[float, float] | None:
@@ -151,7 +170,7 @@ def split_half_spread(correspondences: Correspondences | None) -> tuple[float, f
     return relative_error(poses[0], poses[1])
 
 
-def _frame_residuals(c: Correspondences, transform: RigidTransform) -> np.ndarray:
+def frame_residuals(c: Correspondences, transform: RigidTransform) -> np.ndarray:
     """``(F,)`` mean joint distance per frame (m), the better of direct and mirrored.
 
     NaN where a frame has too few joints seen by both cameras.
@@ -222,6 +241,7 @@ def settle_lag(
     *,
     max_ambiguity: float,
     min_lag_margin: float,
+    known: RigidTransform | None = None,
 ) -> PairOffset:
     """The pair with its lag checked (or chosen) by the poses, flagged or refused if need be.
 
@@ -229,12 +249,15 @@ def settle_lag(
     motion is ambiguous when the runner-up lag correlates ``max_ambiguity`` as well as the
     best or more; the poses decide when one lag's fit residual is ``MIN_LAG_MARGIN`` times
     smaller than every other's, and only among every lag the motion supports (an ambiguous
-    pair with more alike lags than ``MAX_CANDIDATES`` is refused).
+    pair with more alike lags than ``MAX_CANDIDATES`` is refused). With ``known`` (camera b's
+    pose in camera a's frame, from an earlier calibration) the skeletons are measured against
+    that pose instead of a fit of their own, and a lag they choose says so
+    (``lag_decided_by: known poses``).
     """
     if not pair.ok or len(pair.candidates) == 0:
         return pair
     fits = [
-        fit_at_lag(tracks_a, tracks_b, float(lag), float(corr), params)
+        fit_at_lag(tracks_a, tracks_b, float(lag), float(corr), params, known=known)
         for lag, corr in pair.candidates
     ]
     compare_fits(fits)
@@ -270,6 +293,8 @@ def settle_lag(
     settled.quality.update(_quality(pair, fits, chosen, motion_ratio))
     if ambiguous:  # alike lags: the poses chose, whether or not the motion's best
         settled.quality["lag_decided_by"] = "poses"
+    if known is not None and settled.quality["lag_decided_by"] == "poses":
+        settled.quality["lag_decided_by"] = KNOWN_POSES
     if flag:
         settled.quality["flagged"] = flag
     return settled

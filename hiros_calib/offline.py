@@ -9,6 +9,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from hiros_calib.calibrator import CalibrationResult, Calibrator, CalibratorParams, Progress
+from hiros_core.calibration import Calibration
 from hiros_core.errors import RecordingError
 from hiros_core.model import SkeletonGroup
 from hiros_core.recording import read_camera_groups, require_camera_topics
@@ -35,6 +36,7 @@ def calibrate_recording(
     use_arrival: bool = True,
     progress: Progress | None = None,
     problems: list[str] | None = None,
+    known_poses: Calibration | None = None,
 ) -> CalibrationResult:
     """The calibration of a recording's cameras, with every detail (``result.calibration``).
 
@@ -48,6 +50,8 @@ def calibrate_recording(
             from 0 to 1: ``READING`` at 0, then the Calibrator's stages.
         problems: list that receives the reader's sentences on what it could not read (a
             truncated file, a damaged chunk), even when this raises.
+        known_poses: an earlier calibration of the same cameras whose poses and world are
+            kept; only the clocks are found (see ``Calibrator.calibrate``).
 
     Raises:
         RecordingError: the recording cannot be read, holds no camera skeleton topic, or
@@ -72,6 +76,7 @@ def calibrate_recording(
         groups,
         progress=lambda stage, done: report(stage, READ_SHARE + (1 - READ_SHARE) * done),
         arrival_ns=arrivals if use_arrival and not stamps else None,
+        known_poses=known_poses,
     )
     result = calibrator.result
     assert result is not None  # calibrate() sets it or raises

@@ -26,6 +26,7 @@ from typing import Any, TypeVar
 import numpy as np
 
 from hiros_calib.extrinsics import PairPose, relative_error
+from hiros_calib.known import KNOWN_POSE_RESIDUAL, OWN_POSE_RESIDUAL
 from hiros_calib.retime import SHIFT_SE_INFLATION, MotionShift
 from hiros_calib.sync import PairOffset
 from hiros_core.calibration import Calibration, CameraCalibration
@@ -61,6 +62,11 @@ class LoopTolerances:
     a camera's pairs (:func:`~hiros_calib.extrinsics.motion_lever`): people exercising or
     gesturing on one spot move less, people walking, even to and fro along one line, more
     (docs/calibration-robustness.md, session 20)."""
+    known_pose_excess_m: float = 0.015
+    """Most (m) by which the same-instant joints may lie further apart under poses given
+    beforehand than under a pose fitted to the recording alone (:mod:`hiros_calib.known`)
+    before the camera is taken to have moved: 0.1-0.6 cm on cameras left in place, 1.6-2.4
+    cm on one turned by 2 deg (docs/calibration-robustness.md, session 26)."""
     motion_confirms_s: float = 0.01
     """A pair's lag the clocks miss is set aside, not flagged, when the joints' motion puts
     that pair within this (s) of the clocks, twice its own standard error included
@@ -101,6 +107,8 @@ def flag_cameras(
     pose_pairs: Sequence[PairPose],
     tolerances: LoopTolerances | None = None,
     motion_shifts: Sequence[MotionShift] = (),
+    *,
+    poses_known: bool = False,
 ) -> None:
     """Add loop-closure figures to every camera's quality; flag those that fail a check.
 
@@ -109,14 +117,18 @@ def flag_cameras(
     tolerances (with three or more cameras: a loop that does not close), unless the joints'
     motion (``motion_shifts``, measured at the solved clocks) confirms the clocks for that
     pair. The reference camera is never flagged on its own: it defines the frame and the
-    clock.
+    clock. With ``poses_known`` (poses kept from an earlier calibration, not solved here) the
+    poses are checked only for whether they still fit the recording.
     """
     tolerances = tolerances or LoopTolerances()
     cameras = calibration.cameras
     reasons: dict[str, list[str]] = {name: [] for name in cameras}
     confirmed = _confirmed_by_motion(motion_shifts, tolerances)
     _check_clocks(cameras, sync_pairs, tolerances, reasons, confirmed)
-    _check_poses(cameras, pose_pairs, tolerances, reasons)
+    if poses_known:
+        _check_known_poses(cameras, pose_pairs, tolerances, reasons)
+    else:
+        _check_poses(cameras, pose_pairs, tolerances, reasons)
     for name, found in reasons.items():
         if found and name != calibration.reference:
             cameras[name].flagged = "; ".join(dict.fromkeys(found))
@@ -240,6 +252,32 @@ def _check_poses(
             _combined_rotation(name, camera, tolerances, reasons[name], one_pair=links[name] <= 1)
 
 
+def _check_known_poses(
+    cameras: dict[str, CameraCalibration],
+    pose_pairs: Sequence[PairPose],
+    tolerances: LoopTolerances,
+    reasons: dict[str, list[str]],
+) -> None:
+    """Whether the poses given beforehand still fit the recording (:mod:`hiros_calib.known`)."""
+    usable, _ = _usable_links(pose_pairs, cameras)
+    for pose in usable:
+        if KNOWN_POSE_RESIDUAL not in pose.quality:
+            continue
+        known, own = pose.quality[KNOWN_POSE_RESIDUAL], pose.quality[OWN_POSE_RESIDUAL]
+        _keep_largest(cameras, pose, KNOWN_POSE_RESIDUAL, known)
+        _keep_largest(cameras, pose, OWN_POSE_RESIDUAL, own)
+        if known - own > 100 * tolerances.known_pose_excess_m:
+            text = (
+                f"the known poses fit the {pose.camera_a}-{pose.camera_b} skeletons "
+                f"{known - own:.1f} cm worse than a pose fitted to this recording ({known:.1f} "
+                f"against {own:.1f} cm; tolerance {100 * tolerances.known_pose_excess_m:.1f}): "
+                "a camera has moved since they were calibrated; calibrate a recording of "
+                "people walking across the area again"
+            )
+            for name in (pose.camera_a, pose.camera_b):
+                reasons[name].append(text)
+
+
 def _resting_on_one_spot(
     name: str, camera: CameraCalibration, tolerances: LoopTolerances, reasons: list[str]
 ) -> None:
@@ -259,7 +297,8 @@ def _resting_on_one_spot(
             f"one spot, and their joints moved {100 * best:.0f} cm RMS about where they "
             f"stood (at least {100 * tolerances.min_motion_lever_m:.0f} cm pin the "
             "rotation down against the body tracker's own errors; record people walking "
-            "across the area)"
+            "across the area, or, with the cameras unmoved since such a recording, time this "
+            "one with its poses: hiros calibrate --poses-from ITS_CALIBRATION)"
         )
 
 

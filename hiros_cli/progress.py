@@ -24,6 +24,7 @@ from rich.progress import (
 
 if TYPE_CHECKING:
     from hiros_calib.calibrator import CalibrationResult, CalibratorParams
+    from hiros_core.calibration import Calibration
 
 
 @contextmanager
@@ -50,6 +51,7 @@ def calibrate_with_progress(
     params: CalibratorParams | None = None,
     *,
     use_arrival: bool = True,
+    known_poses: Calibration | None = None,
 ) -> CalibrationResult:
     """``hiros_calib.calibrate_recording`` behind a transient bar of its stages.
 
@@ -69,6 +71,7 @@ def calibrate_with_progress(
                 use_arrival=use_arrival,
                 progress=lambda stage, done: bar.update(task, description=stage, completed=done),
                 problems=problems,
+                known_poses=known_poses,
             )
     finally:
         print_warnings(console, problems)

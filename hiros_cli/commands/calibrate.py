@@ -30,9 +30,16 @@ The world is gravity-aligned (REP-103): z up and the floor at z = 0, found from 
 people's feet rest, x along the reference camera's view, the origin on the floor below it.
 --world camera keeps the reference camera's own frame.
 
+People who stay on one spot (exercises, gestures) time the clocks but cannot pin the poses
+down. Calibrate once from a recording of people walking across the area, then give that file
+as --poses-from for each later recording with the cameras unmoved: its poses and world are
+kept, only this recording's clocks are found, and the skeletons judge each candidate lag
+against the known poses. A camera the known poses no longer fit (moved since) is flagged.
+
 Examples:
   hiros calibrate sample/recording.mcap --out calib.yaml
   hiros calibrate rec/ --out calib.yaml --reference k02 --plots calib_plots/
+  hiros calibrate squats.mcap --poses-from walk_calib.yaml --out squats_calib.yaml
 
 """
 
@@ -88,9 +95,15 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--world",
         choices=("floor", "camera"),
-        default="floor",
         help="floor (default): z up and the floor at z = 0, found from the people's feet, x "
         "along the reference camera's view (REP-103); camera: the reference camera's own frame",
+    )
+    parser.add_argument(
+        "--poses-from",
+        type=Path,
+        metavar="CAL",
+        help="keep the camera poses and world of this calibration file (the same cameras, "
+        "unmoved, calibrated from people walking) and find only this recording's clocks",
     )
 
 
@@ -100,7 +113,8 @@ def run(args: argparse.Namespace) -> int:
 
     from hiros_calib.calibrator import CalibratorParams
     from hiros_cli.progress import calibrate_with_progress
-    from hiros_core.calibration import save_calibration
+    from hiros_core.calibration import load_calibration, save_calibration
+    from hiros_core.errors import ConfigError
     from hiros_core.outputs import (
         check_output,
         is_calibration_file,
@@ -121,10 +135,20 @@ def run(args: argparse.Namespace) -> int:
         params.max_offset = args.max_offset
     if args.no_drift:
         params.estimate_drift = False
-    params.world = args.world
+    if args.poses_from and args.world:
+        msg = "--world and --poses-from: the world of the --poses-from calibration is kept"
+        raise ConfigError(msg)
+    params.world = args.world or "floor"
+    known = load_calibration(args.poses_from) if args.poses_from else None
     result = calibrate_with_progress(
-        args.recording, console, params, use_arrival=not args.no_arrival_times
+        args.recording,
+        console,
+        params,
+        use_arrival=not args.no_arrival_times,
+        known_poses=known,
     )
+    if args.poses_from:
+        result.notes.insert(0, f"poses and world kept from {args.poses_from}; clocks found here")
     calibration = result.calibration
     with staged_output(args.out, replace=True) as staged:
         save_calibration(calibration, staged)
@@ -147,6 +171,8 @@ def print_summary(console: Console, result: CalibrationResult) -> None:
     import numpy as np
     from rich import box
     from rich.table import Table
+
+    from hiros_calib.known import KNOWN_POSE_RESIDUAL, OWN_POSE_RESIDUAL
 
     calibration = result.calibration
     # long camera names (IP addresses) get short labels so the table fits one screen
@@ -217,6 +243,15 @@ def print_summary(console: Console, result: CalibrationResult) -> None:
             f"{100 * pq['motion_lever_m']:.0f}" if "motion_lever_m" in pq else "-",
         )
     console.print(pairs)
+    for pose in result.pose_pairs:
+        if KNOWN_POSE_RESIDUAL in pose.quality:
+            console.print(
+                f"known poses: the {pose.camera_a}-{pose.camera_b} joints lie "
+                f"{pose.quality[KNOWN_POSE_RESIDUAL]:.1f} cm apart under them, "
+                f"{pose.quality[OWN_POSE_RESIDUAL]:.1f} cm under a pose fitted to this "
+                "recording alone (a camera moved since fits clearly worse)",
+                highlight=False,
+            )
     for camera, reason in result.refused.items():
         console.print(f"[yellow]{camera} left out: {reason}[/]")
     for note in result.notes:

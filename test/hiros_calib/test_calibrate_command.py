@@ -93,3 +93,28 @@ def test_log_times_that_are_only_the_stamps_do_not_narrow_the_search(make_scene,
     assert "log times are the frames' own stamps" in capsys.readouterr().out
     truth = scene.truth.cameras["cam1"].time_offset
     assert load_calibration(out).cameras["cam1"].time_offset == pytest.approx(truth, abs=3e-3)
+
+
+def test_poses_from_an_earlier_calibration_keep_its_poses_and_find_the_clocks(
+    recording, tmp_path, capsys
+):
+    _scene, path = recording
+    walk = tmp_path / "walk.yaml"
+    assert main(["calibrate", str(path), "--out", str(walk)]) == 0
+    out = tmp_path / "take.yaml"
+    assert main(["calibrate", str(path), "--poses-from", str(walk), "--out", str(out)]) == 0
+    printed = " ".join(capsys.readouterr().out.split())  # (rich wraps long lines)
+    assert "poses and world kept from" in printed
+    assert "known poses: the cam0-cam1 joints lie" in printed
+    known, found = load_calibration(walk), load_calibration(out)
+    for name, camera in found.cameras.items():
+        assert camera.translation == pytest.approx(known.cameras[name].translation)
+        assert camera.rotation == pytest.approx(known.cameras[name].rotation)
+        assert camera.time_offset == pytest.approx(known.cameras[name].time_offset, abs=2e-3)
+    assert (
+        found.cameras["cam0"].quality["floor_up_from"]
+        == known.cameras["cam0"].quality["floor_up_from"]
+    )
+    assert main(["calibrate", str(path), "--poses-from", str(walk), "--world", "camera",
+                 "--out", str(out)]) == 1  # fmt: skip
+    assert "--world and --poses-from" in capsys.readouterr().err
