@@ -2,7 +2,8 @@
 
 Each row is a ``hiros_sim`` preset (log times in each camera's host clock, repeated
 Bandai-Namco motion, one person, two cameras 45° apart, a noisier SDK, 15 Hz, 5 % drops, one
-person exercising on one spot before the pair, then all of them together) simulated over
+person exercising on one spot before the pair, the same timed with the poses of a walk
+before the same cameras, then all of them together) simulated over
 several seeds and calibrated by ``Calibrator`` with its default parameters and the
 recording's own log times, as ``hiros calibrate`` would.
 
@@ -22,6 +23,8 @@ on other data (``KINECT_MULTITRACK_BEFORE``).
 
 from __future__ import annotations
 
+import copy
+import tempfile
 import time
 from collections import Counter
 from collections.abc import Sequence
@@ -31,6 +34,7 @@ from pathlib import Path
 import numpy as np
 
 from hiros_calib.calibrator import Calibrator, CalibratorParams
+from hiros_core.calibration import Calibration, save_calibration
 from hiros_core.errors import CalibrationError, ConfigError, RecordingError
 from hiros_eval.calibration import compare_calibration
 from hiros_sim import simulate
@@ -48,9 +52,26 @@ MATRIX_ROWS = (
     "15hz",
     "drops-5",
     "exercise-on-spot",
+    "exercise+walk",
     "all",
 )
-"""The simulator presets of the matrix, in order (``hiros_sim.presets``)."""
+"""The rows of the matrix, in order: ``hiros_sim.presets`` and ``KNOWN_POSES_ROWS``."""
+
+KNOWN_POSES_ROWS = {
+    "exercise+walk": (
+        "exercise-on-spot",
+        "two-cameras-45",
+        "exercise-on-spot timed with the poses of a walk (two-cameras-45 motion) before the "
+        "same cameras, calibrated first (hiros calibrate --poses-from)",
+    ),
+}
+"""Rows whose take (first preset) is calibrated with the poses of another recording before the
+same cameras (second preset), itself calibrated first: per row the two presets and what the
+row is."""
+
+WALK_SEED_OFFSET = 1000
+"""The walk of a ``KNOWN_POSES_ROWS`` run is simulated with the take's seed plus this, so that
+its clocks and people are drawn apart from the take's."""
 
 UNDECIDABLE = "the lag is ambiguous"
 """How a refusal begins when neither the motion nor the skeletons single out one lag."""
@@ -106,15 +127,45 @@ def _short(reason: str) -> str:
     return head[:70]
 
 
-def one_run(preset: str, seed: int, duration: float, row: _Row) -> None:
-    """Simulate one seed of ``preset``, calibrate it with the defaults, judge the result."""
+def _known_poses(walk_preset: str, truth: Calibration, seed: int, duration: float) -> Calibration:
+    """The calibration of a walk simulated before the cameras of ``truth`` (its clocks apart).
+
+    Raises:
+        CalibrationError: the walk cannot be calibrated.
+
+    """
+    cameras = copy.deepcopy(truth)
+    for camera in cameras.cameras.values():
+        camera.time_offset, camera.drift = 0.0, 0.0  # the walk draws clocks of its own
+    with tempfile.TemporaryDirectory() as folder:
+        setup = Path(folder) / "cameras.yaml"
+        save_calibration(cameras, setup)
+        walk = simulate(preset_params(walk_preset, seed=seed, duration=duration, setup=str(setup)))
+    return Calibrator(CalibratorParams(reference="k01")).calibrate(
+        walk.camera_groups, arrival_ns=walk.receive_ns
+    )
+
+
+def one_run(name: str, seed: int, duration: float, row: _Row) -> None:
+    """Simulate one seed of row ``name``, calibrate it with the defaults, judge the result."""
+    preset, walk_preset, _ = KNOWN_POSES_ROWS.get(name, (name, None, ""))
     result = simulate(preset_params(preset, seed=seed, duration=duration))
     truth = result.calibration
     calibrator = Calibrator(CalibratorParams(reference="k01"))
-    started = time.perf_counter()
     row.runs += 1
+    known = None
     try:
-        estimate = calibrator.calibrate(result.camera_groups, arrival_ns=result.receive_ns)
+        if walk_preset is not None:
+            known = _known_poses(walk_preset, truth, seed + WALK_SEED_OFFSET, duration)
+    except CalibrationError as exc:
+        row.refused += 1
+        row.reasons[f"refused (the walk): {_short(str(exc))}"] += 1
+        return
+    started = time.perf_counter()
+    try:
+        estimate = calibrator.calibrate(
+            result.camera_groups, arrival_ns=result.receive_ns, known_poses=known
+        )
     except CalibrationError as exc:
         row.refused += 1
         row.undecidable += UNDECIDABLE in str(exc)
@@ -235,7 +286,11 @@ def run(
     )
     lines.append("refusals and flags (most common per row):")
     lines.extend(notes or ["  none"])
-    lines.append(f"conditions: {', '.join(f'{r} = {PRESETS[r].description}' for r in rows)}")
+    described = [
+        f"{r} = {KNOWN_POSES_ROWS[r][2] if r in KNOWN_POSES_ROWS else PRESETS[r].description}"
+        for r in rows
+    ]
+    lines.append(f"conditions: {', '.join(described)}")
     lines.extend(_kinect_multitrack_lines(console))
     for line in lines:
         console.print(line, highlight=False)

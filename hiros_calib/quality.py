@@ -297,8 +297,8 @@ def _resting_on_one_spot(
             f"one spot, and their joints moved {100 * best:.0f} cm RMS about where they "
             f"stood (at least {100 * tolerances.min_motion_lever_m:.0f} cm pin the "
             "rotation down against the body tracker's own errors; record people walking "
-            "across the area, or, with the cameras unmoved since such a recording, time this "
-            "one with its poses: hiros calibrate --poses-from ITS_CALIBRATION)"
+            "across the area, or, with the cameras unmoved since such a recording, give its "
+            "calibration as --poses-from)"
         )
 
 

@@ -13,7 +13,7 @@ from hiros_bench import calib_matrix
 @pytest.mark.slow
 def test_matrix_rows_report_outcomes_and_nothing_silently_wrong() -> None:
     console = Console(file=io.StringIO(), width=200)
-    rows = ("host-clocks", "two-cameras-45")
+    rows = ("host-clocks", "two-cameras-45", "exercise+walk")
     lines = calib_matrix.run(console, seeds=[1], duration=25.0, rows=rows)
     table = {
         line.split()[0]: line.split() for line in lines if line.split()[:1] in ([r] for r in rows)
