@@ -3,7 +3,8 @@
 Each row is a ``hiros_sim`` preset (log times in each camera's host clock, repeated
 Bandai-Namco motion, one person, two cameras 45° apart, a noisier SDK, 15 Hz, 5 % drops, one
 person exercising on one spot before the pair, the same timed with the poses of a walk
-before the same cameras, then all of them together) simulated over
+before the same cameras, then all of them together, and that timed with a walk's poses too)
+simulated over
 several seeds and calibrated by ``Calibrator`` with its default parameters and the
 recording's own log times, as ``hiros calibrate`` would.
 
@@ -54,6 +55,7 @@ MATRIX_ROWS = (
     "exercise-on-spot",
     "exercise+walk",
     "all",
+    "all+walk",
 )
 """The rows of the matrix, in order: ``hiros_sim.presets`` and ``KNOWN_POSES_ROWS``."""
 
@@ -64,6 +66,7 @@ KNOWN_POSES_ROWS = {
         "exercise-on-spot timed with the poses of a walk (two-cameras-45 motion) before the "
         "same cameras, calibrated first (hiros calibrate --poses-from)",
     ),
+    "all+walk": ("all", "two-cameras-45", "all, timed with the poses of a walk likewise"),
 }
 """Rows whose take (first preset) is calibrated with the poses of another recording before the
 same cameras (second preset), itself calibrated first: per row the two presets and what the
