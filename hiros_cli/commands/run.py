@@ -5,7 +5,8 @@ MarkerArray or SkeletonGroup topics), applies the calibration, and writes one MC
 stage's output (/hiros/tracker, /hiros/merger, /hiros/optimizer, /hiros/filter), coloured
 markers for Foxglove or RViz (/hiros/merger/markers, /hiros/filter/markers) and the calibration
 used (/hiros/calibration). Every input frame is accounted for in the summary: processed, or
-dropped with a reason. `--calibration auto` calibrates from the recording first.
+dropped with a reason. `--calibration auto` calibrates from the recording first (with
+`--poses-from CAL`, only its clocks: the poses and world are those of CAL).
 
 Parameters are the nodes' own: `--params config/pipeline.yaml` (ROS parameter-file format).
 """
@@ -44,6 +45,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         required=True,
         help="output .mcap (or a rosbag2 folder); never one of the inputs. It appears only "
         "when the run ends well (written beside it under a hidden name until then)",
+    )
+    parser.add_argument(
+        "--poses-from",
+        type=Path,
+        metavar="CAL",
+        help="with --calibration auto: keep the camera poses and world of this calibration "
+        "(the same cameras, unmoved, calibrated from people walking) and find only the "
+        "recording's clocks, as hiros calibrate --poses-from does",
     )
     parser.add_argument("--params", type=Path, help="pipeline parameter file (default: config/)")
     parser.add_argument(
@@ -126,19 +135,30 @@ def _rate(text: str) -> float:
 
 
 def resolve_calibration(
-    spec: str, recording: Path, out: Path, console: Console, *, accept_flagged: bool = False
+    spec: str,
+    recording: Path,
+    out: Path,
+    console: Console,
+    *,
+    accept_flagged: bool = False,
+    poses_from: Path | None = None,
 ) -> Calibration:
     """A calibration file, or ``auto``: calibrate the recording and save beside the output.
 
     The file written for ``auto`` (``OUT.calib.yaml``) replaces only an earlier calibration
     file and never an input. It is written even when a camera is flagged, so the user can
-    read why; the run then stops unless ``accept_flagged``.
+    read why; the run then stops unless ``accept_flagged``. ``poses_from`` (only with
+    ``auto``) keeps that calibration's poses and world, and finds only the clocks.
 
     Raises:
         CalibrationError: a camera is flagged as doubtful (and not ``accept_flagged``).
+        ConfigError: ``poses_from`` with a calibration file.
 
     """
     if spec != "auto":
+        if poses_from is not None:
+            msg = "--poses-from goes with --calibration auto (a calibration file has its poses)"
+            raise ConfigError(msg)
         return refuse_flagged(load_calibration(spec), spec, console, accept=accept_flagged)
     from hiros_core.outputs import check_output, is_calibration_file, staged_output
 
@@ -146,7 +166,10 @@ def resolve_calibration(
     check_output(path, inputs=[recording], force=True, ours=is_calibration_file,
                  what="calibration file", option="--calibration auto: its file")  # fmt: skip
     console.print(f"calibrating {recording} first (--calibration auto)")
-    calibration = calibrate_with_progress(recording, console).calibration
+    known = load_calibration(poses_from) if poses_from is not None else None
+    if poses_from is not None:
+        console.print(f"keeping the camera poses and world of {poses_from}; finding the clocks")
+    calibration = calibrate_with_progress(recording, console, known_poses=known).calibration
     with staged_output(path, replace=True) as staged:
         save_calibration(calibration, staged)
     console.print(f"calibration written to {path}")
@@ -184,13 +207,19 @@ def run(args: argparse.Namespace) -> int:
     from hiros_pipeline.offline import OUTPUTS, message_count
 
     console = Console()
-    inputs = [args.recording, args.params, None if args.calibration == "auto" else args.calibration]
+    calibration_file = None if args.calibration == "auto" else args.calibration
+    inputs = [args.recording, args.params, calibration_file, args.poses_from]
     check_output(args.out, inputs=[p for p in inputs if p is not None], force=args.force,
                  ours=is_hiros_recording, what="recording")  # fmt: skip
     params = load_pipeline_params(args.params, merge_rate=args.merge_rate)
     require_camera_topics(args.recording)
     calibration = resolve_calibration(
-        args.calibration, args.recording, args.out, console, accept_flagged=args.accept_flagged
+        args.calibration,
+        args.recording,
+        args.out,
+        console,
+        accept_flagged=args.accept_flagged,
+        poses_from=args.poses_from,
     )
     with (
         staged_output(args.out, replace=args.force) as staged,

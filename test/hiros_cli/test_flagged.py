@@ -4,10 +4,12 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from hiros_cli.main import main
 from hiros_core.calibration import load_calibration, save_calibration
+from hiros_eval.calibration import compare_calibration
 from hiros_sim import SimParams, simulate, write_recording
 
 
@@ -58,3 +60,29 @@ def test_run_with_calibration_auto_stops_on_a_flagged_result(
     assert not out.exists()
     written = load_calibration(out.with_suffix(".calib.yaml"))  # kept, for the user to read
     assert "poorly determined" in written.cameras["k02"].flagged
+
+
+def test_run_with_calibration_auto_keeps_known_poses_and_times_the_clocks(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A recording whose own poses are flagged (as above: seed 1 is flagged alone too) runs
+    with the poses of a calibration of the same cameras given as --poses-from; --poses-from
+    beside a calibration file is an error."""
+    from hiros_sim.presets import preset_params
+
+    folder = tmp_path / "noisy"
+    scene = simulate(preset_params("noisy-sdk", seed=1, duration=10.0, n_cameras=2, n_people=1))
+    write_recording(scene, folder)
+    known = folder / "calibration.yaml"  # the simulator's truth: poses from elsewhere
+    out = tmp_path / "out.mcap"
+    args = ["run", str(folder / "recording.mcap"), "--out", str(out), "--poses-from", str(known)]
+    assert main([*args, "--calibration", "auto"]) == 0
+    assert "keeping the camera poses" in capsys.readouterr().out
+    written = load_calibration(out.with_suffix(".calib.yaml"))
+    truth = load_calibration(known)
+    assert written.flagged == {}
+    assert written.cameras["k02"].rotation == pytest.approx(truth.cameras["k02"].rotation)
+    stamps = {c: np.array([g.stamp for g in gs]) for c, gs in scene.camera_groups.items()}
+    assert compare_calibration(written, truth, stamps)["k02"].time_error_ms < 10.0
+    assert main([*args, "--calibration", str(known), "--force"]) == 1
+    assert "--poses-from goes with --calibration auto" in capsys.readouterr().err
