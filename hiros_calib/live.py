@@ -46,7 +46,7 @@ from hiros_calib.sync import CameraClock
 from hiros_calib.tracks import BodyTrack, extract_tracks
 from hiros_calib.world import place_in_world
 from hiros_core.accounting import Accounted, Drops
-from hiros_core.calibration import Calibration, CameraCalibration
+from hiros_core.calibration import Calibration, CameraCalibration, load_calibration
 from hiros_core.errors import CalibrationError
 from hiros_core.geometry import RigidTransform
 from hiros_core.model import SkeletonGroup
@@ -140,6 +140,11 @@ class LiveCalibratorParams(CalibratorParams):
     silent_after: float = 5.0
     """Seconds without a frame from a camera before it is reported silent (an event, and in
     :meth:`LiveCalibrator.snapshot`); its calibration is kept, and its return is reported."""
+    poses_from: str = ""
+    """A calibration file of the same cameras, unmoved (calibrated from people walking across
+    the area): its poses and world are kept and only the clocks are estimated, so people who
+    stay on one spot (exercising) can be timed. A camera it no longer fits (moved since) is
+    reported by a flagged estimate. Empty: the poses are estimated too."""
 
 
 def _blend(old: CameraCalibration, new: CameraCalibration, weight: float) -> CameraCalibration:
@@ -227,6 +232,7 @@ class LiveCalibrator(Accounted):
         self._rivals: dict[str, list[CameraCalibration]] = {}  # disagreeing estimates in a row
         self._silent: dict[str, int] = {}  # camera -> arrival of its last frame before silence
         self._lock = threading.Lock()
+        self._known = load_calibration(self.params.poses_from) if self.params.poses_from else None
 
     # -- input
     def update(self, group: SkeletonGroup, arrival_ns: int) -> SkeletonGroup:
@@ -357,12 +363,14 @@ class LiveCalibrator(Accounted):
         calibrator = Calibrator(params)
         try:
             # the arrival times are this node's own receiving clock
-            estimate = calibrator.calibrate(groups, arrival_ns=arrivals, one_receiver=True)
+            estimate = calibrator.calibrate(
+                groups, arrival_ns=arrivals, one_receiver=True, known_poses=self._known
+            )
         except CalibrationError as exc:
             self.drops["estimate_failed"] += 1
             self._event(now_ns, f"estimate failed: {exc}")
             return False
-        if reference is not None:
+        if reference is not None and self._known is None:  # known poses come placed
             place_in_world(estimate, reference.extrinsics)
         self.drops.update(calibrator.drops)
         changed = False

@@ -334,3 +334,44 @@ def test_a_camera_stamping_too_fast_does_not_grow_the_window():
     assert live.snapshot()["buffered"] == {"cam0": kept}
     assert live.drops["window_over_rate"] == frames - kept
     assert live.processed == frames
+
+
+def _feed_simulated(scene, live):
+    """A simulated recording's frames as a node receives them (reference time + 20 ms)."""
+    frames = sorted(
+        (round((scene.calibration.cameras[name].to_reference_time(g.stamp) + 0.02) * 1e9), k, g)
+        for name, groups in scene.camera_groups.items()
+        for k, g in enumerate(groups)
+    )
+    for k, (arrival, _, group) in enumerate(frames):
+        live.update(group, arrival)
+        if k % 3 == 0:
+            live.step(arrival)
+
+
+@pytest.mark.slow
+def test_known_poses_let_a_person_on_one_spot_be_timed_live(tmp_path):
+    """One person exercising on one spot: every estimate of the pose is flagged, so the node
+    has no calibration; with the poses of an earlier calibration (``poses_from``) its clocks
+    are estimated and the known poses kept."""
+    from hiros_core.calibration import save_calibration
+    from hiros_eval.calibration import compare_calibration
+    from hiros_sim import simulate
+    from hiros_sim.presets import preset_params
+
+    scene = simulate(preset_params("exercise-on-spot", seed=2, duration=40.0))
+    truth = scene.calibration
+    plain = LiveCalibrator(LiveCalibratorParams(reference="k01"))
+    _feed_simulated(scene, plain)
+    assert "k02" not in plain.calibration.cameras
+    assert plain.drops["estimate_flagged"] > 0
+
+    known = tmp_path / "walk.yaml"
+    save_calibration(truth, known)
+    live = LiveCalibrator(LiveCalibratorParams(reference="k01", poses_from=str(known)))
+    _feed_simulated(scene, live)
+    k02 = live.calibration.cameras["k02"]
+    assert not k02.flagged
+    assert k02.translation == pytest.approx(truth.cameras["k02"].translation, abs=1e-6)
+    stamps = {c: np.array([g.stamp for g in gs]) for c, gs in scene.camera_groups.items()}
+    assert compare_calibration(live.calibration, truth, stamps)["k02"].time_error_ms < 10.0
