@@ -185,7 +185,11 @@ class Calibrator:
             msg = f"reference camera {reference!r} is not among the cameras {sorted(groups)}"
             raise CalibrationError(msg)
         cameras = [reference, *[c for c in groups if c != reference]]
-        known = known_relative_poses(known_poses, cameras, reference) if known_poses else None
+        known = (
+            known_relative_poses(known_poses, cameras, reference)
+            if known_poses is not None
+            else None
+        )
         report("body tracks", 0.0)
         tracks = {
             camera: extract_tracks(

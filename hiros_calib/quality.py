@@ -65,7 +65,7 @@ class LoopTolerances:
     known_pose_excess_m: float = 0.015
     """Most (m) by which the same-instant joints may lie further apart under poses given
     beforehand than under a pose fitted to the recording alone (:mod:`hiros_calib.known`)
-    before the camera is taken to have moved: 0.1-0.6 cm on cameras left in place, 1.6-2.4
+    before the camera is taken to have moved: 0.0-0.7 cm on cameras left in place, 1.6-2.4
     cm on one turned by 2 deg (docs/calibration-robustness.md, session 26)."""
     motion_confirms_s: float = 0.01
     """A pair's lag the clocks miss is set aside, not flagged, when the joints' motion puts
