@@ -25,7 +25,12 @@ from hiros_calib.extrinsics import (
     pair_correspondences,
     solve_poses,
 )
-from hiros_calib.known import keep_known_poses, known_relative_poses, place_as_known
+from hiros_calib.known import (
+    check_lags,
+    keep_known_poses,
+    known_relative_poses,
+    place_as_known,
+)
 from hiros_calib.lags import settle_lag, split_half_spread
 from hiros_calib.quality import arrival_offsets_from_delays, flag_cameras
 from hiros_calib.retime import retime
@@ -206,6 +211,8 @@ class Calibrator:
         clocks, sync_pairs = synchronise(
             tracks, reference, params, arrival_offsets, settle=self._settle(tracks, known)
         )
+        if known is not None:
+            check_lags(sync_pairs, tracks, known)
         refused = {c: clock.reason for c, clock in clocks.items() if not clock.ok}
         self._check(refused, "clock")
         report("camera poses", 0.6)

@@ -26,7 +26,7 @@ from typing import Any, TypeVar
 import numpy as np
 
 from hiros_calib.extrinsics import PairPose, relative_error
-from hiros_calib.known import KNOWN_POSE_RESIDUAL, OWN_POSE_RESIDUAL
+from hiros_calib.known import KNOWN_POSE_BEST_LAG, KNOWN_POSE_RESIDUAL, OWN_POSE_RESIDUAL
 from hiros_calib.retime import SHIFT_SE_INFLATION, MotionShift
 from hiros_calib.sync import PairOffset
 from hiros_core.calibration import Calibration, CameraCalibration
@@ -67,6 +67,9 @@ class LoopTolerances:
     beforehand than under a pose fitted to the recording alone (:mod:`hiros_calib.known`)
     before the camera is taken to have moved: 0.0-0.7 cm on cameras left in place, 1.6-2.4
     cm on one turned by 2 deg (docs/calibration-robustness.md, session 26)."""
+    known_lag_s: float = 0.1
+    """Most (s) a pair's lag may lie from the one at which poses given beforehand fit its
+    skeletons best (``known_pose_best_lag``; two steps of that search's grid)."""
     motion_confirms_s: float = 0.01
     """A pair's lag the clocks miss is set aside, not flagged, when the joints' motion puts
     that pair within this (s) of the clocks, twice its own standard error included
@@ -126,6 +129,7 @@ def flag_cameras(
     confirmed = _confirmed_by_motion(motion_shifts, tolerances)
     _check_clocks(cameras, sync_pairs, tolerances, reasons, confirmed)
     if poses_known:
+        _check_known_lags(cameras, sync_pairs, tolerances, reasons)
         _check_known_poses(cameras, pose_pairs, tolerances, reasons)
     else:
         _check_poses(cameras, pose_pairs, tolerances, reasons)
@@ -250,6 +254,28 @@ def _check_poses(
         _final_pose_spread(name, camera, tolerances, reasons[name])
         if not reasons[name]:
             _combined_rotation(name, camera, tolerances, reasons[name], one_pair=links[name] <= 1)
+
+
+def _check_known_lags(
+    cameras: dict[str, CameraCalibration],
+    sync_pairs: Sequence[PairOffset],
+    tolerances: LoopTolerances,
+    reasons: dict[str, list[str]],
+) -> None:
+    """A reason where the known poses fit a pair's skeletons best at another lag than its own."""
+    usable, _ = _usable_links(sync_pairs, cameras)
+    for pair in usable:
+        best = pair.quality.get(KNOWN_POSE_BEST_LAG)
+        if best is None or abs(best - pair.offset) <= tolerances.known_lag_s:
+            continue
+        text = (
+            f"the known poses fit the {pair.camera_a}-{pair.camera_b} skeletons best at lag "
+            f"{best:+.2f} s, not at the lag the motion gives ({pair.offset:+.3f} s): the motion "
+            "repeats too alike to time this recording (record a stretch of varied motion, or "
+            "give --max-offset)"
+        )
+        for name in (pair.camera_a, pair.camera_b):
+            reasons[name].append(text)
 
 
 def _check_known_poses(

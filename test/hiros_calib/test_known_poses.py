@@ -3,13 +3,17 @@
 from __future__ import annotations
 
 import copy
+from collections import Counter
 
 import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
 from hiros_calib import Calibrator, CalibratorParams
-from hiros_calib.known import known_relative_poses
+from hiros_calib.known import check_lags, known_relative_poses
+from hiros_calib.quality import flag_cameras
+from hiros_calib.sync import PairOffset
+from hiros_calib.tracks import extract_tracks
 from hiros_core.calibration import Calibration, CameraCalibration
 from hiros_core.errors import CalibrationError
 from hiros_eval.calibration import compare_calibration
@@ -65,3 +69,30 @@ def test_a_person_exercising_on_one_spot_is_timed_against_known_poses():
         scene.camera_groups, arrival_ns=scene.receive_ns, known_poses=_turned(truth, "k02", 3.0)
     )
     assert "a camera has moved since" in moved.flagged["k02"]
+
+
+@pytest.mark.slow
+def test_the_known_poses_find_the_lag_they_fit_best_and_a_pair_far_from_it_is_flagged():
+    """On the exercise take the known poses fit best at the true lag; a pair the motion timed
+    seconds away from it (as noisy gestures on one spot can) is flagged, not kept silently."""
+    scene = simulate(preset_params("exercise-on-spot", seed=2, duration=40.0))
+    truth = scene.calibration
+    tracks = {
+        camera: extract_tracks(
+            groups, camera, max_gap=0.25, min_frames=10, min_confidence=0.5, drops=Counter()
+        )
+        for camera, groups in scene.camera_groups.items()
+    }
+    known = known_relative_poses(truth, ["k01", "k02"], "k01")
+    true_lag = truth.cameras["k02"].time_offset
+    timed = PairOffset("k01", "k02", status="ok", offset=true_lag + 5.0)
+    check_lags([timed], tracks, known)
+    assert timed.quality["known_pose_best_lag"] == pytest.approx(true_lag, abs=0.06)
+
+    calibration = copy.deepcopy(truth)
+    flag_cameras(calibration, [timed], [], poses_known=True)
+    assert "fit the k01-k02 skeletons best at lag" in calibration.flagged["k02"]
+    timed.offset = true_lag
+    calibration = copy.deepcopy(truth)
+    flag_cameras(calibration, [timed], [], poses_known=True)
+    assert "best at lag" not in calibration.cameras["k02"].flagged
