@@ -61,6 +61,13 @@ KNOWN_POSE_BEST_LAG = "known_pose_best_lag"
 SEARCH_STEP = 0.05
 """Grid (s) on which every lag of a pair is judged by the known poses (:func:`check_lags`)."""
 
+CHECK_FRAMES = 1200
+"""Most instants of one track the lag check judges (a minute on its grid): a long recording's
+are spread over it, so that its time and memory stay those of a minute's per pair of tracks."""
+
+BLOCK_VALUES = 2_000_000
+"""Coordinates of camera b's points held per block of the distance tables (about 8 MB each)."""
+
 FLOOR_PREFIX = "floor_"
 """The reference camera's quality keys that describe the known calibration's floor."""
 
@@ -169,17 +176,21 @@ def _lag_scores(
     lags = np.arange(first, last + 1) * SEARCH_STEP
     medians = np.full((len(grid_a), lags.size), np.nan)
     frames = np.zeros((len(grid_a), lags.size))
-    least = MIN_OVERLAP / SEARCH_STEP
     for i, (start_a, points_a, mirror) in enumerate(grid_a):
-        nearest = np.full((lags.size, len(points_a)), np.inf, dtype=np.float32)
+        # a long track is judged on at most CHECK_FRAMES of its instants, spread over it
+        stride = max(1, math.ceil(len(points_a) / CHECK_FRAMES))
+        kept = np.arange(0, len(points_a), stride)
+        least = MIN_OVERLAP / (SEARCH_STEP * stride)
+        nearest = np.full((lags.size, len(kept)), np.inf, dtype=np.float32)
         for start_b, points_b, _ in grid_b:
             distance = np.fmin(
-                _mean_distance(points_a, points_b), _mean_distance(points_a, points_b[:, mirror])
+                _mean_distance(points_a[kept], points_b),
+                _mean_distance(points_a[kept], points_b[:, mirror]),
             )
             # frame ia of a against frame ib of b is lag index start_a + ia - start_b - ib
             base = start_a - start_b - first - len(points_b) + 1
-            for ia, row in enumerate(distance):
-                column = nearest[base + ia : base + ia + len(points_b), ia]
+            for k, row in enumerate(distance):
+                column = nearest[base + kept[k] : base + kept[k] + len(points_b), k]
                 np.fmin(column, row[::-1], out=column)
         seen = np.isfinite(nearest)
         frames[i] = seen.sum(axis=1)
@@ -214,7 +225,8 @@ def _on_grid(track: BodyTrack, transform: RigidTransform) -> tuple[int, np.ndarr
 def _mean_distance(points_a: np.ndarray, points_b: np.ndarray) -> np.ndarray:
     """``(A, B)`` mean distance over the joints both frames hold (NaN: none shared)."""
     rows = []
-    for block in np.array_split(np.arange(len(points_a)), max(1, len(points_a) // 100)):
+    per_block = max(1, BLOCK_VALUES // max(1, points_b.size))
+    for block in np.array_split(np.arange(len(points_a)), max(1, len(points_a) // per_block)):
         gap = np.linalg.norm(points_a[block, None] - points_b[None], axis=-1)  # (a, B, J)
         shared = np.isfinite(gap)
         count = shared.sum(axis=-1)
