@@ -29,6 +29,7 @@ from hiros_calib.known import (
     check_lags,
     keep_known_poses,
     known_relative_poses,
+    pair_pose,
     place_as_known,
 )
 from hiros_calib.lags import settle_lag, split_half_spread
@@ -277,9 +278,7 @@ class Calibrator:
                 max_ambiguity=params.max_ambiguity,
                 min_lag_margin=MIN_LAG_MARGIN,
                 known=(
-                    known[pair.camera_a].inverse() @ known[pair.camera_b]
-                    if known is not None
-                    else None
+                    pair_pose(known, pair.camera_a, pair.camera_b) if known is not None else None
                 ),
             )
 

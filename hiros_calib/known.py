@@ -47,6 +47,7 @@ __all__ = [
     "check_lags",
     "keep_known_poses",
     "known_relative_poses",
+    "pair_pose",
     "place_as_known",
 ]
 
@@ -93,6 +94,11 @@ def known_relative_poses(
     return {c: world_from_reference.inverse() @ known.cameras[c].extrinsics for c in cameras}
 
 
+def pair_pose(known: dict[str, RigidTransform], camera_a: str, camera_b: str) -> RigidTransform:
+    """Camera b's known pose in camera a's frame (b -> a), from :func:`known_relative_poses`."""
+    return known[camera_a].inverse() @ known[camera_b]
+
+
 def keep_known_poses(
     cameras: Sequence[str], known: dict[str, RigidTransform], pose_pairs: Sequence[PairPose]
 ) -> dict[str, CameraPose]:
@@ -103,7 +109,7 @@ def keep_known_poses(
     """
     for pair in pose_pairs:
         if pair.ok and pair.reported is not None:
-            relative = known[pair.camera_a].inverse() @ known[pair.camera_b]
+            relative = pair_pose(known, pair.camera_a, pair.camera_b)
             pair.quality[KNOWN_POSE_RESIDUAL] = _median_cm(pair, relative)
             pair.quality[OWN_POSE_RESIDUAL] = _median_cm(pair, pair.transform)
     return {
@@ -151,7 +157,7 @@ def check_lags(
     for pair in sync_pairs:
         if not pair.ok:
             continue
-        b_to_a = known[pair.camera_a].inverse() @ known[pair.camera_b]
+        b_to_a = pair_pose(known, pair.camera_a, pair.camera_b)
         lags, scores = _lag_scores(tracks[pair.camera_a], tracks[pair.camera_b], b_to_a)
         if np.isfinite(scores).any():
             pair.quality[KNOWN_POSE_BEST_LAG] = round(float(lags[np.argmin(scores)]), 3)

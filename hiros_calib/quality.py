@@ -162,8 +162,7 @@ def _check_clocks(
             continue
         _lag_figures(cameras, pair)
         if pair.quality.get("flagged"):
-            for name in (pair.camera_a, pair.camera_b):
-                reasons[name].append(str(pair.quality["flagged"]))
+            _blame_both(reasons, pair, str(pair.quality["flagged"]))
         miss = _clock_miss(cameras[pair.camera_a], cameras[pair.camera_b], pair)
         _keep_largest(cameras, pair, "loop_time_ms", round(1e3 * abs(miss), 2))
         agrees = confirmed.get(frozenset((pair.camera_a, pair.camera_b)))
@@ -179,8 +178,7 @@ def _check_clocks(
                 f"ms (a loop of camera clocks does not close; tolerance "
                 f"{1e3 * tolerances.time_s:.0f} ms)"
             )
-            for name in (pair.camera_a, pair.camera_b):
-                reasons[name].append(text)
+            _blame_both(reasons, pair, text)
     _check_unconfirmed_choices(cameras, sync_pairs, reasons)
 
 
@@ -209,6 +207,12 @@ def _check_unconfirmed_choices(
         for name in (pair.camera_a, pair.camera_b):
             if links[name] == 1:
                 reasons[name].append(text)
+
+
+def _blame_both(reasons: dict[str, list[str]], pair: PairOffset | PairPose, text: str) -> None:
+    """The same reason for both cameras of a pair."""
+    for name in (pair.camera_a, pair.camera_b):
+        reasons[name].append(text)
 
 
 def _usable_links(
@@ -247,8 +251,7 @@ def _check_poses(
                 f"{angle:.1f} deg and {100 * distance:.1f} cm (a loop of camera poses does not "
                 "close)"
             )
-            for name in (pose.camera_a, pose.camera_b):
-                reasons[name].append(text)
+            _blame_both(reasons, pose, text)
     for name, camera in cameras.items():
         _resting_on_one_spot(name, camera, tolerances, reasons[name])
         _final_pose_spread(name, camera, tolerances, reasons[name])
@@ -274,8 +277,7 @@ def _check_known_lags(
             "repeats too alike to time this recording (record a stretch of varied motion, or "
             "give --max-offset)"
         )
-        for name in (pair.camera_a, pair.camera_b):
-            reasons[name].append(text)
+        _blame_both(reasons, pair, text)
 
 
 def _check_known_poses(
@@ -300,8 +302,7 @@ def _check_known_poses(
                 "a camera has moved since they were calibrated; calibrate a recording of "
                 "people walking across the area again"
             )
-            for name in (pose.camera_a, pose.camera_b):
-                reasons[name].append(text)
+            _blame_both(reasons, pose, text)
 
 
 def _resting_on_one_spot(
