@@ -11,8 +11,9 @@ correlates with its parent's (0.5-0.7). The simulator therefore makes the SDK's 
 first and then fits a rigid model to it (``fit_body_model``):
 
 1. evidence = truth + noise + a per camera, person and joint bias (``joint_bias``; fixed, or
-   drifting as an AR(1) process with time constant ``bias_drift_time``), with per-joint sigma
-   per axis::
+   drifting as an AR(1) process with time constant ``bias_drift_time``; along the world's up
+   the left and right ankle and foot share a smaller one, ``foot_height_bias``), with
+   per-joint sigma per axis::
 
        sigma = (noise_base + noise_per_metre * depth) * (1 + oblique_gain * obliqueness)
                * (occluded_gain if occluded) * (out_of_view_gain if outside the field of view)
@@ -166,6 +167,24 @@ def ar1_noise(rng: np.random.Generator, shape: tuple[int, ...], rho: float) -> n
     from scipy.signal import lfilter
 
     return lfilter([scale], [1.0, -rho], white, axis=1)
+
+
+_LEFT_FEET = np.array([_IDX("AnkleLeft"), _IDX("FootLeft")])
+_FEET = np.concatenate([_LEFT_FEET, [_IDX("AnkleRight"), _IDX("FootRight")]])
+
+
+def level_feet_bias(bias: np.ndarray, up: np.ndarray, height_share: float) -> None:
+    """Give both ankles and both feet the left's offset along ``up`` times ``height_share``.
+
+    ``bias`` is ``(P, N or 1, 32, 3)`` joint offsets in a camera's frame, changed in place;
+    ``up`` is the world's up in that frame. The real SDKs misplace a person's two feet in
+    height alike, and far less than their other joints: a resting foot is seen against the
+    floor (docs/world-frame.md). The left joints' draws are reused, scaled, so that no other
+    draw of the simulation moves. Offsets across the up stay each joint's own.
+    """
+    height = (bias[..., _LEFT_FEET, :] @ up) * height_share
+    height = np.concatenate([height, height], axis=-1)
+    bias[..., _FEET, :] += (height - bias[..., _FEET, :] @ up)[..., None] * up
 
 
 def flip_front_back(positions: np.ndarray, forward: np.ndarray) -> np.ndarray:

@@ -112,6 +112,12 @@ class SimParams:
     """Sigma along the camera's z axis relative to x, y (fitted: 1.20)."""
     joint_bias: float = 0.026
     """Sigma of a per camera, person and joint offset, metres (fitted RMS: 25.6 mm)."""
+    foot_height_bias: float = 0.005
+    """Sigma of the ankles' and feet's offset along the world's up, per camera and person, the
+    left and right alike, metres (their offset across the up is ``joint_bias``'s). Measured on
+    the KinectMultiTrack sessions: each camera's floor under one person agrees with the
+    other's to 0.14-0.46 cm, about 0.2 cm per camera; this is over twice that, those being
+    Kinect v2 and four."""
     bias_drift_time: float = 0.0
     """Seconds for the joint offsets' autocorrelation to fall to 1/e (an Ornstein-Uhlenbeck
     drift, same sigma); 0 keeps them fixed for the whole recording (the take's)."""

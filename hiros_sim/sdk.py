@@ -27,6 +27,7 @@ from hiros_sim.noise import (
     fit_body_model,
     flip_front_back,
     in_view,
+    level_feet_bias,
     occluded,
     plant_legs,
     planted_feet,
@@ -138,7 +139,10 @@ def observe(
     detected = present & (joint_in.mean(axis=-1) >= 0.5)
     if noisy:
         detected &= rng.random(detected.shape) >= params.miss_rate
-        positions = _joint_noise(positions, forward, joint_in, hidden, params=params, rng=rng)
+        up = Rotation.from_quat(cam.rotation).as_matrix()[2]  # the world's z in the camera frame
+        positions = _joint_noise(
+            positions, forward, joint_in, hidden, up=up, params=params, rng=rng
+        )
         _sdk_mistakes(positions, levels, forward, detected, params=params, rng=rng)
     ghosts_spec = []
     if noisy:
@@ -169,6 +173,7 @@ def _joint_noise(
     joint_in: np.ndarray,
     hidden: np.ndarray,
     *,
+    up: np.ndarray,
     params: SimParams,
     rng: np.random.Generator,
 ) -> np.ndarray:
@@ -203,6 +208,8 @@ def _joint_noise(
         bias = params.joint_bias * ar1_noise(rng, positions.shape, rho_bias)
     else:
         bias = rng.normal(0.0, params.joint_bias, (n_people, 1, n_joints, 3))
+    if params.joint_bias > 0.0:
+        level_feet_bias(bias, up, params.foot_height_bias / params.joint_bias)
     scale = 1.0 + params.body_scale_cv * ar1_noise(rng, (n_people, n_frames), rho)
     length_gain = np.ones((n_people, n_frames, n_joints))
     length_gain[..., _THUMBS] += params.thumb_length_cv * ar1_noise(

@@ -9,6 +9,7 @@ from hiros_sim.noise import (
     fit_body_model,
     flip_front_back,
     in_view,
+    level_feet_bias,
     occluded,
     plant_legs,
     planted_feet,
@@ -79,6 +80,27 @@ def test_ar1_noise_statistics():
     lag1 = np.mean(noise[:, 1:] * noise[:, :-1])
     assert lag1 == pytest.approx(0.8, abs=0.05)
     assert noise[:, 0].std() == pytest.approx(1.0, abs=0.1)  # stationary from the first frame
+
+
+def test_level_feet_bias_gives_both_feet_one_smaller_height_offset():
+    rng = np.random.default_rng(3)
+    bias = rng.normal(0.0, 0.026, (2, 5, AZURE_KINECT.n_joints, 3))  # drifting: one per frame
+    before = bias.copy()
+    pitch = np.array(
+        [[1.0, 0.0, 0.0], [0.0, np.cos(0.3), -np.sin(0.3)], [0.0, np.sin(0.3), np.cos(0.3)]]
+    )
+    up = pitch @ WORLD_TO_CAMERA[:, 2]  # the world's z seen by a camera pitched by 0.3 rad
+    level_feet_bias(bias, up, 0.2)
+    for part in ("Ankle", "Foot"):
+        left, right = IDX(f"{part}Left"), IDX(f"{part}Right")
+        np.testing.assert_allclose(bias[..., left, :] @ up, 0.2 * before[..., left, :] @ up)
+        np.testing.assert_allclose(bias[..., right, :] @ up, bias[..., left, :] @ up)
+        for joint in (left, right):  # moved along up only
+            moved = bias[..., joint, :] - before[..., joint, :]
+            np.testing.assert_allclose(np.cross(moved, up), 0.0, atol=1e-15)
+    feet = [IDX(j) for j in ("AnkleLeft", "FootLeft", "AnkleRight", "FootRight")]
+    others = [j for j in range(AZURE_KINECT.n_joints) if j not in feet]
+    np.testing.assert_array_equal(bias[..., others, :], before[..., others, :])
 
 
 def _random_poses(standing, rng, frames=400):
