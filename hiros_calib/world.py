@@ -170,12 +170,6 @@ def resting_feet(track: BodyTrack) -> tuple[np.ndarray, float] | None:
     The foot joint where the layout has one, else the ankle; a joint rests where it moves
     slower than :data:`RESTING_SPEED` over :data:`SPEED_BASELINE`.
     """
-    rest = _resting_sides(track)
-    return None if rest is None else (rest[0], rest[2])
-
-
-def _resting_sides(track: BodyTrack) -> tuple[np.ndarray, np.ndarray, float] | None:
-    """:func:`resting_feet` with each sample's side, ``(N,)`` 0 left and 1 right."""
     for kind, height in FOOT_JOINT_HEIGHT.items():
         joints = _joint(track, (f"{kind}Left", f"{kind}Right"))
         if len(joints) == 2 and len(track.times) >= 3:
@@ -183,8 +177,7 @@ def _resting_sides(track: BodyTrack) -> tuple[np.ndarray, np.ndarray, float] | N
             resting = (speed_over_baseline(positions, track.times) < RESTING_SPEED) & (
                 track.weights[:, joints] > 0
             )
-            sides = np.broadcast_to(np.arange(2), resting.shape)
-            return positions[resting], sides[resting], height
+            return positions[resting], height
     return None
 
 
@@ -239,8 +232,6 @@ class _Seen:
     camera: str
     feet: np.ndarray
     """``(N, 3)`` resting feet: all on the floor."""
-    sides: np.ndarray
-    """``(N,)`` each foot's side: 0 left, 1 right."""
     torsos: list[np.ndarray]
     """Per track, ``(M, 3)`` torso centres: each person at their own height."""
 
@@ -280,15 +271,13 @@ def _gather(
     """
     seen, heights, verticals = [], [], []
     for camera, pose in poses.items():
-        feet, sides, torsos = [], [], []
+        feet, torsos = [], []
         for track in tracks.get(camera, []):
-            rest = _resting_sides(track)
+            rest = resting_feet(track)
             if rest is not None and len(rest[0]):
                 points = pose.apply(rest[0])
-                finite = np.isfinite(points).all(axis=1)
-                feet.append(points[finite])
-                sides.append(rest[1][finite])
-                heights.append(np.full(len(feet[-1]), rest[2]))
+                feet.append(points[np.isfinite(points).all(axis=1)])
+                heights.append(np.full(len(feet[-1]), rest[1]))
             centres = _torso_centres(track)
             if centres is not None and len(centres) >= 10:
                 torsos.append(pose.apply(centres))
@@ -299,7 +288,6 @@ def _gather(
             _Seen(
                 camera,
                 np.concatenate(feet) if feet else np.zeros((0, 3)),
-                np.concatenate(sides) if sides else np.zeros(0, dtype=np.int64),
                 torsos,
             )
         )
@@ -331,26 +319,25 @@ def fit_floor(
     scatter = along - floor
     inliers = np.abs(scatter) < 3 * max(1.4826 * float(np.median(np.abs(scatter))), 0.005)
     residual = float(np.sqrt(np.mean(scatter[inliers] ** 2)))
-    pairs = np.concatenate([2 * k + s.sides for k, s in enumerate(seen)])
-    error = _floor_error(along[inliers], pairs[inliers])
+    cameras = np.concatenate([np.full(len(s.feet), k) for k, s in enumerate(seen)])
+    error = _floor_error(along[inliers], cameras[inliers])
     return FloorFit(up, floor, residual, int(inliers.sum()), source, spread, error)
 
 
-def _floor_error(heights: np.ndarray, pairs: np.ndarray) -> float:
-    """Standard error (m) of the floor height from feet ``heights`` grouped by camera and side.
+def _floor_error(heights: np.ndarray, cameras: np.ndarray) -> float:
+    """Standard error (m) of the floor height from feet ``heights`` grouped by camera.
 
-    The samples of one camera's one foot side are not independent: they share the SDK's fixed
-    offset of that joint (per camera and person, as large as its noise), the camera's pose
-    error, and noise correlated over a fraction of a second. So each pair of camera and side
-    gives one floor (its samples' median) and the floor's standard error is that of their
-    sample-weighted mean, counted from how far they scatter (the clustered standard error,
-    with its small-sample factor). Samples of several people in one pair stay together: a
-    person split into several tracks keeps one offset. NaN with fewer than two pairs.
+    The samples one camera gives are not independent: they share the SDK's offset of each
+    person's feet in height (the left and the right alike on real data, see
+    docs/world-frame.md), the camera's pose error, and noise correlated over a fraction of a
+    second. So each camera gives one floor (its samples' median) and the floor's standard
+    error is that of their sample-weighted mean, counted from how far they scatter (the
+    clustered standard error, with its small-sample factor). NaN with fewer than two cameras.
     """
-    labels, counts = np.unique(pairs, return_counts=True)
+    labels, counts = np.unique(cameras, return_counts=True)
     if len(labels) < 2:
         return math.nan
-    floors = np.array([np.median(heights[pairs == label]) for label in labels])
+    floors = np.array([np.median(heights[cameras == label]) for label in labels])
     weights = counts / counts.sum()
     mean = float(weights @ floors)
     variance = len(labels) / (len(labels) - 1) * float(weights**2 @ (floors - mean) ** 2)

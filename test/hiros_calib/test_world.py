@@ -191,7 +191,7 @@ def test_the_floor_is_doubtful_where_the_data_do_not_pin_it_down() -> None:
     assert noisy.residual_m > 0.025
     assert noisy.floor_error_m < 0.005
     assert noisy.doubts() == []
-    # quiet feet (5 mm), each camera's feet off by its own few centimetres: the four floors
+    # quiet feet (5 mm), each camera's feet off by its own few centimetres: the two cameras' floors
     # disagree, and the floor is called doubtful (it is 2 cm off)
     offsets = np.array([[0.05, 0.03], [-0.01, 0.01]])
     loose = _two_cameras_see(offsets, noise=0.005)
