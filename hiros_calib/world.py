@@ -83,6 +83,10 @@ DOUBT_FLOOR_ERROR = 0.01
 DOUBT_SPREAD = 1.0
 """Up moving more than this (deg) when one camera is left out makes it doubtful."""
 
+DOUBT_POSE_UNCERTAINTY = 1.0
+"""A camera pose whose rotation is uncertain by more than this (deg) makes up doubtful: every
+sample it gives reaches up through it, so up can be off by about as much."""
+
 TORSO_JOINTS = (("Pelvis", "SpineNaval", "SpineChest", "Neck"), ("SpineBase", "SpineMid",
                 "SpineShoulder", "Neck"))  # fmt: skip
 """The torso joints whose mean keeps one height as a person walks (Azure Kinect, Kinect v2)."""
@@ -107,10 +111,13 @@ class FloorFit:
     is the body's."""
     floor_error_m: float = math.nan
     """Standard error of ``floor_height`` (m, :func:`_floor_error`); NaN where it cannot be
-    told (the feet of fewer than two camera and foot pairs)."""
+    told (resting feet from fewer than two cameras)."""
     doubtful_poses: tuple[str, ...] = ()
     """Cameras whose pose the calibration flags as doubtful (:func:`align_to_floor`): their
     samples went into up and the floor through that pose."""
+    pose_uncertainty_deg: float = math.nan
+    """The largest rotation uncertainty (deg) the split halves of the cameras' pair poses give
+    (``pose_uncertainty_deg`` in their quality, :func:`align_to_floor`); NaN with one camera."""
 
     def quality(self) -> dict[str, Any]:
         """The figures for the calibration file."""
@@ -143,12 +150,17 @@ class FloorFit:
         if self.floor_error_m > DOUBT_FLOOR_ERROR:
             doubts.append(
                 f"the floor height is known to {100 * self.floor_error_m:.1f} cm (standard "
-                f"error over cameras and feet, > {100 * DOUBT_FLOOR_ERROR:.0f} cm)"
+                f"error over the cameras, > {100 * DOUBT_FLOOR_ERROR:.0f} cm)"
             )
         if self.doubtful_poses:
             doubts.append(
                 f"up and the floor rest on the pose of {', '.join(self.doubtful_poses)}, which "
                 "the calibration flags as doubtful"
+            )
+        if self.pose_uncertainty_deg > DOUBT_POSE_UNCERTAINTY:
+            doubts.append(
+                f"up rests on camera poses whose split halves leave their rotation uncertain "
+                f"by {self.pose_uncertainty_deg:.1f} deg (> {DOUBT_POSE_UNCERTAINTY:g})"
             )
         if self.source != "feet and torsos":
             doubts.append("up is the bodies' mean vertical: people lean")
@@ -472,8 +484,17 @@ def align_to_floor(calibration: Calibration, floor: FloorFit) -> None:
     rotation = Rotation.from_matrix(rows)
     place_in_world(calibration, RigidTransform(rotation, -rotation.apply(below)))
     flagged = tuple(name for name, cam in calibration.cameras.items() if cam.flagged)
-    reference = calibration.cameras[calibration.reference]
-    reference.quality.update(replace(floor, doubtful_poses=flagged).quality())
+    uncertainties = [
+        float(cam.quality["pose_uncertainty_deg"])
+        for cam in calibration.cameras.values()
+        if "pose_uncertainty_deg" in cam.quality
+    ]
+    floor = replace(
+        floor,
+        doubtful_poses=flagged,
+        pose_uncertainty_deg=max(uncertainties, default=math.nan),
+    )
+    calibration.cameras[calibration.reference].quality.update(floor.quality())
 
 
 def place_in_world(calibration: Calibration, world_from_reference: RigidTransform) -> None:

@@ -233,6 +233,26 @@ def test_a_floor_through_a_flagged_pose_is_doubtful() -> None:
             assert doubtful == ""
 
 
+def test_up_through_a_loosely_pinned_pose_is_doubtful() -> None:
+    # a pair pose whose split halves lie 2.6 deg apart leaves its cameras' rotation uncertain
+    # by 1.3 deg; up, which pools their samples, is then doubtful too, though no camera is
+    # flagged. At 0.8 deg the same floor is trusted
+    floor = FloorFit(np.array([0.0, -1.0, 0.0]), -1.5, 0.01, 1000, "feet and torsos", 0.2, 0.003)
+    for uncertainty in (0.8, 1.3):
+        calibration = Calibration(
+            "k01", cameras={n: CameraCalibration(f"{n}_depth") for n in ("k01", "k02", "k03")}
+        )
+        for name in ("k01", "k03"):
+            calibration.cameras[name].quality["pose_uncertainty_deg"] = uncertainty
+        calibration.cameras["k02"].quality["pose_uncertainty_deg"] = 0.3
+        align_to_floor(calibration, floor)
+        doubtful = calibration.cameras["k01"].quality["floor_doubtful"]
+        if uncertainty > 1.0:
+            assert "rotation uncertain by 1.3 deg" in doubtful
+        else:
+            assert doubtful == ""
+
+
 def test_compare_world_measures_a_known_tilt_and_height() -> None:
     truth = Calibration("k01", cameras={"k01": CameraCalibration("k01_depth")})
     truth.cameras["k01"].translation = np.array([0.0, 0.0, 1.5])
