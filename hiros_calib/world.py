@@ -484,11 +484,8 @@ def align_to_floor(calibration: Calibration, floor: FloorFit) -> None:
     rotation = Rotation.from_matrix(rows)
     place_in_world(calibration, RigidTransform(rotation, -rotation.apply(below)))
     flagged = tuple(name for name, cam in calibration.cameras.items() if cam.flagged)
-    uncertainties = [
-        float(cam.quality["pose_uncertainty_deg"])
-        for cam in calibration.cameras.values()
-        if "pose_uncertainty_deg" in cam.quality
-    ]
+    values = (cam.quality.get("pose_uncertainty_deg") for cam in calibration.cameras.values())
+    uncertainties = [float(v) for v in values if isinstance(v, (int, float))]
     floor = replace(
         floor,
         doubtful_poses=flagged,
