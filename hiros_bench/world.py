@@ -38,6 +38,8 @@ TARGETS = (1.0, 2.0)
 class _Row:
     up_deg: list[float] = field(default_factory=list)
     floor_cm: list[float] = field(default_factory=list)
+    marks: list[str] = field(default_factory=list)
+    """Per run, ``seed:up/floor`` and ``?`` when called doubtful, ``!`` when silently off."""
     doubtful: int = 0
     silently_off: int = 0
     failures: list[str] = field(default_factory=list)
@@ -65,6 +67,8 @@ def one_run(preset: str, seed: int, duration: float, row: _Row) -> None:
     off = accuracy.up_error_deg > TARGETS[0] or abs(accuracy.floor_error_cm) > TARGETS[1]
     row.doubtful += doubtful
     row.silently_off += off and not doubtful
+    flag = "?" if doubtful else "!" if off else ""
+    row.marks.append(f"{seed}:{accuracy.up_error_deg:.2f}/{accuracy.floor_error_cm:+.1f}{flag}")
 
 
 def _row_line(name: str, row: _Row) -> str:
@@ -75,8 +79,7 @@ def _row_line(name: str, row: _Row) -> str:
     range_cell = f"{floor.min():+.1f}..{floor.max():+.1f}"
     return (
         f"{name:<16s} {len(up):4d} {up_cell:>11s} {np.median(floor):+8.1f} {range_cell:>12s} "
-        f"{row.doubtful:5d} {row.silently_off:7d}   "
-        + " ".join(f"{u:.2f}/{f:+.1f}" for u, f in zip(up, floor, strict=True))
+        f"{row.doubtful:5d} {row.silently_off:7d}   " + " ".join(row.marks)
     )
 
 
@@ -96,7 +99,7 @@ def run(
         f"{duration:.0f} s, seeds {seeds[0]}-{seeds[-1]}; targets: up <= {TARGETS[0]:g} deg, "
         f"floor within {TARGETS[1]:g} cm (below the people)",
         f"{'condition':<16s} {'runs':>4s} {'up deg':>11s} {'floor cm':>8s} {'range':>12s} "
-        f"{'doubt':>5s} {'silent':>7s}   per seed up/floor",
+        f"{'doubt':>5s} {'silent':>7s}   per run seed:up/floor",
     ]
     for name in rows:
         row = _Row()
@@ -112,8 +115,8 @@ def run(
     lines.append(
         "up deg: median/max angle between the estimated and the true z; floor cm: median and "
         "range of the true floor's height in the estimated world (negative: estimated floor "
-        "too high); doubt: runs whose calibration called its floor doubtful; silent: runs off "
-        "target and not called doubtful"
+        "too high); doubt: runs whose calibration called its floor doubtful (marked ?); "
+        "silent: runs off target and not called doubtful (marked !)"
     )
     lines.append(f"conditions: {', '.join(f'{r} = {PRESETS[r].description}' for r in rows)}")
     for line in lines:

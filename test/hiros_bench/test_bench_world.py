@@ -20,3 +20,6 @@ def test_world_bench_prints_up_and_floor_per_condition() -> None:
     assert float(up[0]) == float(up[1]) < 1.0  # one run: its median is its maximum
     assert abs(float(row[3])) < 5.0
     assert int(row[5]) + int(row[6]) <= 1  # doubtful, silently off
+    seed, figures = row[7].rstrip("?!").split(":")  # the run, named by its seed
+    assert seed == "1"
+    assert figures == f"{float(up[0]):.2f}/{float(row[3]):+.1f}"
