@@ -64,25 +64,29 @@ def test_a_bumped_camera_sees_from_its_new_pose_after_the_bump(clean):
     )
 
 
+def _silent_sdk(**changes) -> SimParams:
+    """``SHORT`` with the noise model on and every magnitude zero, but for ``changes``."""
+    zero = {
+        "noise_base": 0.0,
+        "noise_per_metre": 0.0,
+        "joint_bias": 0.0,
+        "body_scale_cv": 0.0,
+        "thumb_length_cv": 0.0,
+        "jitter": 0.0,
+        "drop_rate": 0.0,
+        "miss_rate": 0.0,
+        "flip_rate": 0.0,
+        "flip_probability": 0.0,
+        "swap_rate": 0.0,
+        "ghost_rate": 0.0,
+        "id_change_rate": 0.0,
+    }
+    return replace(SHORT, **{**zero, **changes})
+
+
 def test_noise_model_with_zero_magnitudes_is_the_truth(clean):
     """Noise on but every magnitude zero: the SDK's fitted body model is exactly the truth."""
-    zero = replace(
-        SHORT,
-        noise_base=0.0,
-        noise_per_metre=0.0,
-        joint_bias=0.0,
-        body_scale_cv=0.0,
-        thumb_length_cv=0.0,
-        jitter=0.0,
-        drop_rate=0.0,
-        miss_rate=0.0,
-        flip_rate=0.0,
-        flip_probability=0.0,
-        swap_rate=0.0,
-        ghost_rate=0.0,
-        id_change_rate=0.0,
-    )
-    quiet = simulate(zero)
+    quiet = simulate(_silent_sdk())
     for name, groups in clean.camera_groups.items():
         assert len(groups) == len(quiet.camera_groups[name])
         for expected, group in zip(groups, quiet.camera_groups[name], strict=True):
@@ -250,23 +254,9 @@ def test_the_feet_offset_in_height_only_by_foot_height_bias():
     """Large joint offsets, no other noise: the SDK's feet keep the truth's height (a planted
     foot stays on its evidence) unless ``foot_height_bias`` offsets them, in the world's up,
     whichever way each camera is turned."""
-    offsets_only = replace(
-        SHORT,
-        noise_base=0.0,
-        noise_per_metre=0.0,
-        joint_bias=0.05,
-        body_scale_cv=0.0,
-        thumb_length_cv=0.0,
-        jitter=0.0,
-        drop_rate=0.0,
-        miss_rate=0.0,
-        flip_rate=0.0,
-        flip_probability=0.0,
-        swap_rate=0.0,
-        ghost_rate=0.0,
-        id_change_rate=0.0,
+    level = _median_feet_height_errors(simulate(_silent_sdk(joint_bias=0.05, foot_height_bias=0.0)))
+    raised = _median_feet_height_errors(
+        simulate(_silent_sdk(joint_bias=0.05, foot_height_bias=0.05))
     )
-    level = _median_feet_height_errors(simulate(replace(offsets_only, foot_height_bias=0.0)))
-    raised = _median_feet_height_errors(simulate(replace(offsets_only, foot_height_bias=0.05)))
     assert np.median(np.abs(level)) < 0.002  # 0.0 measured
     assert np.median(np.abs(raised)) > 0.01  # 1.5 cm measured
