@@ -38,8 +38,9 @@ TARGETS = (1.0, 2.0)
 class _Row:
     up_deg: list[float] = field(default_factory=list)
     floor_cm: list[float] = field(default_factory=list)
-    marks: list[str] = field(default_factory=list)
-    """Per run, ``seed:up/floor`` and ``?`` when called doubtful, ``!`` when silently off."""
+    seeds: list[int] = field(default_factory=list)
+    flags: list[str] = field(default_factory=list)
+    """Per run, ``?`` when called doubtful, ``!`` when silently off, else empty."""
     doubtful: int = 0
     silently_off: int = 0
     failures: list[str] = field(default_factory=list)
@@ -67,8 +68,8 @@ def one_run(preset: str, seed: int, duration: float, row: _Row) -> None:
     off = accuracy.up_error_deg > TARGETS[0] or abs(accuracy.floor_error_cm) > TARGETS[1]
     row.doubtful += doubtful
     row.silently_off += off and not doubtful
-    flag = "?" if doubtful else "!" if off else ""
-    row.marks.append(f"{seed}:{accuracy.up_error_deg:.2f}/{accuracy.floor_error_cm:+.1f}{flag}")
+    row.seeds.append(seed)
+    row.flags.append("?" if doubtful else "!" if off else "")
 
 
 def _row_line(name: str, row: _Row) -> str:
@@ -79,7 +80,11 @@ def _row_line(name: str, row: _Row) -> str:
     range_cell = f"{floor.min():+.1f}..{floor.max():+.1f}"
     return (
         f"{name:<16s} {len(up):4d} {up_cell:>11s} {np.median(floor):+8.1f} {range_cell:>12s} "
-        f"{row.doubtful:5d} {row.silently_off:7d}   " + " ".join(row.marks)
+        f"{row.doubtful:5d} {row.silently_off:7d}   "
+        + " ".join(
+            f"{seed}:{u:.2f}/{f:+.1f}{flag}"
+            for seed, u, f, flag in zip(row.seeds, up, floor, row.flags, strict=True)
+        )
     )
 
 

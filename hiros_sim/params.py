@@ -117,7 +117,8 @@ class SimParams:
     left and right alike, metres (their offset across the up is ``joint_bias``'s). Measured on
     the KinectMultiTrack sessions: each camera's floor under one person agrees with the
     other's to 0.14-0.46 cm, about 0.2 cm per camera; this is over twice that, those being
-    Kinect v2 and four."""
+    Kinect v2 and four. It scales the left joints' ``joint_bias`` draws, so it is 0 too when
+    ``joint_bias`` is."""
     bias_drift_time: float = 0.0
     """Seconds for the joint offsets' autocorrelation to fall to 1/e (an Ornstein-Uhlenbeck
     drift, same sigma); 0 keeps them fixed for the whole recording (the take's)."""
