@@ -34,6 +34,7 @@ from pathlib import Path
 
 import numpy as np
 
+from hiros_bench.seeds import seeds_text
 from hiros_calib.calibrator import Calibrator, CalibratorParams
 from hiros_core.calibration import Calibration, save_calibration
 from hiros_core.errors import CalibrationError, ConfigError, RecordingError
@@ -263,7 +264,7 @@ def run(
     duration = duration or (30.0 if quick else 60.0)
     lines = [
         f"calibration robustness matrix: default settings, {duration:.0f} s, seeds "
-        f"{seeds[0]}-{seeds[-1]}; wrong = off by > {WRONG[0]:.0f} ms, {WRONG[1]:.0f} deg or "
+        f"{seeds_text(seeds)}; wrong = off by > {WRONG[0]:.0f} ms, {WRONG[1]:.0f} deg or "
         f"{WRONG[2]:.0f} cm; errors of successful runs, median/p95",
         f"{'condition':<16s} {'runs':>5s} {'succ.':>6s} {'undec.':>6s} {'of dec.':>6s} "
         f"{'ref.':>4s} {'flag':>4s} "

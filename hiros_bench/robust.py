@@ -26,10 +26,12 @@ reason, where that is absent, as is a row whose recording the calibration refuse
 from __future__ import annotations
 
 import time
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
 
+from hiros_bench.seeds import seeds_text
 from hiros_calib.calibrator import Calibrator, CalibratorParams
 from hiros_core.errors import CalibrationError, ConfigError
 from hiros_core.model import SkeletonGroup
@@ -40,7 +42,7 @@ from hiros_optimizer import Optimizer
 from hiros_optimizer.learning import limb_links
 from hiros_pipeline import STAGES, Pipeline, PipelineParams
 
-__all__ = ["CONDITIONS", "Row", "measure", "run"]
+__all__ = ["CONDITIONS", "Row", "mean_row", "measure", "run"]
 
 CONDITIONS = (
     "default", "noisy-sdk", "one-person", "two-cameras-45", "15hz", "drops-5", "repeated-motion",
@@ -75,20 +77,54 @@ class Row:
         """The filter's MPJPE over the best oracle-labelled camera's."""
         return self.mpjpe.get("filter", float("nan")) / self.best_camera
 
-    def line(self) -> str:
-        """The row as printed under :data:`HEADER`."""
+    def line(self, label: str | None = None, note: str | None = None) -> str:
+        """The row as printed under :data:`HEADER`, named ``label`` (default: its condition).
+
+        ``note`` replaces what is said after the figures (default: a flagged calibration).
+        """
         stages = " ".join(f"{self.mpjpe.get(stage, float('nan')) * 1e3:6.1f}" for stage in STAGES)
-        return (
-            f"{self.condition:16s} {stages} {self.best_camera * 1e3:6.1f} {self.ratio:5.2f} "
-            f"{self.switches:3d} {self.limb_cv * 100:6.2f} {self.accepted:2d}/{self.people:<2d} "
-            f"{self.acceptance:6.1f} {self.angle_change * 100:+6.1f} {self.mirrored * 100:6.2f} "
-            f"{self.fps:6.0f}"
-            + (
-                f"  calibration flagged ({', '.join(self.flagged)}): run stops"
+        if note is None:
+            note = (
+                f"calibration flagged ({', '.join(self.flagged)}): run stops"
                 if self.flagged
                 else ""
             )
+        return (
+            f"{label or self.condition:16s} {stages} {self.best_camera * 1e3:6.1f} "
+            f"{self.ratio:5.2f} {self.switches:3d} {self.limb_cv * 100:6.2f} "
+            f"{self.accepted:2d}/{self.people:<2d} {self.acceptance:6.1f} "
+            f"{self.angle_change * 100:+6.1f} {self.mirrored * 100:6.2f} {self.fps:6.0f}"
+            + (f"  {note}" if note else "")
         )
+
+
+def mean_row(rows: Sequence[Row]) -> Row:
+    """One condition's rows over several seeds as one: means, counts summed, the worst time.
+
+    MPJPEs, the best camera's, limb CV, angle change, mirrored share and speed are means over
+    the seeds (the ratio is then that of the means); switches and people are summed and the
+    acceptance time is the longest; the cameras any seed's calibration flagged are kept.
+    """
+
+    def mean(values: list[float]) -> float:
+        finite = [v for v in values if np.isfinite(v)]
+        return float(np.mean(finite)) if finite else float("nan")
+
+    stages = {stage for row in rows for stage in row.mpjpe}
+    return Row(
+        condition=rows[0].condition,
+        mpjpe={stage: mean([r.mpjpe.get(stage, np.nan) for r in rows]) for stage in stages},
+        best_camera=mean([r.best_camera for r in rows]),
+        switches=sum(r.switches for r in rows),
+        limb_cv=mean([r.limb_cv for r in rows]),
+        accepted=sum(r.accepted for r in rows),
+        people=sum(r.people for r in rows),
+        acceptance=max((r.acceptance for r in rows if np.isfinite(r.acceptance)), default=np.nan),
+        angle_change=mean([r.angle_change for r in rows]),
+        mirrored=mean([r.mirrored for r in rows]),
+        fps=mean([r.fps for r in rows]),
+        flagged=tuple(sorted({c for r in rows for c in r.flagged})),
+    )
 
 
 HEADER = (
@@ -182,8 +218,16 @@ def limb_cv_after_acceptance(groups: list[SkeletonGroup], optimizer: Optimizer) 
     return float(np.mean(cvs)) if cvs else float("nan")
 
 
-def run(console, quick: bool = False) -> list[str]:  # noqa: ANN001 - rich Console
-    """Print both matrices (20 s per condition with ``quick``, else 60 s); return their lines."""
+def run(
+    console,  # noqa: ANN001 - rich Console
+    quick: bool = False,
+    seeds: Sequence[int] = (0,),
+) -> list[str]:
+    """Print both matrices (20 s per condition with ``quick``, else 60 s); return their lines.
+
+    With several ``seeds``, each condition's line is its mean over them (:func:`mean_row`),
+    followed by each seed's own.
+    """
     duration = 20.0 if quick else 60.0
     lines: list[str] = []
 
@@ -191,13 +235,57 @@ def run(console, quick: bool = False) -> list[str]:  # noqa: ANN001 - rich Conso
         lines.append(line)
         console.print(line, highlight=False)
 
+    several = len(seeds) > 1
     for auto, what in ((False, "the true calibration"), (True, "--calibration auto")):
-        say(f"stages with {what}, {duration:.0f} s per condition, seed 0")
+        which = (
+            f"seeds {seeds_text(seeds)}; each condition's mean, then each seed"
+            if several
+            else f"seed {seeds_text(seeds)}"
+        )
+        say(f"stages with {what}, {duration:.0f} s per condition, {which}")
         say(HEADER)
         for condition in CONDITIONS:
-            try:
-                say(measure(condition, duration=duration, auto=auto).line())
-            except (ConfigError, CalibrationError) as exc:  # clips absent, or refused
-                say(f"{condition:16s} left out: {exc}")
+            rows: dict[int, Row] = {}
+            refused: dict[int, str] = {}
+            for seed in seeds:
+                try:
+                    with console.status(f"bench robust: {condition}, seed {seed}"):
+                        rows[seed] = measure(condition, seed, duration, auto=auto)
+                except ConfigError as exc:  # clips absent: no seed can run
+                    refused = {seed: str(exc)}
+                    rows = {}
+                    break
+                except CalibrationError as exc:  # this seed's recording refused
+                    refused[seed] = str(exc)
+            say_rows(say, condition, rows, refused, several)
     say(UNITS)
     return lines
+
+
+def say_rows(
+    say: Callable[[str], None],
+    condition: str,
+    rows: dict[int, Row],
+    refused: dict[int, str],
+    several: bool,
+) -> None:
+    """One condition's lines: its row (the mean with ``several`` seeds, then each seed's)."""
+    if not several:
+        for row in rows.values():
+            say(row.line())
+        for reason in refused.values():
+            say(f"{condition:16s} left out: {reason}")
+        return
+    if rows:
+        flagged = sum(bool(row.flagged) for row in rows.values())
+        note = f"calibration flagged on {flagged} of {len(rows)} seeds" if flagged else ""
+        left_out = f"; {len(refused)} seed(s) left out" if refused else ""
+        say(mean_row(list(rows.values())).line(note=(note + left_out).lstrip("; ")))
+    else:
+        say(f"{condition:16s} left out: {next(iter(refused.values()), 'no seed ran')}")
+        return
+    for seed in sorted(rows.keys() | refused.keys()):
+        if seed in rows:
+            say(rows[seed].line(label=f"  seed {seed}"))
+        else:
+            say(f"{'  seed ' + str(seed):16s} left out: {refused[seed]}")

@@ -19,6 +19,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from hiros_bench.seeds import seeds_text
 from hiros_calib.calibrator import Calibrator, CalibratorParams
 from hiros_core.errors import CalibrationError, ConfigError
 from hiros_eval.calibration import compare_world
@@ -101,7 +102,7 @@ def run(
     duration = duration or (30.0 if quick else 60.0)
     lines = [
         f"gravity-aligned world against the simulator's truth: default settings, "
-        f"{duration:.0f} s, seeds {seeds[0]}-{seeds[-1]}; targets: up <= {TARGETS[0]:g} deg, "
+        f"{duration:.0f} s, seeds {seeds_text(seeds)}; targets: up <= {TARGETS[0]:g} deg, "
         f"floor within {TARGETS[1]:g} cm (below the people)",
         f"{'condition':<16s} {'runs':>4s} {'up deg':>11s} {'floor cm':>8s} {'range':>12s} "
         f"{'doubt':>5s} {'silent':>7s}   per run seed:up/floor",

@@ -1,8 +1,9 @@
 """The stages' mirrored share and filter MPJPE per simulator seed, with the true calibration.
 
-``hiros bench robust`` prints one seed (0) per condition; a change to the tracker's facing moves
-single seeds by whole points, so its figures in docs/stages-robustness.md are over several
-seeds, each row as ``hiros_bench.robust.measure`` runs it (60 s, default settings):
+Two columns of ``hiros bench robust --seeds ...`` (the true calibration only), quicker to read
+when only the tracker's facing changed: a change there moves single seeds by whole points, so
+its figures in docs/stages-robustness.md are over several seeds, each row as
+``hiros_bench.robust.measure`` runs it (60 s, default settings):
 
     .venv/bin/python tools/stage_seeds.py exercise-on-spot 0-7
     .venv/bin/python tools/stage_seeds.py noisy-sdk 0,1,4,5,6,7,8,9
@@ -15,15 +16,7 @@ import sys
 import numpy as np
 
 from hiros_bench.robust import measure
-
-
-def parse_seeds(text: str) -> list[int]:
-    """``"0-3,7"`` -> ``[0, 1, 2, 3, 7]``."""
-    seeds = []
-    for part in text.split(","):
-        first, _, last = part.partition("-")
-        seeds += range(int(first), int(last or first) + 1)
-    return seeds
+from hiros_bench.seeds import parse_seeds
 
 
 def main(argv: list[str]) -> int:

@@ -39,6 +39,7 @@ import inspect
 from rich.console import Console
 
 from hiros_bench import SuiteFailedError
+from hiros_bench.seeds import parse_seeds
 
 HELP = "speed and accuracy benchmarks, each beside a baseline run alongside"
 SUITES = ("codec", "io", "calib", "world", "tracking", "body", "pipeline", "robust", "soak")
@@ -61,6 +62,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument(
         "--duration", type=float, help="calib: seconds per simulated recording (default 60)"
+    )
+    parser.add_argument(
+        "--seeds",
+        metavar="LIST",
+        help="calib, world, robust: the simulator seeds to run, e.g. 0-3,7 (default: each "
+        "suite's own; robust with several prints each condition's mean, then each seed)",
     )
     parser.add_argument(
         "--minutes", type=float, help="soak: minutes of feeding the nodes (default 30; quick: 3)"
@@ -112,6 +119,7 @@ def run(args: argparse.Namespace) -> int:
         console.print(f"hiros bench: unknown suite(s) {unknown}; choose from {list(SUITES)}")
         return 2
     sim = _sim_overrides(args.sim)  # a mistyped setting fails before anything runs
+    seeds = parse_seeds(args.seeds) if getattr(args, "seeds", None) else None
     failed = []
     for suite in args.suites or DEFAULT_SUITES:
         try:
@@ -121,7 +129,9 @@ def run(args: argparse.Namespace) -> int:
             failed.append(suite)
             continue
         console.rule(f"hiros bench {suite}")
-        options = {"quick": args.quick}
+        options: dict[str, object] = {"quick": args.quick}
+        if seeds is not None:
+            options["seeds"] = seeds
         if suite == "calib" and args.matrix:
             module = importlib.import_module("hiros_bench.calib_matrix")
             options.update(duration=args.duration)

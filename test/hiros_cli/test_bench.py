@@ -34,3 +34,20 @@ def test_a_suite_that_fails_its_own_verdict_makes_bench_exit_1(monkeypatch, caps
     args = argparse.Namespace(suites=["soak"], sim=[], quick=True, minutes=0.1, matrix=False)
     assert bench.run(args) == 1
     assert "the soak failed" in capsys.readouterr().out
+
+
+def test_seeds_reach_the_suites_that_take_them(monkeypatch) -> None:
+    import argparse
+
+    from hiros_bench import robust
+    from hiros_cli.commands import bench
+
+    taken = []
+    monkeypatch.setattr(robust, "run", lambda console, quick=False, seeds=(0,): taken.append(seeds))
+    args = argparse.Namespace(suites=["robust"], sim=[], quick=True, seeds="0-1,4", matrix=False)
+    assert bench.run(args) == 0
+    assert taken == [(0, 1, 4)]
+    args.seeds = "4-1"
+    with pytest.raises(ConfigError, match="runs backwards"):
+        bench.run(args)  # before any suite runs
+    assert len(taken) == 1
