@@ -257,33 +257,32 @@ def run(
                     break
                 except CalibrationError as exc:  # this seed's recording refused
                     refused[seed] = str(exc)
-            say_rows(say, condition, rows, refused, several)
+            _say_rows(say, condition, rows, refused, several)
     say(UNITS)
     return lines
 
 
-def say_rows(
+def _say_rows(
     say: Callable[[str], None],
     condition: str,
     rows: dict[int, Row],
     refused: dict[int, str],
     several: bool,
 ) -> None:
-    """One condition's lines: its row (the mean with ``several`` seeds, then each seed's)."""
+    """One condition's lines: its row, or with ``several`` seeds their mean, then each seed's."""
     if not several:
         for row in rows.values():
             say(row.line())
         for reason in refused.values():
             say(f"{condition:16s} left out: {reason}")
         return
-    if rows:
-        flagged = sum(bool(row.flagged) for row in rows.values())
-        note = f"calibration flagged on {flagged} of {len(rows)} seeds" if flagged else ""
-        left_out = f"; {len(refused)} seed(s) left out" if refused else ""
-        say(mean_row(list(rows.values())).line(note=(note + left_out).lstrip("; ")))
-    else:
+    if not rows:
         say(f"{condition:16s} left out: {next(iter(refused.values()), 'no seed ran')}")
         return
+    flagged = sum(bool(row.flagged) for row in rows.values())
+    notes = [f"calibration flagged on {flagged} of {len(rows)} seeds"] if flagged else []
+    notes += [f"{len(refused)} seed(s) left out"] if refused else []
+    say(mean_row(list(rows.values())).line(note="; ".join(notes)))
     for seed in sorted(rows.keys() | refused.keys()):
         if seed in rows:
             say(rows[seed].line(label=f"  seed {seed}"))
