@@ -37,7 +37,12 @@ from hiros_core.errors import CalibrationError, ConfigError
 from hiros_core.model import SkeletonGroup
 from hiros_eval.body import limb_length_cv
 from hiros_eval.run import align_to_truth, evaluate_run
-from hiros_eval.tracking import arrival_order, camera_mpjpe, mirrored_share
+from hiros_eval.tracking import (
+    arrival_order,
+    camera_mpjpe,
+    longest_mirrored_run,
+    mirrored_share,
+)
 from hiros_optimizer import Optimizer
 from hiros_optimizer.learning import limb_links
 from hiros_pipeline import STAGES, Pipeline, PipelineParams
@@ -71,6 +76,9 @@ class Row:
     flagged: tuple[str, ...] = ()
     """Cameras the calibration flagged (``auto`` only): ``hiros run --calibration auto`` stops
     there; the figures are what ``--accept-flagged`` runs on."""
+    mirror_run: float = float("nan")
+    """Seconds of the longest unbroken run of one person's mirrored output
+    (``longest_mirrored_run``): a flicker of a frame, or a person the wrong way round."""
 
     @property
     def ratio(self) -> float:
@@ -93,8 +101,8 @@ class Row:
             f"{label or self.condition:16s} {stages} {self.best_camera * 1e3:6.1f} "
             f"{self.ratio:5.2f} {self.switches:3d} {self.limb_cv * 100:6.2f} "
             f"{self.accepted:2d}/{self.people:<2d} {self.acceptance:6.1f} "
-            f"{self.angle_change * 100:+6.1f} {self.mirrored * 100:6.2f} {self.fps:6.0f}"
-            + (f"  {note}" if note else "")
+            f"{self.angle_change * 100:+6.1f} {self.mirrored * 100:6.2f} {self.mirror_run:5.1f} "
+            f"{self.fps:6.0f}" + (f"  {note}" if note else "")
         )
 
 
@@ -124,19 +132,21 @@ def mean_row(rows: Sequence[Row]) -> Row:
         mirrored=mean([r.mirrored for r in rows]),
         fps=mean([r.fps for r in rows]),
         flagged=tuple(sorted({c for r in rows for c in r.flagged})),
+        mirror_run=max((r.mirror_run for r in rows if np.isfinite(r.mirror_run)), default=np.nan),
     )
 
 
 HEADER = (
     f"{'condition':16s} {'track':>6s} {'merge':>6s} {'optim':>6s} {'filter':>6s} {'camera':>6s} "
     f"{'ratio':>5s} {'sw':>3s} {'limbCV':>6s} {'acc':>5s} {'accept':>6s} {'angle':>6s} "
-    f"{'mirror':>6s} {'fps':>6s}"
+    f"{'mirror':>6s} {'m-run':>5s} {'fps':>6s}"
 )
 UNITS = (
     "(MPJPE mm per stage and of the best single camera with oracle left/right labels; ratio = "
     "filter / that camera; sw: identity switches; limb CV % after acceptance; acc: people "
     "accepted / tracks; accept: longest acceptance time, s; angle: joint-angle RMSE change "
-    "tracker -> filter, %; mirror: mirrored filter skeletons, %; fps: camera frames per second; "
+    "tracker -> filter, %; mirror: mirrored filter skeletons, %; m-run: longest unbroken run of a "
+    "person's mirrored skeletons, s; fps: camera frames per second; "
     "calibration flagged: hiros run --calibration auto stops there, the figures are what "
     "--accept-flagged runs on)"
 )
@@ -173,6 +183,7 @@ def measure(condition: str, seed: int = 0, duration: float = 60.0, *, auto: bool
                 outputs[stage].append(group)
     seconds = time.perf_counter() - start
     evaluation = evaluate_run(outputs, calibration, true_calibration, truth)
+    aligned = align_to_truth(outputs["filter"], calibration, true_calibration)
     cameras = camera_mpjpe(result.camera_groups, true_calibration, truth, oracle_sides=True)
     people = pipeline.optimizer.people()
     accepted = [p.acceptance_time for p in people.values() if p.acceptance_time is not None]
@@ -186,9 +197,8 @@ def measure(condition: str, seed: int = 0, duration: float = 60.0, *, auto: bool
         people=len(people),
         acceptance=max(accepted, default=float("nan")),
         angle_change=evaluation.angle_change("filter"),
-        mirrored=mirrored_share(
-            align_to_truth(outputs["filter"], calibration, true_calibration), truth
-        ),
+        mirrored=mirrored_share(aligned, truth),
+        mirror_run=longest_mirrored_run(aligned, truth),
         fps=len(frames) / seconds,
         flagged=tuple(sorted(calibration.flagged)),
     )

@@ -43,6 +43,7 @@ __all__ = [
     "camera_mpjpe",
     "detection_labels",
     "identity_metrics",
+    "longest_mirrored_run",
     "match_to_truth",
     "mirrored_share",
     "output_mpjpe",
@@ -411,6 +412,43 @@ def mirrored_share(
         mirror = _mirror_of(groups)
         counts += (_mirrored(estimate, target, mirror).sum(), len(estimate))
     return float(counts[0] / counts[1]) if counts[1] else float("nan")
+
+
+def longest_mirrored_run(
+    groups: Sequence[SkeletonGroup], truth: TruthLike, *, threshold: float = 0.5
+) -> float:
+    """Seconds of the longest unbroken run of one person's mirrored output skeletons.
+
+    Mirrored as in :func:`mirrored_share`; a run spans from its first mirrored skeleton of the
+    person (per source) to its last, plus one frame interval (the person's median), so one
+    mirrored frame at 30 Hz counts 0.033 s. A flicker of a frame or two is what a downstream
+    consumer smooths away; a run of seconds is a person reported the wrong way round. 0 when
+    nothing is mirrored, NaN when nothing is matched.
+    """
+    frames, at, matches, _ = match_to_truth(groups, truth, threshold=threshold)
+    series: dict[tuple[str, int], list[tuple[int, bool]]] = defaultdict(list)
+    mirror = _mirror_of(groups) if frames else np.zeros(0, dtype=np.int64)
+    for frame, people, match in zip(frames, at, matches, strict=True):
+        rows = np.flatnonzero(match >= 0)
+        if rows.size:
+            flags = _mirrored(frame.positions[rows], people[match[rows]], mirror)
+            for h, flag in zip(rows, flags, strict=True):
+                series[frame.source, int(match[h])].append((frame.stamp_ns, bool(flag)))
+    if not series:
+        return float("nan")
+    return max(_longest_run(sorted(points)) for points in series.values())
+
+
+def _longest_run(points: list[tuple[int, bool]]) -> float:
+    """Seconds of the longest run of ``True`` in time-ordered ``(stamp_ns, flag)`` points."""
+    stamps = np.array([p[0] for p in points], dtype=np.int64)
+    flags = np.array([p[1] for p in points], dtype=np.int8)
+    edges = np.flatnonzero(np.diff(np.concatenate([[0], flags, [0]])))
+    if not edges.size:
+        return 0.0
+    first, last = edges[0::2], edges[1::2] - 1
+    step = float(np.median(np.diff(stamps))) if len(stamps) > 1 else 0.0
+    return float((stamps[last] - stamps[first]).max() + step) * 1e-9
 
 
 def camera_mpjpe(

@@ -42,13 +42,15 @@ def _row(seed: int, **changes: object) -> Row:
 
 
 def test_a_conditions_rows_over_seeds_average_their_figures_and_sum_their_counts() -> None:
-    rows = [_row(0), _row(2, flagged=("k02",)), _row(4, limb_cv=float("nan"))]
+    rows = [_row(0, mirror_run=0.5), _row(2, flagged=("k02",), mirror_run=2.0)]
+    rows.append(_row(4, limb_cv=float("nan")))
     mean = mean_row(rows)
     assert mean.mpjpe["filter"] == pytest.approx(0.12)
     assert mean.mirrored == pytest.approx(0.02)
     assert mean.limb_cv == pytest.approx(0.002)  # a seed without accepted people adds nothing
     assert (mean.switches, mean.accepted, mean.people) == (6, 6, 6)
     assert mean.acceptance == 6.0  # the longest
+    assert mean.mirror_run == 2.0  # the longest; a seed without the figure adds nothing
     assert mean.flagged == ("k02",)
     assert mean.ratio == pytest.approx(0.12 / 0.2)
 

@@ -1,0 +1,47 @@
+"""How long a person's output stays mirrored: flickers told apart from stretches."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from hiros_core.layouts import AZURE_KINECT
+from hiros_core.model import Skeleton, SkeletonGroup
+from hiros_eval.tracking import longest_mirrored_run, mirrored_share
+from hiros_sim import SimParams, simulate
+
+RATE = 30.0
+
+
+def _output(truth, mirrored_between: list[tuple[float, float]]) -> list[SkeletonGroup]:
+    """The truth itself at 30 Hz as one track's output, mirrored (left for right) within spans."""
+    times = truth.times[0] + np.arange(0.5, truth.times[-1] - truth.times[0] - 0.5, 1 / RATE)
+    groups = []
+    for when, true_pose in zip(times, truth.at(times)[0], strict=True):
+        since = when - truth.times[0]
+        mirrored = any(start <= since < stop for start, stop in mirrored_between)
+        pose = true_pose[AZURE_KINECT.mirror] if mirrored else true_pose
+        stamp = round(when * 1e9)
+        skeleton = Skeleton.from_positions(pose, skeleton_id=1, src_time_ns=stamp, src_frame="w")
+        groups.append(SkeletonGroup(stamp, "world", [skeleton]))
+    return groups
+
+
+@pytest.fixture(scope="module")
+def truth():
+    return simulate(SimParams(n_people=1, duration=6.0, seed=2)).truth
+
+
+def test_the_longest_mirrored_stretch_is_measured_in_seconds(truth) -> None:
+    groups = _output(truth, [(1.0, 1.1), (2.0, 3.5)])
+    assert longest_mirrored_run(groups, truth) == pytest.approx(1.5, abs=0.04)
+    assert mirrored_share(groups, truth) == pytest.approx(1.6 / 5.0, abs=0.02)
+
+
+def test_a_single_mirrored_frame_is_one_frame_long_and_none_is_zero(truth) -> None:
+    one = _output(truth, [(2.0, 2.0 + 0.5 / RATE)])
+    assert longest_mirrored_run(one, truth) == pytest.approx(1 / RATE, rel=0.05)
+    assert longest_mirrored_run(_output(truth, []), truth) == 0.0
+    assert math.isnan(longest_mirrored_run([], truth))
