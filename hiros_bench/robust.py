@@ -40,8 +40,7 @@ from hiros_eval.run import align_to_truth, evaluate_run
 from hiros_eval.tracking import (
     arrival_order,
     camera_mpjpe,
-    longest_mirrored_run,
-    mirrored_share,
+    mirrored_output,
 )
 from hiros_optimizer import Optimizer
 from hiros_optimizer.learning import limb_links
@@ -78,7 +77,7 @@ class Row:
     there; the figures are what ``--accept-flagged`` runs on."""
     mirror_run: float = float("nan")
     """Seconds of the longest unbroken run of one person's mirrored output
-    (``longest_mirrored_run``): a flicker of a frame, or a person the wrong way round."""
+    (``MirroredOutput.longest_run_s``): a flicker of a frame, or a person the wrong way round."""
 
     @property
     def ratio(self) -> float:
@@ -183,7 +182,9 @@ def measure(condition: str, seed: int = 0, duration: float = 60.0, *, auto: bool
                 outputs[stage].append(group)
     seconds = time.perf_counter() - start
     evaluation = evaluate_run(outputs, calibration, true_calibration, truth)
-    aligned = align_to_truth(outputs["filter"], calibration, true_calibration)
+    mirrored = mirrored_output(
+        align_to_truth(outputs["filter"], calibration, true_calibration), truth
+    )
     cameras = camera_mpjpe(result.camera_groups, true_calibration, truth, oracle_sides=True)
     people = pipeline.optimizer.people()
     accepted = [p.acceptance_time for p in people.values() if p.acceptance_time is not None]
@@ -197,8 +198,8 @@ def measure(condition: str, seed: int = 0, duration: float = 60.0, *, auto: bool
         people=len(people),
         acceptance=max(accepted, default=float("nan")),
         angle_change=evaluation.angle_change("filter"),
-        mirrored=mirrored_share(aligned, truth),
-        mirror_run=longest_mirrored_run(aligned, truth),
+        mirrored=mirrored.share,
+        mirror_run=mirrored.longest_run_s,
         fps=len(frames) / seconds,
         flagged=tuple(sorted(calibration.flagged)),
     )

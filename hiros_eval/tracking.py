@@ -38,13 +38,14 @@ from hiros_tracker.correction import CameraCorrection
 __all__ = [
     "DetectionLabels",
     "IdentityMetrics",
+    "MirroredOutput",
     "TruthLike",
     "arrival_order",
     "camera_mpjpe",
     "detection_labels",
     "identity_metrics",
-    "longest_mirrored_run",
     "match_to_truth",
+    "mirrored_output",
     "mirrored_share",
     "output_mpjpe",
 ]
@@ -399,51 +400,70 @@ def output_mpjpe(
     return out
 
 
-def mirrored_share(
-    groups: Sequence[SkeletonGroup], truth: TruthLike, *, threshold: float = 0.5
-) -> float:
-    """Share of the matched output skeletons whose whole body is mirrored (left for right).
+@dataclass
+class MirroredOutput:
+    """Which matched output skeletons are mirrored (left for right), per source and person.
 
     A skeleton is mirrored when swapping all its left and right joints brings it closer to its
-    person's truth. NaN when nothing is matched.
+    person's truth (:func:`mirrored_output`).
     """
-    counts = np.zeros(2)
-    for estimate, target in _matched_by_source(groups, truth, threshold).values():
-        mirror = _mirror_of(groups)
-        counts += (_mirrored(estimate, target, mirror).sum(), len(estimate))
-    return float(counts[0] / counts[1]) if counts[1] else float("nan")
+
+    series: dict[tuple[str, int], tuple[np.ndarray, np.ndarray]]
+    """``(source, person)`` -> ``(N,)`` stamps (ns, in time order) and whether each is mirrored."""
+
+    @property
+    def share(self) -> float:
+        """Share of the matched skeletons that are mirrored; NaN when nothing is matched."""
+        flags = [flags for _, flags in self.series.values()]
+        return float(np.concatenate(flags).mean()) if flags else float("nan")
+
+    @property
+    def longest_run_s(self) -> float:
+        """Seconds of the longest unbroken run of one person's mirrored skeletons.
+
+        A run spans from its first mirrored skeleton of the person (per source) to its last,
+        plus one frame interval (the person's median), so one mirrored frame at 30 Hz counts
+        0.033 s. A flicker of a frame or two is what a downstream consumer smooths away; a run
+        of seconds is a person reported the wrong way round. 0 when nothing is mirrored, NaN
+        when nothing is matched.
+        """
+        if not self.series:
+            return float("nan")
+        return max(_longest_run(stamps, flags) for stamps, flags in self.series.values())
 
 
-def longest_mirrored_run(
+def mirrored_output(
     groups: Sequence[SkeletonGroup], truth: TruthLike, *, threshold: float = 0.5
-) -> float:
-    """Seconds of the longest unbroken run of one person's mirrored output skeletons.
-
-    Mirrored as in :func:`mirrored_share`; a run spans from its first mirrored skeleton of the
-    person (per source) to its last, plus one frame interval (the person's median), so one
-    mirrored frame at 30 Hz counts 0.033 s. A flicker of a frame or two is what a downstream
-    consumer smooths away; a run of seconds is a person reported the wrong way round. 0 when
-    nothing is mirrored, NaN when nothing is matched.
-    """
+) -> MirroredOutput:
+    """Each matched output skeleton judged mirrored or not, in time order per person."""
     frames, at, matches, _ = match_to_truth(groups, truth, threshold=threshold)
-    series: dict[tuple[str, int], list[tuple[int, bool]]] = defaultdict(list)
+    points: dict[tuple[str, int], list[tuple[int, bool]]] = defaultdict(list)
     mirror = _mirror_of(groups) if frames else np.zeros(0, dtype=np.int64)
     for frame, people, match in zip(frames, at, matches, strict=True):
         rows = np.flatnonzero(match >= 0)
         if rows.size:
             flags = _mirrored(frame.positions[rows], people[match[rows]], mirror)
             for h, flag in zip(rows, flags, strict=True):
-                series[frame.source, int(match[h])].append((frame.stamp_ns, bool(flag)))
-    if not series:
-        return float("nan")
-    return max(_longest_run(sorted(points)) for points in series.values())
+                points[frame.source, int(match[h])].append((frame.stamp_ns, bool(flag)))
+    return MirroredOutput({
+        key: (np.array([p[0] for p in ordered], dtype=np.int64), np.array([p[1] for p in ordered]))
+        for key, ordered in ((key, sorted(found)) for key, found in points.items())
+    })  # fmt: skip
 
 
-def _longest_run(points: list[tuple[int, bool]]) -> float:
-    """Seconds of the longest run of ``True`` in time-ordered ``(stamp_ns, flag)`` points."""
-    stamps = np.array([p[0] for p in points], dtype=np.int64)
-    flags = np.array([p[1] for p in points], dtype=np.int8)
-    edges = np.flatnonzero(np.diff(np.concatenate([[0], flags, [0]])))
+def mirrored_share(
+    groups: Sequence[SkeletonGroup], truth: TruthLike, *, threshold: float = 0.5
+) -> float:
+    """Share of the matched output skeletons whose whole body is mirrored (left for right).
+
+    See :class:`MirroredOutput`. NaN when nothing is matched.
+    """
+    return mirrored_output(groups, truth, threshold=threshold).share
+
+
+def _longest_run(stamps: np.ndarray, flags: np.ndarray) -> float:
+    """Seconds of the longest run of ``True`` in time-ordered ``flags`` at ``stamps`` (ns)."""
+    edges = np.flatnonzero(np.diff(np.concatenate([[0], flags.astype(np.int8), [0]])))
     if not edges.size:
         return 0.0
     first, last = edges[0::2], edges[1::2] - 1

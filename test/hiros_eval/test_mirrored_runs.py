@@ -9,7 +9,7 @@ import pytest
 
 from hiros_core.layouts import AZURE_KINECT
 from hiros_core.model import Skeleton, SkeletonGroup
-from hiros_eval.tracking import longest_mirrored_run, mirrored_share
+from hiros_eval.tracking import mirrored_output, mirrored_share
 from hiros_sim import SimParams, simulate
 
 RATE = 30.0
@@ -36,12 +36,12 @@ def truth():
 
 def test_the_longest_mirrored_stretch_is_measured_in_seconds(truth) -> None:
     groups = _output(truth, [(1.0, 1.1), (2.0, 3.5)])
-    assert longest_mirrored_run(groups, truth) == pytest.approx(1.5, abs=0.04)
+    assert mirrored_output(groups, truth).longest_run_s == pytest.approx(1.5, abs=0.04)
     assert mirrored_share(groups, truth) == pytest.approx(1.6 / 5.0, abs=0.02)
 
 
 def test_a_single_mirrored_frame_is_one_frame_long_and_none_is_zero(truth) -> None:
     one = _output(truth, [(2.0, 2.0 + 0.5 / RATE)])
-    assert longest_mirrored_run(one, truth) == pytest.approx(1 / RATE, rel=0.05)
-    assert longest_mirrored_run(_output(truth, []), truth) == 0.0
-    assert math.isnan(longest_mirrored_run([], truth))
+    assert mirrored_output(one, truth).longest_run_s == pytest.approx(1 / RATE, rel=0.05)
+    assert mirrored_output(_output(truth, []), truth).longest_run_s == 0.0
+    assert math.isnan(mirrored_output([], truth).longest_run_s)
