@@ -119,7 +119,7 @@ def run(args: argparse.Namespace) -> int:
         console.print(f"hiros bench: unknown suite(s) {unknown}; choose from {list(SUITES)}")
         return 2
     sim = _sim_overrides(args.sim)  # a mistyped setting fails before anything runs
-    seeds = parse_seeds(args.seeds) if getattr(args, "seeds", None) else None
+    seeds = parse_seeds(args.seeds) if args.seeds else None
     failed = []
     for suite in args.suites or DEFAULT_SUITES:
         try:

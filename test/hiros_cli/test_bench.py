@@ -31,7 +31,9 @@ def test_a_suite_that_fails_its_own_verdict_makes_bench_exit_1(monkeypatch, caps
         raise SuiteFailedError("the soak failed (exit status 1)")
 
     monkeypatch.setattr(soak, "run", failing)
-    args = argparse.Namespace(suites=["soak"], sim=[], quick=True, minutes=0.1, matrix=False)
+    args = argparse.Namespace(
+        suites=["soak"], sim=[], quick=True, minutes=0.1, matrix=False, seeds=None
+    )
     assert bench.run(args) == 1
     assert "the soak failed" in capsys.readouterr().out
 
