@@ -485,7 +485,8 @@ def align_to_floor(calibration: Calibration, floor: FloorFit) -> None:
     place_in_world(calibration, RigidTransform(rotation, -rotation.apply(below)))
     flagged = tuple(name for name, cam in calibration.cameras.items() if cam.flagged)
     values = (cam.quality.get("pose_uncertainty_deg") for cam in calibration.cameras.values())
-    uncertainties = [float(v) for v in values if isinstance(v, (int, float))]
+    # (NaN, where a camera's halves could not be told, would make max() depend on the order)
+    uncertainties = [float(v) for v in values if isinstance(v, (int, float)) and math.isfinite(v)]
     floor = replace(
         floor,
         doubtful_poses=flagged,

@@ -253,6 +253,20 @@ def test_up_through_a_loosely_pinned_pose_is_doubtful() -> None:
             assert doubtful == ""
 
 
+def test_an_unknown_pose_uncertainty_does_not_hide_a_known_one() -> None:
+    # max() over values with a NaN depends on their order; the NaN of a camera whose halves
+    # could not be told is left out wherever it comes
+    floor = FloorFit(np.array([0.0, -1.0, 0.0]), -1.5, 0.01, 1000, "feet and torsos", 0.2, 0.003)
+    for order in (("k01", "k02"), ("k02", "k01")):
+        calibration = Calibration(
+            "k01", cameras={n: CameraCalibration(f"{n}_depth") for n in order}
+        )
+        calibration.cameras["k01"].quality["pose_uncertainty_deg"] = math.nan
+        calibration.cameras["k02"].quality["pose_uncertainty_deg"] = 1.3
+        align_to_floor(calibration, floor)
+        assert "uncertain by 1.3 deg" in calibration.cameras["k01"].quality["floor_doubtful"]
+
+
 def test_compare_world_measures_a_known_tilt_and_height() -> None:
     truth = Calibration("k01", cameras={"k01": CameraCalibration("k01_depth")})
     truth.cameras["k01"].translation = np.array([0.0, 0.0, 1.5])
