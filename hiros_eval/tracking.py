@@ -421,11 +421,12 @@ class MirroredOutput:
     def longest_run_s(self) -> float:
         """Seconds of the longest unbroken run of one person's mirrored skeletons.
 
-        A run spans from its first mirrored skeleton of the person (per source) to its last,
-        plus one frame interval (the person's median), so one mirrored frame at 30 Hz counts
-        0.033 s. A flicker of a frame or two is what a downstream consumer smooths away; a run
-        of seconds is a person reported the wrong way round. 0 when nothing is mirrored, NaN
-        when nothing is matched.
+        A run is consecutive mirrored skeletons of the person (per source), and it lasts as
+        many frame intervals (the person's median) as it has skeletons, so one mirrored frame at
+        30 Hz counts 0.033 s, and a person out of every view between two mirrored skeletons
+        does not count as reported the wrong way round meanwhile. A flicker of a frame or two
+        is what a downstream consumer smooths away; a run of seconds is a person reported the
+        wrong way round. 0 when nothing is mirrored, NaN when nothing is matched.
         """
         if not self.series:
             return float("nan")
@@ -462,13 +463,17 @@ def mirrored_share(
 
 
 def _longest_run(stamps: np.ndarray, flags: np.ndarray) -> float:
-    """Seconds of the longest run of ``True`` in time-ordered ``flags`` at ``stamps`` (ns)."""
+    """Seconds of the longest run of ``True`` in time-ordered ``flags`` at ``stamps`` (ns).
+
+    Its length in frames times the median frame interval (one frame: 1/30 s where there is no
+    interval to take).
+    """
     edges = np.flatnonzero(np.diff(np.concatenate([[0], flags.astype(np.int8), [0]])))
     if not edges.size:
         return 0.0
-    first, last = edges[0::2], edges[1::2] - 1
-    step = float(np.median(np.diff(stamps))) if len(stamps) > 1 else 0.0
-    return float((stamps[last] - stamps[first]).max() + step) * 1e-9
+    frames = int((edges[1::2] - edges[0::2]).max())
+    step = float(np.median(np.diff(stamps))) * 1e-9 if len(stamps) > 1 else 1 / 30
+    return frames * step
 
 
 def camera_mpjpe(

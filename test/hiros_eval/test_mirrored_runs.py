@@ -40,6 +40,15 @@ def test_the_longest_mirrored_stretch_is_measured_in_seconds(truth) -> None:
     assert mirrored_share(groups, truth) == pytest.approx(1.6 / 5.0, abs=0.02)
 
 
+def test_a_person_out_of_view_between_mirrored_frames_is_not_a_long_run(truth) -> None:
+    # five mirrored frames, the person out of every view (no output) for 2 s among them: the
+    # output reported the person the wrong way round for five frames, not for 2 s
+    groups = _output(truth, [(1.0, 4.0)])
+    seen = [g for g in groups if not 1.0 + 3 / RATE <= g.stamp_ns * 1e-9 - truth.times[0] < 3.9]
+    run = mirrored_output(seen, truth).longest_run_s
+    assert run == pytest.approx(6 / RATE, abs=0.5 / RATE)
+
+
 def test_a_single_mirrored_frame_is_one_frame_long_and_none_is_zero(truth) -> None:
     one = _output(truth, [(2.0, 2.0 + 0.5 / RATE)])
     assert mirrored_output(one, truth).longest_run_s == pytest.approx(1 / RATE, rel=0.05)
