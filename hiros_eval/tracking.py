@@ -465,14 +465,14 @@ def mirrored_share(
 def _longest_run(stamps: np.ndarray, flags: np.ndarray) -> float:
     """Seconds of the longest run of ``True`` in time-ordered ``flags`` at ``stamps`` (ns).
 
-    Its length in frames times the median frame interval (one frame: 1/30 s where there is no
-    interval to take).
+    Its length in frames times the median frame interval (0 with a single stamp: no interval
+    to take).
     """
     edges = np.flatnonzero(np.diff(np.concatenate([[0], flags.astype(np.int8), [0]])))
     if not edges.size:
         return 0.0
     frames = int((edges[1::2] - edges[0::2]).max())
-    step = float(np.median(np.diff(stamps))) * 1e-9 if len(stamps) > 1 else 1 / 30
+    step = float(np.median(np.diff(stamps))) * 1e-9 if len(stamps) > 1 else 0.0
     return frames * step
 
 
