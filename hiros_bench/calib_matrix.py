@@ -53,6 +53,7 @@ MATRIX_ROWS = (
     "noisy-sdk",
     "15hz",
     "drops-5",
+    "crossing-host",
     "exercise-on-spot",
     "exercise+walk",
     "all",

@@ -23,7 +23,9 @@ not. The decision:
   ``MIN_LAG_MARGIN``: the poses' lag is taken;
 - the motion decides but the poses clearly prefer another lag: the motion's lag is kept and
   the pair is flagged as doubtful;
-- neither can decide: the pair is refused, listing the candidate lags.
+- neither can decide: the pair is refused, listing the candidate lags. So is an ambiguous
+  pair whose best lag leaves the skeletons more than ``MAX_LAG_FIT`` apart: a lag that fits
+  least badly among lags that do not fit is no evidence.
 
 The residual at the chosen lag against the best other lag is kept in the pair's quality as
 evidence that the lag is right (``lag_fit_residual_m``, ``lag_fit_runner_up_m``).
@@ -54,6 +56,7 @@ from hiros_core.geometry import RigidTransform
 
 __all__ = [
     "KNOWN_POSES",
+    "MAX_LAG_FIT",
     "MIN_FIT_COVERAGE",
     "LagFit",
     "compare_fits",
@@ -71,6 +74,15 @@ MIN_FIT_COVERAGE = 0.5
 """A lag's skeletons must match at least this fraction of the frames that the best-matched
 lag's do for its fit to count (as :mod:`~hiros_calib.sync` keeps a candidate lag only if
 its overlap is half the best's)."""
+
+MAX_LAG_FIT = 0.5
+"""Largest lag fit residual (m) that counts as the skeletons fitting at all: half a metre,
+about a body's width, between the same joints after the best rigid fit means the two cameras'
+skeletons at those instants are not one body's (at true lags the simulator's SDKs, the
+noisiest included, leave a few tenths of that: docs/calibration-robustness.md, session 30).
+Among lags the motion cannot tell apart, the poses choose only a lag that fits: people who
+walk one loop side by side correlate alike at lags that pair each person with another, and
+the least bad of those is no evidence."""
 
 
 @dataclass
@@ -271,10 +283,13 @@ def settle_lag(
     best = by_fit[0]
     margin = _margin(fits, best)
     chosen, flag = 0, ""
-    if ambiguous and pair.quality.get("candidates_left_out", 0):
+    if ambiguous and (
+        pair.quality.get("candidates_left_out", 0) or not fits[best].residual_m <= MAX_LAG_FIT
+    ):
         # a motion repeating at more lags than the poses check: the true lag may be one they
         # never saw, and among a looped walk's repetitions the skeletons can fit a wrong lag
-        # better than the true one (docs/calibration-robustness.md, session 17)
+        # better than the true one (docs/calibration-robustness.md, session 17); or no lag
+        # checked fits at all, so the true one is not among them
         return _undecided(pair, fits, max_ambiguity, min_lag_margin)
     if margin >= min_lag_margin:
         if best == 0 or ambiguous:
@@ -387,12 +402,23 @@ def _undecided(
         else ""
     )
     left_out = int(pair.quality.get("candidates_left_out", 0))
-    judged = (
-        f"and {left_out} more lags correlate as well: the motion repeats too often for the "
-        "skeletons to tell its repetitions apart"
-        if left_out
-        else f"and the skeletons fit none of them {min_lag_margin:.2f}x better than the others"
-    )
+    best_fit = min(f.residual_m for f in fits)
+    if left_out:
+        judged = (
+            f"and {left_out} more lags correlate as well: the motion repeats too often for the "
+            "skeletons to tell its repetitions apart"
+        )
+    elif not math.isfinite(best_fit):
+        judged = "and at none of them could the two cameras' people be matched"
+    elif best_fit > MAX_LAG_FIT:
+        judged = (
+            "and the skeletons fit at none of them (after the best rigid fit the same joints "
+            f"lie {100 * best_fit:.0f} cm apart at best, more than {100 * MAX_LAG_FIT:.0f} cm): "
+            "the true lag may not be among these, as when people moving alike are paired "
+            "with one another"
+        )
+    else:
+        judged = f"and the skeletons fit none of them {min_lag_margin:.2f}x better than the others"
     reason = (
         f"the lag is ambiguous: the motion repeats, so lags {listed} correlate alike "
         f"(within {max_ambiguity:.0%}){windows}, {judged}. Record a stretch of motion that "

@@ -95,6 +95,11 @@ PRESETS: Mapping[str, Preset] = MappingProxyType(
             "four people walking to and fro in lanes 0.45 m apart, passing each other closely",
             _CROSSING,
         ),
+        "crossing-host": Preset(
+            "crossing-4 with each camera's log times on its own host clock: one walk looped by "
+            "four people, whose motion correlates alike at many lags",
+            {**_CROSSING, **_HOST_CLOCKS},
+        ),
         "exercise-on-spot": Preset(
             "one person bending over and over on one spot (the bundled inertial-mocap bend, "
             "looped +-10 %) before the 45-deg pair, each camera on its own host, clocks within "

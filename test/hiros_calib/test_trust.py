@@ -8,8 +8,9 @@ import numpy as np
 import pytest
 
 from hiros_calib import Calibrator, CalibratorParams, LiveCalibrator, LiveCalibratorParams
-from hiros_calib.extrinsics import PairPose
-from hiros_calib.lags import LagFit, compare_fits
+from hiros_calib import lags as lags_module
+from hiros_calib.extrinsics import ExtrinsicsParams, PairPose
+from hiros_calib.lags import MAX_LAG_FIT, LagFit, compare_fits, settle_lag
 from hiros_calib.quality import arrival_offsets_from_delays, flag_cameras
 from hiros_calib.retime import MotionShift
 from hiros_calib.sync import PairOffset, close_loops, overrule_weak_pairs
@@ -359,6 +360,50 @@ def test_every_person_counts_in_the_fit_of_a_lag():
     compare_fits([truth, edge])
     assert edge.residual_m == math.inf
     assert math.isfinite(truth.residual_m)
+
+
+def _settled_among(residuals: dict[float, float], monkeypatch) -> PairOffset:
+    """An ambiguous pair settled by the poses, each candidate lag fitting as ``residuals``."""
+    rng = np.random.default_rng(1)
+
+    def fit(_tracks_a, _tracks_b, lag, correlation, _params, *, known=None):
+        frames = {(0, k): residuals[lag] + 0.01 * rng.random() for k in range(200)}
+        return LagFit(lag, correlation, frames=frames)
+
+    monkeypatch.setattr(lags_module, "fit_at_lag", fit)
+    pair = _pair("k01", "k02", -8.18)
+    pair.candidates = np.array([[lag, 0.5 - 0.01 * k] for k, lag in enumerate(residuals)])
+    pair.quality["motion_window_t"] = 0.0  # nor do the windows decide
+    return settle_lag(
+        pair, [], [], ExtrinsicsParams(), lambda lag: _pair("k01", "k02", lag),
+        max_ambiguity=0.5, min_lag_margin=1.15,
+    )  # fmt: skip
+
+
+def test_among_lags_that_do_not_fit_the_least_bad_is_not_chosen(monkeypatch):
+    """Four people walking one loop side by side correlate alike at lags that pair each
+    person with another; the skeletons fit none of them (the same joints a metre apart after
+    the fit), and the one 1.26 times less bad was taken, silently 10.8 s off (crossing-host
+    seed 2). A lag the poses choose must fit."""
+    refused = _settled_among({-8.18: 0.98, -18.58: 1.23, 2.22: 1.24}, monkeypatch)
+    assert not refused.ok
+    assert "the skeletons fit at none of them" in refused.reason
+    assert "98 cm apart at best" in refused.reason
+    assert refused.quality["candidate_lags"] == [-8.18, -18.58, 2.22]
+    fitting = _settled_among({-8.18: 0.98, -18.58: 1.23, 2.22: 0.15}, monkeypatch)
+    assert fitting.ok
+    assert fitting.offset == 2.22
+    assert fitting.quality["lag_decided_by"] == "poses"
+    assert fitting.quality["lag_fit_residual_m"] < MAX_LAG_FIT
+
+
+@pytest.mark.slow
+def test_four_people_crossing_on_host_clocks_are_refused_not_silently_wrong():
+    """The case above, end to end: no camera comes out wrong without a word."""
+    scene = simulate(preset_params("crossing-host", seed=2, duration=60.0))
+    calibrator = Calibrator(CalibratorParams(reference="k01"))
+    with pytest.raises(CalibrationError, match="the skeletons fit at none of them"):
+        calibrator.calibrate(scene.camera_groups, arrival_ns=scene.receive_ns)
 
 
 def test_a_looped_walk_of_two_people_is_timed_by_the_poses():
