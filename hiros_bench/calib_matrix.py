@@ -36,6 +36,7 @@ import numpy as np
 
 from hiros_bench.seeds import seeds_text
 from hiros_calib.calibrator import Calibrator, CalibratorParams
+from hiros_calib.lags import REPEATS_EXACTLY
 from hiros_core.calibration import Calibration, save_calibration
 from hiros_core.errors import CalibrationError, ConfigError, RecordingError
 from hiros_eval.calibration import compare_calibration
@@ -54,6 +55,7 @@ MATRIX_ROWS = (
     "15hz",
     "drops-5",
     "crossing-host",
+    "walk-pair-host",
     "exercise-on-spot",
     "exercise+walk",
     "all",
@@ -191,7 +193,9 @@ def one_run(name: str, seed: int, duration: float, row: _Row) -> None:
     row.wrong_flagged += sum(w and camera in flagged for camera, w in wrong.items())
     if flagged:
         row.flagged += 1
-        row.undecidable += any(ON_ONE_SPOT in why for why in flagged.values())
+        row.undecidable += any(
+            marker in why for why in flagged.values() for marker in (ON_ONE_SPOT, REPEATS_EXACTLY)
+        )
         return
     if any(wrong.values()):
         return
@@ -287,7 +291,8 @@ def run(
         "undec. = refused because neither the motion nor the skeletons single out one lag "
         "(motion repeated over the whole recording, no usable log times), or flagged because "
         "the people stayed on one spot (nothing pins the rotation down against the body "
-        "tracker's own errors): the data cannot decide; of dec. = success among the other runs"
+        "tracker's own errors) or a lag other body pairs support fits as well (the motion may "
+        "repeat exactly): the data cannot decide; of dec. = success among the other runs"
     )
     lines.append("refusals and flags (most common per row):")
     lines.extend(notes or ["  none"])

@@ -58,6 +58,7 @@ __all__ = [
     "KNOWN_POSES",
     "MAX_LAG_FIT",
     "MIN_FIT_COVERAGE",
+    "REPEATS_EXACTLY",
     "LagFit",
     "compare_fits",
     "fit_at_lag",
@@ -74,6 +75,10 @@ MIN_FIT_COVERAGE = 0.5
 """A lag's skeletons must match at least this fraction of the frames that the best-matched
 lag's do for its fit to count (as :mod:`~hiros_calib.sync` keeps a candidate lag only if
 its overlap is half the best's)."""
+
+REPEATS_EXACTLY = "the motion may repeat exactly"
+"""Part of a pair's flag when a lag other body pairs support fits as well as the chosen one
+(see :func:`settle_lag`): nothing in the recording tells the two apart."""
 
 MAX_LAG_FIT = 0.5
 """Largest lag fit residual (m) that counts as the skeletons fitting at all: half a metre,
@@ -310,9 +315,58 @@ def settle_lag(
         settled.quality["lag_decided_by"] = "poses"
     if known is not None and settled.quality["lag_decided_by"] == "poses":
         settled.quality["lag_decided_by"] = KNOWN_POSES
+    rival = _rival_doubt(
+        pair, fits[chosen], (tracks_a, tracks_b), params, min_lag_margin=min_lag_margin, known=known
+    )
+    flag = "; ".join(text for text in (flag, rival) if text)
     if flag:
         settled.quality["flagged"] = flag
     return settled
+
+
+def _rival_doubt(
+    pair: PairOffset,
+    chosen: LagFit,
+    tracks: tuple[list[BodyTrack], list[BodyTrack]],
+    params: ExtrinsicsParams,
+    *,
+    min_lag_margin: float,
+    known: RigidTransform | None,
+) -> str:
+    """Why the chosen lag is doubtful when a rival lag fits about as well ("" when none does).
+
+    The rivals (``pair.rivals``) are lags other body pairs support as strongly as the chosen
+    lag's, which the candidates missed. They never choose the lag (among a motion repeated
+    to the frame, the skeletons fit every repetition alike and a small margin is chance); a
+    rival the chosen lag does not beat by ``min_lag_margin`` makes the pair doubtful.
+    """
+    if len(pair.rivals) == 0 or not math.isfinite(chosen.residual_m):
+        return ""
+    rivals = [
+        fit_at_lag(*tracks, float(lag), float(corr), params, known=known)
+        for lag, corr in pair.rivals
+    ]
+    judged = [LagFit(chosen.lag, chosen.correlation, frames=chosen.frames), *rivals]
+    compare_fits(judged)
+    own = judged[0].residual_m  # inf: the rivals match over twice the chosen lag's frames
+    close = [
+        f
+        for f in rivals
+        if f.residual_m <= MAX_LAG_FIT
+        and (f.residual_m * min_lag_margin > own or not math.isfinite(own))
+    ]
+    if not close:
+        return ""
+    best = min(close, key=lambda f: f.residual_m)
+    chosen_fit = (
+        f"{100 * own:.0f} cm" if math.isfinite(own) else "under half as many frames matched"
+    )
+    return (
+        f"the skeletons fit the {pair.camera_a}-{pair.camera_b} pair about as well at "
+        f"{best.lag:+.3f} s ({100 * best.residual_m:.0f} cm; the chosen {chosen.lag:+.3f} s: "
+        f"{chosen_fit}), a lag other body pairs support as strongly: {REPEATS_EXACTLY}. "
+        "Record a stretch of motion that does not repeat"
+    )
 
 
 def _motion_decides(pair: PairOffset) -> bool:

@@ -95,6 +95,11 @@ PRESETS: Mapping[str, Preset] = MappingProxyType(
             "four people walking to and fro in lanes 0.45 m apart, passing each other closely",
             _CROSSING,
         ),
+        "walk-pair-host": Preset(
+            "one person walking the bundled walk, looped to the frame, in and out of the "
+            "45-deg pair's views, each camera on its own host",
+            {**_HOST_CLOCKS, **_ONE_PERSON, **_PAIR},
+        ),
         "crossing-host": Preset(
             "crossing-4 with each camera's log times on its own host clock: one walk looped by "
             "four people, whose motion correlates alike at many lags",

@@ -35,6 +35,9 @@ class PairOffset:
         candidates: ``(K, 2)`` lags (s) the motion supports and their pooled correlation,
             best first; the first is ``offset``'s lobe. Other rows are lags one repetition
             away, or side lobes, for the poses to rule out.
+        rivals: ``(R, 2)`` lags (s) other clear body pairs support about as strongly as
+            the consensus, outside the pooled curve's candidates, and their pooled
+            correlation: the poses check that none fits as well as the chosen lag.
 
     """
 
@@ -49,6 +52,7 @@ class PairOffset:
     correlation: np.ndarray = field(default_factory=lambda: np.empty(0))
     body_pairs: list[tuple[int, int]] = field(default_factory=list)
     candidates: np.ndarray = field(default_factory=lambda: np.empty((0, 2)))
+    rivals: np.ndarray = field(default_factory=lambda: np.empty((0, 2)))
 
     @property
     def ok(self) -> bool:

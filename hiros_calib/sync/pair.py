@@ -186,6 +186,8 @@ def _estimate(
     )
     result.candidates = lags[: max(2, MAX_CANDIDATES)]
     result.quality.update(_lag_quality(lags))
+    if not one_lobe and not windowed:
+        result.rivals = _rival_lags(lags, good, used, search)
     return result
 
 
@@ -260,6 +262,48 @@ def _candidate_lags(
     keep = rows[:, 1] >= CANDIDATE_RATIO * rows[0, 1]
     keep[: min(2, len(rows))] = True
     return rows[keep]
+
+
+def _rival_lags(
+    lags: np.ndarray,
+    good: list[Candidate],
+    used: list[Candidate],
+    search: tuple[float, float] | None,
+) -> np.ndarray:
+    """``(R, 2)`` rival lags and their pooled correlation: other body pairs' consensus lags.
+
+    The candidates (``lags``) come from the pooled curve of the body pairs that agree with the vote,
+    which shows only the lags where those pairs overlap. Where a person is seen in several
+    stretches (walking in and out of view) and repeats one motion, the pairs of stretches one
+    repetition apart may win the vote, and the pairs of the same stretch, which agree on the
+    true lag, are left out of the curve: the true lag is no candidate
+    (docs/calibration-robustness.md, session 30). A lag that clear body pairs support with at
+    least ``CANDIDATE_RATIO`` of the consensus's support (the vote's weight, score times
+    overlap, summed over the pairs within ``CONSENSUS_TOLERANCE``) and is none of ``lags`` is
+    such a rival.
+    """
+    tolerance = max(1, round(CONSENSUS_TOLERANCE / GRID_STEP))
+    index = np.array([c.lag_index for c in good])
+    weight = np.array([c.score * c.overlap for c in good])
+    support = np.array([weight[np.abs(index - k) <= tolerance].sum() for k in index])
+    needed = CANDIDATE_RATIO * weight[np.abs(index - used[0].lag_index) <= tolerance].sum()
+    known = [round(lag / GRID_STEP) for lag in lags[:, 0]]
+    rivals: list[tuple[float, float]] = []
+    for k in np.argsort(-support, kind="stable"):
+        if support[k] < needed:
+            break
+        centre = int(index[k])
+        lag = centre * GRID_STEP
+        if any(abs(centre - other) <= tolerance for other in known) or (
+            search is not None and not search[0] <= lag <= search[1]
+        ):
+            continue
+        group = [c for c in good if abs(c.lag_index - centre) <= tolerance]
+        first, pooled, _ = _pooled_curve(group, GRID_STEP)
+        near = pooled[max(0, centre - tolerance - first) : centre + tolerance + 1 - first]
+        rivals.append((lag, float(np.nanmax(near))))
+        known.append(centre)
+    return np.array(rivals).reshape(-1, 2)
 
 
 def _local_maxima(values: np.ndarray, separation: int) -> list[int]:

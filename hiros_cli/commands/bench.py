@@ -7,8 +7,8 @@ Suites:
              Eichler et al.'s RANSAC + Kabsch alone, on the same recordings; with --matrix
              the robustness matrix: one row per simulator condition (host clocks, repeated
              motion, one person, two cameras, noisy SDK, 15 Hz, drops, four people crossing
-             on host clocks, exercise on one spot, the same timed with a walk's poses, all),
-             default settings
+             and one person walking before the pair on host clocks, exercise on one spot,
+             the same timed with a walk's poses, all), default settings
   world      the gravity-aligned world against the simulator's truth: up (deg) and floor
              (cm) per condition (default, one person, 15 Hz, repeated motion, noisy SDK,
              two cameras), default settings, and whether a miss was called doubtful

@@ -406,6 +406,23 @@ def test_four_people_crossing_on_host_clocks_are_refused_not_silently_wrong():
         calibrator.calibrate(scene.camera_groups, arrival_ns=scene.receive_ns)
 
 
+def test_a_lag_other_body_pairs_support_that_fits_as_well_flags_the_pair():
+    """One person walks a loop of 16.6 s in and out of two cameras' views, each camera on its
+    own host. The body pairs of stretches two loops apart won the vote, and the pooled curve
+    of those pairs alone offered no other lag: the calibration came out 33.2 s off, unflagged.
+    The lags the pairs of the same stretches agree on are rivals; the loop repeats to the
+    frame, so the skeletons fit them as well, and the camera is flagged."""
+    scene = simulate(
+        preset_params("two-cameras-45", seed=0, duration=60.0, n_people=1, log_clock="camera")
+    )
+    truth = scene.calibration.cameras["k02"].time_offset
+    calibrator = Calibrator(CalibratorParams(reference="k01"))
+    estimate = calibrator.calibrate(scene.camera_groups, arrival_ns=scene.receive_ns)
+    (pair,) = calibrator.result.sync_pairs
+    assert np.abs(pair.rivals[:, 0] - truth).min() < 0.05  # the true lag was checked
+    assert "the skeletons fit the k01-k02 pair about as well at" in estimate.flagged["k02"]
+
+
 def test_a_looped_walk_of_two_people_is_timed_by_the_poses():
     """Two people walk loops of 8.3 s and 10.4 s, each camera logged by its own host: the
     motion correlates alike at every repetition of the first walk, and the second person's
