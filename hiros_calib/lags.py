@@ -353,7 +353,7 @@ def _rival_doubt(
         f
         for f in rivals
         if f.residual_m <= MAX_LAG_FIT
-        and (f.residual_m * min_lag_margin > own or not math.isfinite(own))
+        and (f.residual_m < own * min_lag_margin or not math.isfinite(own))
     ]
     if not close:
         return ""

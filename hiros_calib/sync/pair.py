@@ -30,6 +30,7 @@ from hiros_calib.sync.params import (
     MIN_REPEATED_PEAK,
     MIN_SHARPNESS,
     MIN_VOTERS,
+    PEAK_SEPARATION,
     PRIOR_CONTRADICTION,
     SyncParams,
 )
@@ -254,7 +255,7 @@ def _candidate_lags(
     if search is not None:
         valid &= (lags >= search[0] - 1e-9) & (lags <= search[1] + 1e-9)
     significance = np.where(valid, fisher_significance(pooled, overlap), -np.inf)
-    peaks = _local_maxima(significance, max(3, round(0.25 / step)))
+    peaks = _local_maxima(significance, max(3, round(PEAK_SEPARATION / step)))
     # a lag whose overlap is much shorter than the best one's rests on too little data to
     # rival it (the poses would judge it on a transform fitted to a few seconds)
     peaks = [k for k in peaks if overlap[k] >= 0.5 * overlap[peaks[0]]]
@@ -272,17 +273,18 @@ def _rival_lags(
 ) -> np.ndarray:
     """``(R, 2)`` rival lags and their pooled correlation: other body pairs' consensus lags.
 
-    The candidates (``lags``) come from the pooled curve of the body pairs that agree with the vote,
-    which shows only the lags where those pairs overlap. Where a person is seen in several
-    stretches (walking in and out of view) and repeats one motion, the pairs of stretches one
-    repetition apart may win the vote, and the pairs of the same stretch, which agree on the
-    true lag, are left out of the curve: the true lag is no candidate
+    The candidates (``lags``) come from the pooled curve of the body pairs that agree with
+    the vote, which shows only the lags where those pairs overlap. Where a person is seen in
+    several stretches (walking in and out of view) and repeats one motion, the pairs of
+    stretches one repetition apart may win the vote, and the pairs of the same stretch, which
+    agree on the true lag, are left out of the curve: the true lag is no candidate
     (docs/calibration-robustness.md, session 30). A lag that clear body pairs support with at
     least ``CANDIDATE_RATIO`` of the consensus's support (the vote's weight, score times
-    overlap, summed over the pairs within ``CONSENSUS_TOLERANCE``) and is none of ``lags`` is
-    such a rival.
+    overlap, summed over the pairs within ``CONSENSUS_TOLERANCE``) and that lies
+    ``PEAK_SEPARATION`` or more from every one of ``lags`` is such a rival.
     """
     tolerance = max(1, round(CONSENSUS_TOLERANCE / GRID_STEP))
+    separation = max(3, round(PEAK_SEPARATION / GRID_STEP))
     index = np.array([c.lag_index for c in good])
     weight = np.array([c.score * c.overlap for c in good])
     support = np.array([weight[np.abs(index - k) <= tolerance].sum() for k in index])
@@ -294,7 +296,7 @@ def _rival_lags(
             break
         centre = int(index[k])
         lag = centre * GRID_STEP
-        if any(abs(centre - other) <= tolerance for other in known) or (
+        if any(abs(centre - other) < separation for other in known) or (
             search is not None and not search[0] <= lag <= search[1]
         ):
             continue

@@ -28,6 +28,7 @@ __all__ = [
     "MIN_REPEATED_PEAK",
     "MIN_SHARPNESS",
     "MIN_VOTERS",
+    "PEAK_SEPARATION",
     "PRIOR_CONTRADICTION",
     "REFINE_STEP",
     "SyncParams",
@@ -81,6 +82,10 @@ peak); the lags it competes with are then decided by the poses (see ``candidates
 CANDIDATE_RATIO: float = 0.6
 """Local maxima of the pooled correlation at least this fraction of the peak are the
 pair's candidate lags, for the poses to check."""
+
+PEAK_SEPARATION: float = 0.25
+"""Seconds two candidate (or rival) lags lie apart at least: closer peaks are one lobe of the
+pooled correlation."""
 
 MAX_CANDIDATES: int = 12
 """At most this many candidate lags per camera pair (best first)."""

@@ -10,7 +10,7 @@ import pytest
 from hiros_calib import Calibrator, CalibratorParams, LiveCalibrator, LiveCalibratorParams
 from hiros_calib import lags as lags_module
 from hiros_calib.extrinsics import ExtrinsicsParams, PairPose
-from hiros_calib.lags import MAX_LAG_FIT, LagFit, compare_fits, settle_lag
+from hiros_calib.lags import MAX_LAG_FIT, REPEATS_EXACTLY, LagFit, compare_fits, settle_lag
 from hiros_calib.quality import arrival_offsets_from_delays, flag_cameras
 from hiros_calib.retime import MotionShift
 from hiros_calib.sync import PairOffset, close_loops, overrule_weak_pairs
@@ -362,17 +362,23 @@ def test_every_person_counts_in_the_fit_of_a_lag():
     assert math.isfinite(truth.residual_m)
 
 
-def _settled_among(residuals: dict[float, float], monkeypatch) -> PairOffset:
-    """An ambiguous pair settled by the poses, each candidate lag fitting as ``residuals``."""
+def _settled_among(
+    residuals: dict[float, float], monkeypatch, rivals: dict[float, float] | None = None
+) -> PairOffset:
+    """An ambiguous pair settled by the poses, each candidate (and rival) lag fitting as
+    ``residuals`` (and ``rivals``) say."""
     rng = np.random.default_rng(1)
+    rivals = rivals or {}
 
     def fit(_tracks_a, _tracks_b, lag, correlation, _params, *, known=None):
-        frames = {(0, k): residuals[lag] + 0.01 * rng.random() for k in range(200)}
+        residual = {**residuals, **rivals}[lag]
+        frames = {(0, k): residual + 0.01 * rng.random() for k in range(200)}
         return LagFit(lag, correlation, frames=frames)
 
     monkeypatch.setattr(lags_module, "fit_at_lag", fit)
-    pair = _pair("k01", "k02", -8.18)
+    pair = _pair("k01", "k02", next(iter(residuals)))  # at the motion's best lag
     pair.candidates = np.array([[lag, 0.5 - 0.01 * k] for k, lag in enumerate(residuals)])
+    pair.rivals = np.array([[lag, 0.4] for lag in rivals]).reshape(-1, 2)
     pair.quality["motion_window_t"] = 0.0  # nor do the windows decide
     return settle_lag(
         pair, [], [], ExtrinsicsParams(), lambda lag: _pair("k01", "k02", lag),
@@ -395,6 +401,21 @@ def test_among_lags_that_do_not_fit_the_least_bad_is_not_chosen(monkeypatch):
     assert fitting.offset == 2.22
     assert fitting.quality["lag_decided_by"] == "poses"
     assert fitting.quality["lag_fit_residual_m"] < MAX_LAG_FIT
+
+
+def test_a_rival_lag_flags_the_pair_only_when_it_fits_about_as_well(monkeypatch):
+    """A rival (a lag other body pairs support, outside the candidates) never chooses the
+    lag. One that the chosen lag beats by less than the margin flags the pair; one that fits
+    far worse (four people, a lag 20.8 s off pairing them with one another) does not."""
+    worse = _settled_among({2.13: 0.16, 30.0: 1.2}, monkeypatch, rivals={22.93: 0.43})
+    assert worse.ok
+    assert worse.offset == 2.13
+    assert "flagged" not in worse.quality
+    alike = _settled_among({2.13: 0.16, 30.0: 1.2}, monkeypatch, rivals={22.93: 0.15})
+    assert alike.ok
+    assert alike.offset == 2.13  # still the candidates' best
+    assert REPEATS_EXACTLY in alike.quality["flagged"]
+    assert "about as well at +22.930 s" in alike.quality["flagged"]
 
 
 @pytest.mark.slow
