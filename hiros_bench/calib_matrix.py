@@ -37,6 +37,7 @@ import numpy as np
 from hiros_bench.seeds import seeds_text
 from hiros_calib.calibrator import Calibrator, CalibratorParams
 from hiros_calib.lags import REPEATS_EXACTLY
+from hiros_calib.quality import ON_ONE_SPOT
 from hiros_core.calibration import Calibration, save_calibration
 from hiros_core.errors import CalibrationError, ConfigError, RecordingError
 from hiros_eval.calibration import compare_calibration
@@ -82,10 +83,6 @@ its clocks and people are drawn apart from the take's."""
 
 UNDECIDABLE = "the lag is ambiguous"
 """How a refusal begins when neither the motion nor the skeletons single out one lag."""
-
-ON_ONE_SPOT = "the people stayed on one spot"
-"""Part of a flag's reason when the people's joints barely moved about where they stood, so
-that nothing in the recording pins the rotation down against the body tracker's own errors."""
 
 WRONG = (50.0, 2.0, 10.0)
 """A camera off by more than this time (ms), rotation (deg) or translation (cm) is wrong."""

@@ -33,7 +33,12 @@ from hiros_core.calibration import Calibration, CameraCalibration
 
 _Pair = TypeVar("_Pair", PairOffset, PairPose)
 
-__all__ = ["LoopTolerances", "arrival_offsets_from_delays", "flag_cameras"]
+__all__ = ["ON_ONE_SPOT", "LoopTolerances", "arrival_offsets_from_delays", "flag_cameras"]
+
+ON_ONE_SPOT = "the people stayed on one spot"
+"""Part of a camera's flag when its pose rests on joints that barely moved about where the
+people stood, so that nothing in the recording pins the rotation down against the body
+tracker's own errors."""
 
 OWN_CLOCK_LATENCY = 0.5
 """Largest ``log - stamp`` (s) of a host logging its own camera's frames: its latency, tens
@@ -320,8 +325,8 @@ def _resting_on_one_spot(
     best = _number(camera.quality["motion_lever_m"])
     if best < tolerances.min_motion_lever_m:
         reasons.append(
-            f"the pose of {name} rests on joints that barely moved: the people stayed on "
-            f"one spot, and their joints moved {100 * best:.0f} cm RMS about where they "
+            f"the pose of {name} rests on joints that barely moved: {ON_ONE_SPOT}, and "
+            f"their joints moved {100 * best:.0f} cm RMS about where they "
             f"stood (at least {100 * tolerances.min_motion_lever_m:.0f} cm pin the "
             "rotation down against the body tracker's own errors; record people walking "
             "across the area, or, with the cameras unmoved since such a recording, give its "

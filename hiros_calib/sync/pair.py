@@ -286,9 +286,8 @@ def _rival_lags(
     tolerance = max(1, round(CONSENSUS_TOLERANCE / GRID_STEP))
     separation = max(3, round(PEAK_SEPARATION / GRID_STEP))
     index = np.array([c.lag_index for c in good])
-    weight = np.array([c.score * c.overlap for c in good])
-    support = np.array([weight[np.abs(index - k) <= tolerance].sum() for k in index])
-    needed = CANDIDATE_RATIO * weight[np.abs(index - used[0].lag_index) <= tolerance].sum()
+    support = _support(good, index, tolerance)
+    needed = CANDIDATE_RATIO * _support(good, np.array([used[0].lag_index]), tolerance)[0]
     known = [round(lag / GRID_STEP) for lag in lags[:, 0]]
     rivals: list[tuple[float, float]] = []
     for k in np.argsort(-support, kind="stable"):
@@ -348,8 +347,7 @@ def _consensus(good: list[Candidate], *, one_lobe: bool = False) -> list[Candida
     fewest = 1 if one_lobe else min(MIN_VOTERS, len(ranked))
     voters = ranked[: max(fewest, math.ceil(BEST_FRACTION * len(ranked)))]
     lags = np.array([c.lag_index for c in voters])
-    weights = np.array([c.score * c.overlap for c in voters])
-    support = [(weights * (np.abs(lags - lag) <= tolerance)).sum() for lag in lags]
+    support = _support(voters, lags, tolerance)
     winner = int(lags[int(np.argmax(support))])
     # centred on the sharpest pair of the winning lag's group, so that a vote confirming the
     # sharpest pair keeps its peak (voters within the tolerance may peak a few steps apart)
@@ -361,6 +359,17 @@ def _consensus(good: list[Candidate], *, one_lobe: bool = False) -> list[Candida
             continue
         used.append(candidate)
     return used
+
+
+def _support(pairs: list[Candidate], at: np.ndarray, tolerance: int) -> np.ndarray:
+    """The vote's support of each lag index in ``at``.
+
+    The vote weight (score times overlap) summed over the ``pairs`` whose peak lies within
+    ``tolerance`` of it.
+    """
+    index = np.array([c.lag_index for c in pairs])
+    weight = np.array([c.score * c.overlap for c in pairs])
+    return np.array([(weight * (np.abs(index - k) <= tolerance)).sum() for k in at])
 
 
 def _pooled_curve(used: list[Candidate], step: float) -> tuple[int, np.ndarray, np.ndarray]:
